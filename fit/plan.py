@@ -1,0 +1,324 @@
+"""The evaluation plan: the single source of truth for the golden model and the RTL.
+
+A plan is a list of integer operations in topological order (a dataflow graph).
+Every node holds an integer; its real value is ``integer * 2**-frac``. Every node
+carries the integer interval it can take for any in-range input, computed by
+interval arithmetic, from which its bit width and signedness follow, so that no
+in-range input can overflow any intermediate.
+
+Operations
+----------
+``input``  a port field (already clamped to its range by a ``clamp`` node after it)
+``const``  an integer constant; ``ideal`` keeps the real value it was rounded from
+``add``    a + b (operands have equal ``frac``)            registered
+``mul``    a * b (``frac`` = frac(a) + frac(b))            registered
+``clamp``  min(max(a, lo), hi)                             registered
+``shr``    floor(a / 2**s) (arithmetic shift right)        wiring only
+``shl``    a * 2**s                                        wiring only
+``frac``   same integer, new binary point (``reinterpret``)  wiring only
+
+Registered operations take one pipeline stage; wiring-only ones take none.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+__all__ = ["Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for", "PLAN_FORMAT",
+           "PLAN_VERSION", "REGISTERED_OPS"]
+
+PLAN_FORMAT = "ikseries.plan"
+PLAN_VERSION = 1
+REGISTERED_OPS = frozenset({"add", "mul", "clamp"})
+_OPS = {"input": 0, "const": 0, "add": 2, "mul": 2, "clamp": 1, "shr": 1, "shl": 1, "frac": 1}
+
+
+def bits_for(lo: int, hi: int) -> tuple[int, bool]:
+    """Smallest (width, signed) holding every integer in [lo, hi]."""
+    if lo >= 0:
+        return max(1, int(hi).bit_length()), False
+    w = max((-lo - 1).bit_length(), max(hi, 0).bit_length()) + 1
+    return w, True
+
+
+@dataclass(frozen=True)
+class Node:
+    op: str
+    args: tuple[int, ...]
+    frac: int
+    lo: int
+    hi: int
+    param: object = None        # input name | const value | shift | (lo, hi) for clamp
+    ideal: float | None = None  # const only: real value before rounding
+
+    @property
+    def width(self) -> int:
+        return bits_for(self.lo, self.hi)[0]
+
+    @property
+    def signed(self) -> bool:
+        return bits_for(self.lo, self.hi)[1]
+
+
+@dataclass(frozen=True)
+class PlanInput:
+    name: str       # field name (port suffix)
+    unit: str
+    frac: int       # fractional bits of the port integer
+    lo: int         # in-range integer bounds
+    hi: int
+    width: int      # port width
+    signed: bool
+
+
+@dataclass(frozen=True)
+class PlanOutput:
+    name: str        # servo name (port suffix)
+    node: int        # node holding the final integer (PWM clock ticks)
+    preround: int    # node holding the value before the final rounding
+    unit: str        # "ticks"
+    ticks_per_pu: float
+
+
+@dataclass
+class Plan:
+    inputs: list[PlanInput]
+    nodes: list[Node]
+    outputs: list[PlanOutput]
+    meta: dict = field(default_factory=dict)
+
+    # -- pipeline ------------------------------------------------------------
+    def stages(self) -> list[int]:
+        """Pipeline stage of every node (constants: -1, inputs: 0)."""
+        st: list[int] = []
+        for n in self.nodes:
+            if n.op == "const":
+                st.append(-1)
+            elif n.op == "input":
+                st.append(0)
+            else:
+                s = max([st[a] for a in n.args] + [0])
+                st.append(s + 1 if n.op in REGISTERED_OPS else s)
+        return st
+
+    @property
+    def latency(self) -> int:
+        """Clock cycles from an accepted input to its outputs (all outputs aligned)."""
+        st = self.stages()
+        return max(st[o.node] for o in self.outputs)
+
+    def count(self, op: str) -> int:
+        return sum(1 for n in self.nodes if n.op == op)
+
+    def cone(self, node: int) -> set[int]:
+        """Indices of the nodes that ``node`` depends on (itself included)."""
+        seen, todo = set(), [node]
+        while todo:
+            i = todo.pop()
+            if i not in seen:
+                seen.add(i)
+                todo.extend(self.nodes[i].args)
+        return seen
+
+    # -- certified quantization bound -----------------------------------------
+    def rounding_bounds(self) -> list[float]:
+        """Bound on |integer value - ideal real value| of every node, as a real number.
+
+        The ideal value is the same dataflow evaluated in exact real arithmetic
+        with unrounded constants and no truncating shifts (see
+        :func:`ikseries.sim.golden.evaluate_ideal`). The bound is rigorous for
+        every in-range input: it follows the interval of each node.
+        """
+        err: list[float] = []
+        for n in self.nodes:
+            sc = 2.0 ** -n.frac
+            if n.op == "input":
+                e = 0.0
+            elif n.op == "const":
+                e = abs(n.param * sc - n.ideal) if n.ideal is not None else 0.0
+            elif n.op == "add":
+                e = err[n.args[0]] + err[n.args[1]]
+            elif n.op == "mul":
+                a, b = (self.nodes[i] for i in n.args)
+                ea, eb = err[n.args[0]], err[n.args[1]]
+                ma = max(abs(a.lo), abs(a.hi)) * 2.0 ** -a.frac
+                mb = max(abs(b.lo), abs(b.hi)) * 2.0 ** -b.frac
+                e = ma * eb + mb * ea + ea * eb
+            elif n.op == "shr":
+                e = err[n.args[0]] + (1 - 2.0 ** -n.param) * sc
+            else:  # shl, frac, clamp: exact (clamping only moves towards the ideal range)
+                e = err[n.args[0]]
+            err.append(e)
+        return err
+
+    # -- serialisation -----------------------------------------------------------
+    def to_json(self) -> dict:
+        return {
+            "format": PLAN_FORMAT, "version": PLAN_VERSION,
+            "inputs": [vars(i) for i in self.inputs],
+            "outputs": [vars(o) for o in self.outputs],
+            "latency": self.latency,
+            "nodes": [self._node_json(i, n) for i, n in enumerate(self.nodes)],
+            "meta": self.meta,
+        }
+
+    @staticmethod
+    def _node_json(i: int, n: Node) -> dict:
+        d = {"id": i, "op": n.op, "args": list(n.args), "frac": n.frac, "lo": n.lo, "hi": n.hi,
+             "width": n.width, "signed": n.signed}
+        if n.param is not None:
+            d["param"] = list(n.param) if isinstance(n.param, tuple) else n.param
+        if n.ideal is not None:
+            d["ideal"] = n.ideal
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict) -> "Plan":
+        if d.get("format") != PLAN_FORMAT:
+            raise ValueError(f"plan format must be {PLAN_FORMAT!r}, not {d.get('format')!r}")
+        if d.get("version") != PLAN_VERSION:
+            raise ValueError(f"plan version must be {PLAN_VERSION}, not {d.get('version')!r}")
+        b = PlanBuilder([PlanInput(**i) for i in d["inputs"]], with_inputs=False)
+        for nd in d["nodes"]:
+            param = nd.get("param")
+            if isinstance(param, list):
+                param = tuple(param)
+            b._append(nd["op"], tuple(nd["args"]), nd["frac"], param, nd.get("ideal"), share=False)
+            n = b.nodes[-1]
+            if (n.lo, n.hi) != (nd["lo"], nd["hi"]):
+                raise ValueError(f"plan node {nd['id']}: stored interval [{nd['lo']}, {nd['hi']}] "
+                                 f"does not match the recomputed [{n.lo}, {n.hi}]")
+        plan = cls(b.inputs, b.nodes, [PlanOutput(**o) for o in d["outputs"]], d.get("meta", {}))
+        if plan.latency != d.get("latency"):
+            raise ValueError(f"plan latency {d.get('latency')!r} does not match the recomputed {plan.latency}")
+        return plan
+
+    def dumps(self) -> str:
+        return json.dumps(self.to_json(), indent=1, sort_keys=True) + "\n"
+
+
+class PlanBuilder:
+    """Appends nodes with their intervals; structurally identical nodes are shared."""
+
+    def __init__(self, inputs: list[PlanInput], with_inputs: bool = True):
+        self.inputs = list(inputs)
+        self.nodes: list[Node] = []
+        self._memo: dict[tuple, int] = {}
+        self.input_nodes = {}
+        for i in self.inputs if with_inputs else ():
+            raw = self._append("input", (), i.frac, i.name)
+            self.input_nodes[i.name] = self.clamp(raw, i.lo, i.hi) if self._needs_clamp(i) else raw
+
+    @staticmethod
+    def _needs_clamp(i: PlanInput) -> bool:
+        full = (-(1 << (i.width - 1)), (1 << (i.width - 1)) - 1) if i.signed else (0, (1 << i.width) - 1)
+        return full != (i.lo, i.hi)
+
+    def _append(self, op, args, frac, param=None, ideal=None, share=True) -> int:
+        if op not in _OPS or len(args) != _OPS[op]:
+            raise ValueError(f"bad plan operation {op!r} with {len(args)} operands")
+        key = (op, args, frac, param, ideal)
+        if share and key in self._memo:
+            return self._memo[key]
+        a = [self.nodes[i] for i in args]
+        if op == "input":
+            inp = next(i for i in self.inputs if i.name == param)
+            lo, hi = ((-(1 << (inp.width - 1)), (1 << (inp.width - 1)) - 1) if inp.signed
+                      else (0, (1 << inp.width) - 1))
+        elif op == "const":
+            lo = hi = int(param)
+        elif op == "add":
+            if a[0].frac != a[1].frac or frac != a[0].frac:
+                raise ValueError("add operands must have equal fractional bits")
+            lo, hi = a[0].lo + a[1].lo, a[0].hi + a[1].hi
+        elif op == "mul":
+            if frac != a[0].frac + a[1].frac:
+                raise ValueError("mul result must have frac(a) + frac(b) fractional bits")
+            p = [x * y for x in (a[0].lo, a[0].hi) for y in (a[1].lo, a[1].hi)]
+            lo, hi = min(p), max(p)
+            if args[0] == args[1]:  # a square is never negative
+                lo = 0 if a[0].lo <= 0 <= a[0].hi else min(a[0].lo ** 2, a[0].hi ** 2)
+        elif op == "clamp":
+            clo, chi = param
+            lo, hi = min(max(a[0].lo, clo), chi), max(min(a[0].hi, chi), clo)
+        elif op == "shr":
+            lo, hi = a[0].lo >> param, a[0].hi >> param
+        elif op == "shl":
+            lo, hi = a[0].lo << param, a[0].hi << param
+        else:  # frac
+            lo, hi = a[0].lo, a[0].hi
+        if max(abs(lo), abs(hi)) >= 1 << 62:
+            raise OverflowError(f"plan node {op} needs more than 63 bits (interval [{lo}, {hi}])")
+        self.nodes.append(Node(op, tuple(args), frac, lo, hi, param, ideal))
+        self._memo[key] = len(self.nodes) - 1
+        return len(self.nodes) - 1
+
+    # -- helpers ---------------------------------------------------------------
+    def const(self, value: float, frac: int) -> int:
+        """Constant rounded to ``frac`` fractional bits (ideal value kept for the error bound)."""
+        q = int(round(value * 2.0 ** frac))
+        ideal = None if q == value * 2.0 ** frac else float(value)
+        return self._append("const", (), frac, q, ideal)
+
+    def frac(self, a: int) -> int:
+        return self.nodes[a].frac
+
+    def is_zero(self, a: int) -> bool:
+        n = self.nodes[a]
+        return n.op == "const" and n.param == 0
+
+    def reinterpret(self, a: int, frac: int) -> int:
+        """Same integer, real value scaled by 2**(frac(a) - frac)."""
+        return a if frac == self.frac(a) else self._append("frac", (a,), frac)
+
+    def align(self, a: int, frac: int) -> int:
+        """Change the binary point to ``frac`` bits (exact when widening, floor when narrowing)."""
+        f = self.frac(a)
+        if f == frac:
+            return a
+        if frac > f:
+            return self._append("shl", (a,), frac, frac - f)
+        return self._append("shr", (a,), frac, f - frac)
+
+    def add(self, a: int, b: int) -> int:
+        if self.is_zero(a):
+            return b
+        if self.is_zero(b):
+            return a
+        f = max(self.frac(a), self.frac(b))
+        return self._append("add", (self.align(a, f), self.align(b, f)), f)
+
+    def mul(self, a: int, b: int, frac: int | None = None) -> int:
+        """Product, truncated (floor) to ``frac`` fractional bits if given."""
+        p = self._append("mul", (a, b), self.frac(a) + self.frac(b))
+        return p if frac is None else self.align(p, frac)
+
+    def clamp(self, a: int, lo: int, hi: int) -> int:
+        n = self.nodes[a]
+        if n.lo >= lo and n.hi <= hi:
+            return a
+        return self._append("clamp", (a,), n.frac, (int(lo), int(hi)))
+
+    def round(self, a: int, frac: int) -> int:
+        """Round half up to ``frac`` fractional bits."""
+        f = self.frac(a)
+        if frac >= f:
+            return self.align(a, frac)
+        half = self._append("const", (), f, 1 << (f - frac - 1))
+        return self.align(self._append("add", (a, half), f), frac)
+
+    def build(self, outputs: list[PlanOutput], meta: dict | None = None) -> Plan:
+        """Keep only the nodes the outputs need and renumber them."""
+        keep = set()
+        plan = Plan(self.inputs, self.nodes, outputs, {})
+        for o in outputs:
+            keep |= plan.cone(o.node) | plan.cone(o.preround)
+        # inputs always stay (they are ports)
+        keep |= {i for i, n in enumerate(self.nodes) if n.op == "input"}
+        order = sorted(keep)
+        remap = {old: new for new, old in enumerate(order)}
+        nodes = [Node(n.op, tuple(remap[a] for a in n.args), n.frac, n.lo, n.hi, n.param, n.ideal)
+                 for n in (self.nodes[i] for i in order)]
+        outs = [PlanOutput(o.name, remap[o.node], remap[o.preround], o.unit, o.ticks_per_pu) for o in outputs]
+        return Plan(self.inputs, nodes, outs, dict(meta or {}))
+

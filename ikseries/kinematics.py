@@ -1,0 +1,143 @@
+"""Reference inverse and forward kinematics (float64) and servo calibration.
+
+Everything here is vectorised over numpy arrays and is the ground truth the
+fitted integer series is measured against.
+
+Angles are in degrees, lengths in millimetres, pulses in pulse units (pu).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["UnreachableError", "CylinderLeg", "Calibration"]
+
+
+class UnreachableError(ValueError):
+    """A tip target that the leg cannot reach."""
+
+
+def _fmt_point(names, values):
+    return "(" + ", ".join(f"{n}={float(v):g}" for n, v in zip(names, values)) + ")"
+
+
+@dataclass(frozen=True)
+class CylinderLeg:
+    """3-DOF coxa-femur-tibia leg with a cylindrical tip target (R, theta, Z).
+
+    The coxa (S1) axis is vertical through the origin. The tip's plan position
+    is ``x = D + R cos(theta)``, ``y = R sin(theta)``; Z is depth below the Z
+    datum (positive downwards), which lies ``z_datum`` below the femur (S2) axis.
+
+    Joint angles: ``S1 = atan2(y, x)``; with ``u = hypot(x, y) - coxa`` and
+    ``v = z_datum + Z``, ``d = hypot(u, v)``:
+    ``S2 = acos((f^2 + d^2 - t^2) / (2 f d)) - atan2(v, u)`` (femur elevation,
+    knee up) and ``S3 = 180 - acos((f^2 + t^2 - d^2) / (2 f t))`` (knee bend,
+    0 = straight).
+    """
+
+    coxa: float = 30.0
+    femur: float = 60.0
+    tibia: float = 90.0
+    neutral_distance: float = 100.0
+    z_datum: float = 50.0
+
+    inputs = ("r", "theta", "z")
+    input_units = ("mm", "deg", "mm")
+    servos = ("s1", "s2", "s3")
+    servo_names = ("coxa", "femur", "tibia")
+    cartesian_names = ("x", "y", "z")
+
+    # -- coordinate maps ---------------------------------------------------
+    def to_cartesian(self, r, theta, z):
+        """Cylindrical target -> plan position (x, y) and depth Z."""
+        th = np.radians(np.asarray(theta, dtype=np.float64))
+        r = np.asarray(r, dtype=np.float64)
+        return (self.neutral_distance + r * np.cos(th), r * np.sin(th),
+                np.asarray(z, dtype=np.float64) + 0.0 * r)
+
+    def from_cartesian(self, x, y, z):
+        """Plan position and depth -> cylindrical target (R, theta, Z)."""
+        dx = np.asarray(x, dtype=np.float64) - self.neutral_distance
+        y = np.asarray(y, dtype=np.float64)
+        return np.hypot(dx, y), np.degrees(np.arctan2(y, dx)), np.asarray(z, dtype=np.float64)
+
+    # -- inverse kinematics ------------------------------------------------
+    def ik_cartesian(self, x, y, z):
+        """Joint angles (S1, S2, S3) in degrees for tip (x, y, Z).
+
+        Raises
+        ------
+        UnreachableError
+            If any point lies outside the reachable annulus of the femur-tibia pair.
+        """
+        x, y, z = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (x, y, z)))
+        f, t = self.femur, self.tibia
+        s1 = np.degrees(np.arctan2(y, x))
+        u = np.hypot(x, y) - self.coxa
+        v = self.z_datum + z
+        d = np.hypot(u, v)
+        c2 = (f * f + d * d - t * t) / (2 * f * np.where(d > 0, d, 1.0))
+        c3 = (f * f + t * t - d * d) / (2 * f * t)
+        bad = (d <= 0) | (np.abs(c2) > 1) | (np.abs(c3) > 1) | ~np.isfinite(d)
+        if np.any(bad):
+            i = np.flatnonzero(np.ravel(bad))[0]
+            pt = [np.ravel(a)[i] for a in (x, y, z)]
+            raise UnreachableError(
+                f"target {_fmt_point(self.cartesian_names, pt)} is unreachable: tip distance "
+                f"from the femur axis {np.ravel(d)[i]:.6g} mm must be within "
+                f"[{abs(f - t):g}, {f + t:g}] mm")
+        s2 = np.degrees(np.arccos(c2) - np.arctan2(v, u))
+        s3 = 180.0 - np.degrees(np.arccos(c3))
+        return s1, s2, s3
+
+    def ik(self, r, theta, z):
+        """Joint angles (S1, S2, S3) in degrees for the cylindrical target (R, theta, Z)."""
+        try:
+            return self.ik_cartesian(*self.to_cartesian(r, theta, z))
+        except UnreachableError:
+            r, theta, z = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (r, theta, z)))
+            x, y, zz = self.to_cartesian(r, theta, z)
+            for idx in np.ndindex(r.shape):
+                try:
+                    self.ik_cartesian(x[idx], y[idx], zz[idx])
+                except UnreachableError as e:
+                    pt = (r[idx], theta[idx], z[idx])
+                    raise UnreachableError(
+                        f"target {_fmt_point(self.inputs, pt)} is unreachable: "
+                        + str(e).split(": ", 1)[1]) from None
+            raise
+
+    # -- forward kinematics ------------------------------------------------
+    def fk_cartesian(self, s1, s2, s3):
+        """Tip (x, y, Z) for joint angles in degrees."""
+        a1, a2, a3 = (np.radians(np.asarray(a, dtype=np.float64)) for a in (s1, s2, s3))
+        # In the leg plane: u outwards from the femur axis, v downwards.
+        u = self.femur * np.cos(-a2) + self.tibia * np.cos(a3 - a2)
+        v = self.femur * np.sin(-a2) + self.tibia * np.sin(a3 - a2)
+        rho = u + self.coxa
+        return rho * np.cos(a1), rho * np.sin(a1), v - self.z_datum
+
+    def fk(self, s1, s2, s3):
+        """Cylindrical tip target (R, theta, Z) for joint angles in degrees."""
+        return self.from_cartesian(*self.fk_cartesian(s1, s2, s3))
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Servo calibration: joint angle (deg) -> pulse width (pulse units).
+
+    ``pulse = neutral_pulse + direction * pu_per_degree * (angle - neutral_angle)``
+    where ``neutral_angle`` is the joint angle at the neutral pose.
+    """
+
+    neutral_angles: tuple[float, ...]
+    directions: tuple[int, ...]
+    neutral_pulse_pu: float = 3000.0
+    pu_per_degree: float = 20.0
+
+    def pulses(self, angles):
+        """Pulse widths in pu for a sequence of per-servo angle arrays."""
+        return tuple(self.neutral_pulse_pu + d * self.pu_per_degree * (np.asarray(a) - n)
+                     for a, d, n in zip(angles, self.directions, self.neutral_angles))

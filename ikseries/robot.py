@@ -1,0 +1,243 @@
+"""Robot descriptions: TOML format, validation and built-in presets."""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .kinematics import Calibration, CylinderLeg, UnreachableError
+
+__all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot"]
+
+
+class RobotError(ValueError):
+    """An invalid robot description; the message names the field and the bad value."""
+
+
+GEOMETRIES = {"cylinder-leg": CylinderLeg}
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    name: str
+    unit: str
+    min: float
+    max: float
+    frac_bits: int
+
+    @property
+    def lo(self) -> int:
+        return int(np.ceil(self.min * 2 ** self.frac_bits))
+
+    @property
+    def hi(self) -> int:
+        return int(np.floor(self.max * 2 ** self.frac_bits))
+
+
+@dataclass(frozen=True)
+class Robot:
+    name: str
+    description: str
+    geometry: CylinderLeg
+    inputs: tuple[InputSpec, ...]
+    neutral_pose: dict
+    pulse_unit_us: float
+    neutral_pulse_pu: float
+    pu_per_degree: float
+    directions: tuple[int, ...]
+    pulse_min_us: float
+    pulse_max_us: float
+    tolerance_pu: float
+    clock_hz: int
+    pwm_period_us: float
+
+    @property
+    def servos(self) -> tuple[str, ...]:
+        return self.geometry.servos
+
+    @property
+    def ticks_per_pu(self) -> float:
+        """PWM clock ticks per pulse unit."""
+        return self.clock_hz * self.pulse_unit_us * 1e-6
+
+    @property
+    def pwm_period_ticks(self) -> int:
+        return int(round(self.pwm_period_us * 1e-6 * self.clock_hz))
+
+    def pulse_limits_ticks(self) -> tuple[int, int]:
+        tpu = self.clock_hz * 1e-6
+        return int(np.ceil(self.pulse_min_us * tpu)), int(np.floor(self.pulse_max_us * tpu))
+
+    @property
+    def calibration(self) -> Calibration:
+        pose = [self.neutral_pose[i.name] for i in self.inputs]
+        neutral = tuple(float(a) for a in self.geometry.ik(*pose))
+        return Calibration(neutral, self.directions, self.neutral_pulse_pu, self.pu_per_degree)
+
+    def pulses_pu(self, *coords):
+        """Exact pulse widths (pu, float64) per servo for input coordinate arrays."""
+        return self.calibration.pulses(self.geometry.ik(*coords))
+
+
+# -- parsing helpers -------------------------------------------------------------------
+def _number(table, key, path, *, default=None, positive=False, integer=False):
+    if key not in table:
+        if default is None:
+            raise RobotError(f"{path}{key} is missing")
+        return default
+    v = table[key]
+    kind = "an integer" if integer else "a number"
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not isinstance(v, int)):
+        raise RobotError(f"{path}{key} must be {kind}, not {v!r}")
+    if not np.isfinite(v):
+        raise RobotError(f"{path}{key} must be finite, not {v!r}")
+    if positive and v <= 0:
+        raise RobotError(f"{path}{key} must be > 0, not {v!r}")
+    return v
+
+
+def _table(table, key, path, required=True):
+    v = table.get(key, None)
+    if v is None:
+        if required:
+            raise RobotError(f"{path}{key} is missing")
+        return {}
+    if not isinstance(v, dict):
+        raise RobotError(f"{path}{key} must be a table, not {v!r}")
+    return v
+
+
+def _no_extra(table, allowed, path):
+    extra = sorted(set(table) - set(allowed))
+    if extra:
+        raise RobotError(f"unknown field {path}{extra[0]} (expected one of: {', '.join(sorted(allowed))})")
+
+
+def parse_robot(data: dict, source: str = "robot") -> Robot:
+    """Validate a parsed TOML table and build a :class:`Robot`."""
+    if not isinstance(data, dict):
+        raise RobotError(f"{source}: a robot description must be a table")
+    _no_extra(data, {"name", "description", "geometry", "workspace", "calibration", "fit", "hardware"}, "")
+    name = data.get("name")
+    if not isinstance(name, str) or not name or not all(c.isalnum() or c in "-_" for c in name):
+        raise RobotError(f"name must be a non-empty string of letters, digits, '-' and '_', not {name!r}")
+    desc = data.get("description", "")
+    if not isinstance(desc, str):
+        raise RobotError(f"description must be a string, not {desc!r}")
+
+    geo = _table(data, "geometry", "")
+    gtype = geo.get("type")
+    if gtype not in GEOMETRIES:
+        raise RobotError(f"geometry.type must be one of {sorted(GEOMETRIES)}, not {gtype!r}")
+    cls = GEOMETRIES[gtype]
+    fields = [f for f in cls.__dataclass_fields__]
+    _no_extra(geo, ["type", *fields], "geometry.")
+    kw = {f: float(_number(geo, f, "geometry.", positive=True)) for f in fields}
+    geometry = cls(**kw)
+
+    ws = _table(data, "workspace", "")
+    _no_extra(ws, geometry.inputs, "workspace.")
+    inputs = []
+    for name_i, unit in zip(geometry.inputs, geometry.input_units):
+        t = _table(ws, name_i, "workspace.")
+        p = f"workspace.{name_i}."
+        _no_extra(t, ["min", "max", "frac_bits"], p)
+        lo, hi = _number(t, "min", p), _number(t, "max", p)
+        if not lo < hi:
+            raise RobotError(f"{p}max must be > {p}min ({lo!r}), not {hi!r}")
+        fb = _number(t, "frac_bits", p, integer=True)
+        if not 0 <= fb <= 16:
+            raise RobotError(f"{p}frac_bits must be in 0..16, not {fb!r}")
+        if name_i == "theta" and (lo < -180 or hi > 180):
+            raise RobotError(f"workspace.theta must lie within [-180, 180] deg, not [{lo!r}, {hi!r}]")
+        if name_i == "r" and lo < 0:
+            raise RobotError(f"workspace.r.min must be >= 0 mm, not {lo!r}")
+        spec = InputSpec(name_i, unit, float(lo), float(hi), fb)
+        if spec.lo > spec.hi:
+            raise RobotError(f"{p}: no value with {fb} fractional bits lies in [{lo!r}, {hi!r}]")
+        inputs.append(spec)
+
+    cal = _table(data, "calibration", "")
+    p = "calibration."
+    _no_extra(cal, ["pulse_unit_us", "neutral_pulse_pu", "pu_per_degree", "neutral_pose", "directions",
+                    "pulse_min_us", "pulse_max_us"], p)
+    pose = _table(cal, "neutral_pose", p)
+    _no_extra(pose, geometry.inputs, "calibration.neutral_pose.")
+    pose = {i.name: float(_number(pose, i.name, "calibration.neutral_pose.")) for i in inputs}
+    dirs = cal.get("directions", [1] * len(geometry.servos))
+    if (not isinstance(dirs, list) or len(dirs) != len(geometry.servos)
+            or any(d not in (1, -1) or isinstance(d, bool) for d in dirs)):
+        raise RobotError(f"calibration.directions must be a list of {len(geometry.servos)} values "
+                         f"each +1 or -1, not {dirs!r}")
+    pmin = float(_number(cal, "pulse_min_us", p, default=500.0, positive=True))
+    pmax = float(_number(cal, "pulse_max_us", p, default=2500.0, positive=True))
+    if not pmin < pmax:
+        raise RobotError(f"calibration.pulse_max_us must be > pulse_min_us ({pmin!r}), not {pmax!r}")
+
+    fit = _table(data, "fit", "", required=False)
+    _no_extra(fit, ["tolerance_pu"], "fit.")
+    tol = fit.get("tolerance_pu", 0.5)
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not tol > 0:
+        raise RobotError(f"fit.tolerance_pu must be > 0 pu, not {tol!r}")
+
+    hw = _table(data, "hardware", "", required=False)
+    _no_extra(hw, ["clock_hz", "pwm_period_us"], "hardware.")
+    clk = _number(hw, "clock_hz", "hardware.", default=48_000_000, positive=True, integer=True)
+    period = float(_number(hw, "pwm_period_us", "hardware.", default=20000.0, positive=True))
+    if period <= pmax:
+        raise RobotError(f"hardware.pwm_period_us must be > calibration.pulse_max_us ({pmax:g}), not {period!r}")
+
+    robot = Robot(name, desc, geometry, tuple(inputs), pose,
+                  float(_number(cal, "pulse_unit_us", p, positive=True)),
+                  float(_number(cal, "neutral_pulse_pu", p, positive=True)),
+                  float(_number(cal, "pu_per_degree", p, positive=True)),
+                  tuple(dirs), pmin, pmax, float(tol), int(clk), period)
+    if robot.ticks_per_pu < 1:
+        raise RobotError(f"hardware.clock_hz must give at least one PWM tick per pulse unit "
+                         f"(>= {1 / (robot.pulse_unit_us * 1e-6):g} Hz), not {clk!r}")
+    _check_reachable(robot)
+    return robot
+
+
+def _check_reachable(robot: Robot) -> None:
+    """The neutral pose and a grid over the workspace box (corners included) must be reachable."""
+    try:
+        robot.geometry.ik(*(robot.neutral_pose[i.name] for i in robot.inputs))
+    except UnreachableError as e:
+        raise RobotError(f"calibration.neutral_pose: {e}") from None
+    axes = [np.linspace(i.min, i.max, 9) for i in robot.inputs]
+    grid = [g.ravel() for g in np.meshgrid(*axes, indexing="ij")]
+    try:
+        robot.geometry.ik(*grid)
+    except UnreachableError as e:
+        raise RobotError(f"workspace: {e}") from None
+
+
+def load_robot(path) -> Robot:
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise RobotError(f"cannot read robot description {str(path)!r}: {e.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise RobotError(f"{path}: invalid TOML: {e}") from None
+    return parse_robot(data, str(path))
+
+
+def preset_names() -> list[str]:
+    return sorted(p.name[:-5] for p in resources.files("ikseries.presets").iterdir() if p.name.endswith(".toml"))
+
+
+def preset_text(name: str) -> str:
+    if name not in preset_names():
+        raise RobotError(f"preset must be one of {preset_names()}, not {name!r}")
+    return resources.files("ikseries.presets").joinpath(f"{name}.toml").read_text()
+
+
+def load_preset(name: str) -> Robot:
+    return parse_robot(tomllib.loads(preset_text(name)), f"preset {name}")
