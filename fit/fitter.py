@@ -12,7 +12,6 @@ Error budget (pu): ``tolerance = approximation + quantization + output rounding
 from __future__ import annotations
 
 import itertools
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -229,7 +228,6 @@ def _choose_formats(robot, inputs, cf, fits, budget: Budget, progress) -> int:
 
 def fit_robot(robot, progress=lambda msg: None) -> tuple[Plan, list[ServoFit]]:
     """Fit every servo of ``robot`` and return the evaluation plan and the fits."""
-    t0 = time.perf_counter()
     tpp = robot.ticks_per_pu
     budget = Budget.split(robot.tolerance_pu, tpp)
     inputs = plan_inputs(robot)
@@ -260,7 +258,6 @@ def fit_robot(robot, progress=lambda msg: None) -> tuple[Plan, list[ServoFit]]:
                     "fit_error_pu": sf.fit_error_pu / tpp, "certified_rounding_pu": sf.bound_pu,
                     "coefficients": [{"exponents": list(e), "value": c} for e, c in sf.poly.items()]}
                    for sf in fits],
-        "fit_seconds": round(time.perf_counter() - t0, 1),
     }
     plan = _build(robot, inputs, cf, fits, fv, meta)
     for sf, o in zip(fits, plan.outputs):

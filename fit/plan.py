@@ -24,13 +24,18 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
-__all__ = ["Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for", "PLAN_FORMAT",
+__all__ = ["quantize", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for", "PLAN_FORMAT",
            "PLAN_VERSION", "REGISTERED_OPS"]
 
 PLAN_FORMAT = "ikseries.plan"
 PLAN_VERSION = 1
 REGISTERED_OPS = frozenset({"add", "mul", "clamp"})
 _OPS = {"input": 0, "const": 0, "add": 2, "mul": 2, "clamp": 1, "shr": 1, "shl": 1, "frac": 1}
+
+
+def quantize(value: float, frac: int) -> int:
+    """Nearest integer to ``value * 2**frac``: a constant with ``frac`` fractional bits."""
+    return int(round(value * 2.0 ** frac))
 
 
 def bits_for(lo: int, hi: int) -> tuple[int, bool]:
@@ -89,13 +94,14 @@ class Plan:
 
     # -- pipeline ------------------------------------------------------------
     def stages(self) -> list[int]:
-        """Pipeline stage of every node (constants: -1, inputs: 0)."""
+        """Pipeline stage of every node: the number of clock edges after an input transfer at
+        which the node's value is valid (inputs are registered: 1; constants: 0)."""
         st: list[int] = []
         for n in self.nodes:
             if n.op == "const":
-                st.append(-1)
-            elif n.op == "input":
                 st.append(0)
+            elif n.op == "input":
+                st.append(1)
             else:
                 s = max([st[a] for a in n.args] + [0])
                 st.append(s + 1 if n.op in REGISTERED_OPS else s)
@@ -103,7 +109,7 @@ class Plan:
 
     @property
     def latency(self) -> int:
-        """Clock cycles from an accepted input to its outputs (all outputs aligned)."""
+        """Clock cycles from an input transfer to the transfer of its outputs (all aligned)."""
         st = self.stages()
         return max(st[o.node] for o in self.outputs)
 
@@ -256,7 +262,7 @@ class PlanBuilder:
     # -- helpers ---------------------------------------------------------------
     def const(self, value: float, frac: int) -> int:
         """Constant rounded to ``frac`` fractional bits (ideal value kept for the error bound)."""
-        q = int(round(value * 2.0 ** frac))
+        q = quantize(value, frac)
         ideal = None if q == value * 2.0 ** frac else float(value)
         return self._append("const", (), frac, q, ideal)
 

@@ -1,0 +1,102 @@
+"""Verilog export of the leg core and its JSON interface manifest."""
+from __future__ import annotations
+
+from amaranth.hdl import Module
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+from amaranth.back import verilog
+
+from ..fit.plan import Plan
+from .leg import LegCore
+
+__all__ = ["FlatLegTop", "module_name", "leg_verilog", "manifest", "MANIFEST_FORMAT"]
+
+
+class FlatLegTop(wiring.Component):
+    """The leg core with one Verilog port per stream field (``i_<input>``, ``o_<servo>``).
+
+    Amaranth packs a stream payload into one vector; this wrapper gives each field its
+    own port so the exported module is easy to instantiate. Pure wiring: latency and
+    throughput are those of :class:`LegCore`.
+    """
+
+    def __init__(self, core: LegCore):
+        self._core = core
+        ilay, olay = core.i.payload.shape(), core.o.payload.shape()
+        super().__init__({
+            "i_valid": In(1), "i_ready": Out(1),
+            **{f"i_{n}": In(f.shape) for n, f in ilay},
+            "o_valid": Out(1), "o_ready": In(1),
+            **{f"o_{n}": Out(f.shape) for n, f in olay},
+            **{f"pwm_{s}": Out(1) for s in core.servos},
+        })
+
+    @property
+    def core(self) -> LegCore:
+        return self._core
+
+    @property
+    def latency(self) -> int:
+        return self._core.latency
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.core = c = self._core
+        m.d.comb += [c.i.valid.eq(self.i_valid), self.i_ready.eq(c.i.ready),
+                     self.o_valid.eq(c.o.valid), c.o.ready.eq(self.o_ready)]
+        for n, _ in c.i.payload.shape():
+            m.d.comb += c.i.payload[n].eq(getattr(self, f"i_{n}"))
+        for n, _ in c.o.payload.shape():
+            m.d.comb += getattr(self, f"o_{n}").eq(c.o.payload[n])
+        for s in c.servos:
+            m.d.comb += getattr(self, f"pwm_{s}").eq(getattr(c, f"pwm_{s}"))
+        return m
+
+MANIFEST_FORMAT = "ikseries.manifest"
+
+
+def module_name(robot_name: str) -> str:
+    """Verilog module name of a robot's leg core (``cylinder-leg`` -> ``cylinder_leg_core``)."""
+    return robot_name.replace("-", "_") + "_core"
+
+
+def leg_verilog(core: LegCore, name: str) -> str:
+    """Verilog text of ``core`` with flat ports (:class:`FlatLegTop`); deterministic."""
+    return verilog.convert(FlatLegTop(core), name=name, emit_src=False)
+
+
+def manifest(robot, plan: Plan, core: LegCore, name: str) -> dict:
+    """Everything a user needs to connect the core: ports, formats, units, timing."""
+    clk = robot.clock_hz
+    return {
+        "format": MANIFEST_FORMAT, "version": 1,
+        "module": name,
+        "robot": robot.name,
+        "clock": {"port": "clk", "frequency_hz": clk, "edge": "rising"},
+        "reset": {"port": "rst", "polarity": "active-high", "synchronous": True,
+                  "state": "pipeline empty (o_valid low), PWM outputs low, no pulses until the first "
+                           "target is transferred on o"},
+        "inputs": {
+            "stream": {"valid": "i_valid", "ready": "i_ready"},
+            "fields": [{"name": i.name, "port": f"i_{i.name}", "width": i.width,
+                        "signed": i.signed, "frac_bits": i.frac, "unit": i.unit,
+                        "value": f"{i.name} [{i.unit}] = port / 2**{i.frac}",
+                        "range": [i.lo, i.hi],
+                        "out_of_range": "clamped to the range"} for i in plan.inputs],
+        },
+        "outputs": {
+            "stream": {"valid": "o_valid", "ready": "o_ready"},
+            "fields": [{"name": o.name, "port": f"o_{o.name}",
+                        "width": plan.nodes[o.node].width, "signed": False, "unit": "clock ticks",
+                        "ticks_per_pulse_unit": o.ticks_per_pu,
+                        "pulse_us": f"port / {clk / 1e6:g}",
+                        "range": [plan.nodes[o.node].lo, plan.nodes[o.node].hi]} for o in plan.outputs],
+        },
+        "pwm": [{"servo": s, "port": f"pwm_{s}", "period_cycles": core.period,
+                 "period_us": core.period / clk * 1e6,
+                 "update": "new width applied at the next period start"} for s in core.servos],
+        "latency_cycles": core.latency,
+        "latency_ns": core.latency / clk * 1e9,
+        "throughput": {"targets_per_cycle": 1, "targets_per_second_at_clock": clk,
+                       "note": "the pipeline stalls while o_valid is high and o_ready low"},
+    }

@@ -1,0 +1,87 @@
+"""Leg core: target stream in, pulse-width stream out, one PWM generator per servo."""
+from __future__ import annotations
+
+from amaranth.hdl import Module
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from ..fit.plan import Plan
+from .evaluator import PlanEvaluator, input_layout, output_layout
+from .pwm import ServoPWM
+
+__all__ = ["LegCore"]
+
+
+class LegCore(wiring.Component):
+    """IK evaluator for one leg feeding a PWM generator per servo.
+
+    Parameters
+    ----------
+    plan : Plan
+        Evaluation plan; its outputs are pulse widths in clock ticks.
+    period : int
+        PWM period in clock cycles.
+    reset_widths : dict, optional
+        Pulse width per servo from reset until the first target (default: no pulse).
+
+    Attributes
+    ----------
+    i : In(stream.Signature(input_layout(plan)))
+        Tip targets (port integers, see the interface manifest).
+    o : Out(stream.Signature(output_layout(plan)))
+        Pulse widths in clock ticks, one field per servo. Every transfer on ``o``
+        also loads the widths into the PWM generators, which apply them together at
+        the next period start (the generators share reset and period, so they run
+        in step).
+    pwm_<servo> : Out(1)
+        Servo signals.
+
+    Latency
+    -------
+    ``latency`` cycles from a target transfer on ``i`` to its widths on ``o``
+    (equal to the evaluator's latency).
+
+    Throughput
+    ----------
+    One target per cycle while ``o.ready`` is high.
+    """
+
+    def __init__(self, plan: Plan, period: int, reset_widths: dict | None = None):
+        self._evaluator = PlanEvaluator(plan)
+        self._servos = [o.name for o in plan.outputs]
+        reset_widths = dict(reset_widths or {})
+        unknown = sorted(set(reset_widths) - set(self._servos))
+        if unknown:
+            raise ValueError(f"reset_widths keys must be servos {self._servos}, not {unknown[0]!r}")
+        layout = output_layout(plan)
+        self._pwms = {s: ServoPWM(period, layout.members[s].width, reset_widths.get(s, 0))
+                      for s in self._servos}
+        super().__init__({
+            "i": In(stream.Signature(input_layout(plan))),
+            "o": Out(stream.Signature(layout)),
+            **{f"pwm_{s}": Out(1) for s in self._servos},
+        })
+
+    @property
+    def latency(self) -> int:
+        return self._evaluator.latency
+
+    @property
+    def servos(self) -> list[str]:
+        return list(self._servos)
+
+    @property
+    def period(self) -> int:
+        return next(iter(self._pwms.values())).period
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.evaluator = ev = self._evaluator
+        wiring.connect(m, wiring.flipped(self.i), ev.i)
+        wiring.connect(m, ev.o, wiring.flipped(self.o))
+        for s, pwm in self._pwms.items():
+            m.submodules[f"pwm_{s}"] = pwm
+            m.d.comb += [pwm.i.valid.eq(ev.o.valid & self.o.ready),
+                         pwm.i.payload.eq(ev.o.payload[s]),
+                         getattr(self, f"pwm_{s}").eq(pwm.pwm)]
+        return m

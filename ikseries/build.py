@@ -1,0 +1,158 @@
+"""``ikseries build``: robot description -> fit -> plan -> Verilog, manifest, report."""
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .accuracy import measure
+from .fit.fitter import FitError, fit_robot
+from .fit.plan import quantize
+from .hdl.export import leg_verilog, manifest, module_name
+from .hdl.leg import LegCore
+from .report import render_markdown
+from .sim import golden
+from .sim.amaranth_sim import corner_targets, random_targets, simulate_leg
+
+__all__ = ["BuildError", "build"]
+
+
+class BuildError(RuntimeError):
+    """The build cannot produce a design that meets the robot's requirements."""
+
+
+def robot_record(robot) -> dict:
+    d = dataclasses.asdict(robot)
+    d["geometry"] = {"type": "cylinder-leg", **dataclasses.asdict(robot.geometry)}
+    return d
+
+
+def _simulate(core, plan, progress) -> dict:
+    """Amaranth simulation: bit-exact against the golden model, latency measured."""
+    targets = {k: np.concatenate([c, r]) for (k, c), r in
+               zip(corner_targets(plan).items(), random_targets(plan, 1000, 7).values())}
+    t0 = time.perf_counter()
+    res = simulate_leg(core, targets)
+    exp = golden.outputs(plan, targets)
+    mismatches = int(sum(np.count_nonzero(res.outputs[s] != exp[s]) for s in exp))
+    lat = sorted(set(int(x) for x in res.latencies))
+    progress(f"amaranth simulation: {len(res.latencies)} targets, {mismatches} mismatches, "
+             f"latency {lat} cycles")
+    if mismatches or lat != [core.latency]:
+        raise BuildError(f"simulation disagrees with the golden model ({mismatches} mismatches, "
+                         f"latency {lat} vs {core.latency}): please report this as a bug")
+    return {"simulator": "amaranth", "targets": len(res.latencies), "mismatches": mismatches,
+            "latency_cycles_measured": lat[0], "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def build(robot, out_dir, *, synth: bool = True, progress=print) -> dict:
+    """Run the whole pipeline and write every artifact into ``out_dir``.
+
+    Files are written to a temporary directory and moved into place at the end,
+    so a failed build leaves nothing half-written.
+    """
+    out_dir = Path(out_dir)
+    times = {}
+    t0 = time.perf_counter()
+    progress(f"fitting {robot.name} (tolerance ±{robot.tolerance_pu:g} pu)")
+    try:
+        plan, fits = fit_robot(robot, progress)
+    except FitError as e:
+        raise BuildError(str(e)) from None
+    times["fit_s"] = round(time.perf_counter() - t0, 1)
+    plan.meta["robot_description"] = robot_record(robot)
+    plan.meta["ikseries_version"] = __version__
+
+    t0 = time.perf_counter()
+    acc = measure(robot, plan)
+    times["accuracy_s"] = round(time.perf_counter() - t0, 1)
+    plan.meta["accuracy"] = {"points": acc["points"],
+                             "max_error_pu": {s: {k: v for k, v in w.items() if k != "at"}
+                                              for s, w in acc["servos"].items()}}
+    worst = max(acc["servos"].items(), key=lambda kv: kv[1]["total"])
+    progress(f"accuracy on {acc['points']} points: worst {worst[0]} {worst[1]['total']:.3f} pu")
+    if worst[1]["total"] > robot.tolerance_pu:
+        raise BuildError(f"servo {worst[0]} misses the tolerance: {worst[1]['total']:.4f} pu > "
+                         f"{robot.tolerance_pu:g} pu at {worst[1]['at']}")
+
+    name = module_name(robot.name)
+    core = LegCore(plan, robot.pwm_period_ticks)
+    t0 = time.perf_counter()
+    progress("exporting Verilog")
+    verilog_text = leg_verilog(core, name)
+    times["verilog_s"] = round(time.perf_counter() - t0, 1)
+    sim = _simulate(core, plan, progress)
+
+    tmp = Path(tempfile.mkdtemp(prefix=".ikseries-", dir=out_dir.parent if out_dir.parent.exists() else None))
+    try:
+        vfile = f"{name}.v"
+        (tmp / vfile).write_text(verilog_text)
+        resources = None
+        if synth:
+            from .synth import synth_counts
+            t0 = time.perf_counter()
+            resources = synth_counts(tmp / vfile, name, workdir=tmp / "synth", progress=progress)
+            times["synth_s"] = round(time.perf_counter() - t0, 1)
+            shutil.rmtree(tmp / "synth", ignore_errors=True)
+        man = manifest(robot, plan, core, name)
+        report = make_report(robot, plan, fits, acc, sim, man, resources, times, vfile)
+        (tmp / "plan.json").write_text(plan.dumps())
+        (tmp / "manifest.json").write_text(json.dumps(man, indent=1, sort_keys=True) + "\n")
+        (tmp / "report.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
+        (tmp / "report.md").write_text(render_markdown(report))
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for f in sorted(tmp.iterdir()):
+            dest = out_dir / f.name
+            if dest.is_dir():
+                shutil.rmtree(dest)
+            f.replace(dest)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    progress(f"wrote {out_dir}/: {vfile}, plan.json, manifest.json, report.md, report.json")
+    return report
+
+
+def make_report(robot, plan, fits, acc, sim, man, resources, times, vfile) -> dict:
+    bounds = plan.rounding_bounds()
+    servos = []
+    for sf, o in zip(fits, plan.outputs):
+        cone = plan.cone(o.node)
+        servos.append({
+            "name": sf.name,
+            "total_degree": sf.degree,
+            "powers": dict(zip(("x", "y", "z"), sf.allowed)),
+            "terms": len(sf.poly),
+            "accumulator_frac_bits": sf.frac,
+            "multipliers": sum(1 for i in cone if plan.nodes[i].op == "mul"),
+            "coefficients": [{"exponents": list(e), "integer": quantize(c, sf.frac), "value": c}
+                             for e, c in sf.poly.items()],
+            "error_pu": acc["servos"][sf.name],
+            "certified_rounding_bound_pu": bounds[o.preround] / o.ticks_per_pu,
+        })
+    return {
+        "robot": robot.name,
+        "ikseries_version": plan.meta.get("ikseries_version"),
+        "tolerance_pu": robot.tolerance_pu,
+        "clock_hz": robot.clock_hz,
+        "ticks_per_pu": robot.ticks_per_pu,
+        "verilog": vfile,
+        "module": man["module"],
+        "accuracy_points": acc["points"],
+        "servos": servos,
+        "plan": {"nodes": len(plan.nodes), "multipliers": plan.count("mul"), "adders": plan.count("add"),
+                 "clamps": plan.count("clamp"), "feature_frac_bits": plan.meta["features"]["frac_bits"],
+                 "max_width": max(n.width for n in plan.nodes)},
+        "latency_cycles": man["latency_cycles"],
+        "latency_ns": man["latency_ns"],
+        "throughput_targets_per_s": man["throughput"]["targets_per_second_at_clock"],
+        "simulation": sim,
+        "resources": resources,
+        "times_s": times,
+    }
+

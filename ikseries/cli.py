@@ -1,0 +1,136 @@
+"""Command-line interface: ``ikseries presets | build | eval``."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["main"]
+
+
+class CliError(Exception):
+    pass
+
+
+def _robot(args):
+    from .robot import load_preset, load_robot
+    if getattr(args, "robot", None) and getattr(args, "preset", None):
+        raise CliError("give either a robot description file or --preset, not both")
+    if getattr(args, "robot", None):
+        return load_robot(args.robot)
+    return load_preset(args.preset or "cylinder-leg")
+
+
+def _progress(quiet):
+    t0 = time.perf_counter()
+
+    def say(msg):
+        if not quiet:
+            print(f"[{time.perf_counter() - t0:6.1f}s] {msg}", file=sys.stderr, flush=True)
+    return say
+
+
+def cmd_presets(args):
+    from .robot import load_preset, preset_names
+    for n in preset_names():
+        print(f"{n}\t{load_preset(n).description}")
+
+
+def cmd_build(args):
+    from .build import build
+    robot = _robot(args)
+    out = Path(args.output) if args.output else Path("build") / robot.name
+    rep = build(robot, out, synth=not args.no_synth, progress=_progress(args.quiet))
+    worst = max(s["error_pu"]["total"] for s in rep["servos"])
+    print(f"{robot.name}: max error {worst:.3f} pu (tolerance {robot.tolerance_pu:g}), "
+          f"latency {rep['latency_cycles']} cycles, output in {out}/")
+
+
+def _cached_plan(robot, path):
+    """The plan in ``path`` (or build/<robot>/plan.json when it was built from this robot)."""
+    import json
+
+    from .build import robot_record
+    from .fit.plan import Plan
+    given = path is not None
+    path = Path(path) if given else Path("build") / robot.name / "plan.json"
+    if not path.exists():
+        if given:
+            raise CliError(f"plan file {str(path)!r} does not exist")
+        return None
+    try:
+        plan = Plan.from_json(json.loads(path.read_text()))
+    except (ValueError, KeyError, TypeError) as e:
+        raise CliError(f"{path}: not a valid ikseries plan: {e}") from None
+    if json.loads(json.dumps(robot_record(robot))) != plan.meta.get("robot_description"):
+        if given:
+            raise CliError(f"{path} was built for a different robot description than {robot.name!r}")
+        return None
+    return plan
+
+
+def cmd_eval(args):
+    import numpy as np
+
+    from .fit.fitter import fit_robot
+    from .kinematics import UnreachableError
+    from .sim import golden
+    robot = _robot(args)
+    vals = [args.r, args.theta, args.z]
+    for v, spec in zip(vals, robot.inputs):
+        if not np.isfinite(v) or not spec.min <= v <= spec.max:
+            raise CliError(f"{spec.name} must be within [{spec.min:g}, {spec.max:g}] {spec.unit}, not {v:g}")
+    try:
+        ref = robot.pulses_pu(*vals)
+    except UnreachableError as e:
+        raise CliError(str(e)) from None
+    plan = _cached_plan(robot, args.plan)
+    if plan is None:
+        _progress(args.quiet)(f"no plan.json for {robot.name} under build/: fitting")
+        plan = fit_robot(robot, _progress(args.quiet))[0]
+    ints = golden.quantize_inputs(plan, dict(zip([i.name for i in robot.inputs], [[v] for v in vals])))
+    q = [float(ints[i.name][0]) * 2.0 ** -i.frac_bits for i in robot.inputs]
+    ref_q = robot.pulses_pu(*q)
+    outs = golden.outputs(plan, ints)
+    print("input (port integers): " + ", ".join(f"{i.name}={int(ints[i.name][0])}" for i in robot.inputs)
+          + "  = " + ", ".join(f"{i.name}={v:g} {i.unit}" for i, v in zip(robot.inputs, q)))
+    print(f"{'servo':6} {'reference pu':>14} {'golden ticks':>13} {'golden pu':>11} {'error pu':>9}")
+    for k, o in enumerate(plan.outputs):
+        pu = outs[o.name][0] / o.ticks_per_pu
+        print(f"{o.name:6} {float(ref_q[k]):14.4f} {int(outs[o.name][0]):13d} {pu:11.4f} {pu - float(ref_q[k]):+9.4f}")
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="ikseries", description=__doc__)
+    sub = p.add_subparsers(dest="cmd", required=True)
+    sub.add_parser("presets", help="list the built-in robot descriptions")
+    b = sub.add_parser("build", help="fit, generate Verilog + manifest + report")
+    b.add_argument("robot", nargs="?", help="robot description (TOML); default: --preset cylinder-leg")
+    b.add_argument("--preset", help="built-in robot name (see `ikseries presets`)")
+    b.add_argument("-o", "--output", help="output directory (default build/<robot>)")
+    b.add_argument("--no-synth", action="store_true", help="skip Yosys resource counts")
+    b.add_argument("-q", "--quiet", action="store_true")
+    e = sub.add_parser("eval", help="pulse of each servo: reference IK vs golden integer model")
+    e.add_argument("--preset")
+    e.add_argument("--robot", help="robot description (TOML)")
+    e.add_argument("--plan", help="use this plan.json instead of fitting")
+    e.add_argument("-q", "--quiet", action="store_true")
+    for n in ("r", "theta", "z"):
+        e.add_argument(n, type=float, metavar=n.upper())
+    args = p.parse_args(argv)
+    from .build import BuildError
+    from .robot import RobotError
+    try:
+        {"presets": cmd_presets, "build": cmd_build, "eval": cmd_eval}[args.cmd](args)
+    except (CliError, RobotError) as exc:
+        print(f"ikseries: error: {exc}", file=sys.stderr)
+        return 2
+    except BuildError as exc:
+        print(f"ikseries: error: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,70 @@
+"""Human-readable report (Markdown) from the build's report.json data."""
+from __future__ import annotations
+
+__all__ = ["render_markdown"]
+
+
+def _row(cells) -> str:
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def render_markdown(r: dict) -> str:
+    out = [f"# ikseries report: {r['robot']}", "",
+           f"ikseries {r['ikseries_version']}; Verilog module `{r['module']}` in `{r['verilog']}`; "
+           f"clock {r['clock_hz'] / 1e6:g} MHz ({r['ticks_per_pu']:g} ticks per pulse unit).", "",
+           "## Accuracy", "",
+           f"Max |error| in pulse units (pu; tolerance ±{r['tolerance_pu']:g} pu) over "
+           f"{r['accuracy_points']:,} representable workspace points (dense grid, random, every face). "
+           "approximation: the fitted series in exact arithmetic vs the reference IK; quantization: "
+           "integer arithmetic vs exact; rounding: the emitted PWM tick count vs the value before "
+           "rounding; total: emitted pulse vs exact pulse. The certified bound is a proof, for every "
+           "in-range input, on quantization + rounding inside the datapath before the last rounding.", "",
+           _row(["servo", "approximation", "quantization", "rounding", "total", "worst at",
+                 "certified rounding bound"]),
+           _row(["---"] * 7)]
+    for s in r["servos"]:
+        e = s["error_pu"]
+        at = ", ".join(f"{k}={v:g}" for k, v in (e.get("at") or {}).items())
+        out.append(_row([s["name"], f"{e['approximation']:.4f}", f"{e['quantization']:.4f}",
+                         f"{e['rounding']:.4f}", f"**{e['total']:.4f}**", at,
+                         f"{s['certified_rounding_bound_pu']:.4f}"]))
+    out += ["", "## Series", "",
+            _row(["servo", "total degree", "powers (x, y, z)", "terms", "multipliers (incl. coordinate stage)",
+                  "coefficient frac bits"]), _row(["---"] * 6)]
+    for s in r["servos"]:
+        p = s["powers"]
+        out.append(_row([s["name"], s["total_degree"], f"{p['x']}, {p['y']}, {p['z']}", s["terms"],
+                         s["multipliers"], s["accumulator_frac_bits"]]))
+    pl = r["plan"]
+    out += ["", f"Whole plan: {pl['nodes']} operations, {pl['multipliers']} multipliers "
+            f"(the coordinate stage is shared by all servos), {pl['adders']} adders, "
+            f"features with {pl['feature_frac_bits']} fractional bits, widest intermediate "
+            f"{pl['max_width']} bits.", "",
+            "## Timing", "",
+            f"- Latency: **{r['latency_cycles']} cycles** ({r['latency_ns']:.1f} ns at the configured clock), "
+            f"measured in simulation: {r['simulation']['latency_cycles_measured']} cycles "
+            f"({r['simulation']['targets']} targets, {r['simulation']['mismatches']} mismatches against "
+            "the golden model).",
+            f"- Throughput: one target per cycle = {r['throughput_targets_per_s']:,.0f} leg solutions/s "
+            "at the configured clock.", ""]
+    res = r.get("resources")
+    out += ["## FPGA resources (Yosys, before place-and-route)", ""]
+    if res:
+        cats = ["LUT", "FF", "carry", "DSP", "BRAM"]
+        out += [_row(["target", *cats, "synthesis time (s)"]), _row(["---"] * (len(cats) + 2))]
+        for tgt, d in res.items():
+            c = d.get("counts", d)
+            out.append(_row([tgt, *(c.get(k, 0) for k in cats), d.get("seconds", "")]))
+    else:
+        out.append("Synthesis was skipped (--no-synth).")
+    out += ["", "## Coefficients", "",
+            "Integer coefficient = round(value * 2**frac_bits); term = x^i y^j z^k over the "
+            "normalised features (see plan.json `meta.features`), value in PWM ticks.", ""]
+    for s in r["servos"]:
+        out += [f"### {s['name']}", "", _row(["i j k", "integer", "value"]), _row(["---"] * 3)]
+        out += [_row([" ".join(map(str, c["exponents"])), c["integer"], f"{c['value']:.10g}"])
+                for c in s["coefficients"]]
+        out.append("")
+    t = r["times_s"]
+    out += ["## Build times", "", ", ".join(f"{k[:-2]} {v:g} s" for k, v in t.items()), ""]
+    return "\n".join(out)

@@ -1,0 +1,43 @@
+"""Shared fixtures: the default robot and its fitted plan (fitted once per test session)."""
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from ikseries.fit.fitter import fit_robot
+from ikseries.robot import load_preset
+
+
+@pytest.fixture(scope="session")
+def robot():
+    return load_preset("cylinder-leg")
+
+
+@pytest.fixture(scope="session")
+def fitted(robot):
+    """(plan, servo fits) of the default robot at its real tolerance."""
+    return fit_robot(robot)
+
+
+@pytest.fixture(scope="session")
+def plan(fitted):
+    return fitted[0]
+
+
+@pytest.fixture(scope="session")
+def small_robot(robot):
+    """The default leg at a loose tolerance (4 pu): a small plan for fast HDL tests."""
+    return dataclasses.replace(robot, name="cylinder-leg-small", tolerance_pu=4.0)
+
+
+@pytest.fixture(scope="session")
+def small_plan(small_robot):
+    return fit_robot(small_robot)[0]
+
+
+@pytest.fixture(scope="session")
+def small_plan_file(small_plan, tmp_path_factory):
+    p = tmp_path_factory.mktemp("plan") / "small_plan.json"
+    p.write_text(small_plan.dumps())
+    return p
