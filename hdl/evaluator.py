@@ -21,7 +21,7 @@ def input_layout(plan: Plan) -> data.StructLayout:
 
 def output_layout(plan: Plan) -> data.StructLayout:
     """One field per output: pulse width in PWM clock ticks."""
-    return data.StructLayout({o.name: unsigned(plan.nodes[o.node].width) for o in plan.outputs})
+    return data.StructLayout({o.name: _shape(plan.nodes[o.node]) for o in plan.outputs})
 
 
 class PlanEvaluator(wiring.Component):

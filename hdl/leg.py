@@ -48,6 +48,10 @@ class LegCore(wiring.Component):
 
     def __init__(self, plan: Plan, period: int, reset_widths: dict | None = None):
         self._evaluator = PlanEvaluator(plan)
+        for o in plan.outputs:
+            if plan.nodes[o.node].lo < 0:
+                raise ValueError(f"plan output {o.name} must be a non-negative pulse width, but its "
+                                 f"range starts at {plan.nodes[o.node].lo}")
         self._servos = [o.name for o in plan.outputs]
         reset_widths = dict(reset_widths or {})
         unknown = sorted(set(reset_widths) - set(self._servos))

@@ -17,8 +17,8 @@ The result of :func:`synth_counts` is a JSON-serialisable dict, one entry per ta
         "other_cells": {},                  # the raw cells counted as "other"
         "num_cells": 1761,                  # == sum(cells.values()) == sum(counts.values())
         "seconds": 12.3,                    # wall time of the Yosys process
-        "yosys_seconds": 11.9,              # Yosys' own "End of script" CPU time (user+system)
-        "top_passes": [["abc", 61.0], ...]} # Yosys' "Time spent" breakdown (percent), largest first
+        "yosys_seconds": 11.9,              # Yosys' own "End of script" time
+        "top_passes": [["abc9_exe", 61, 7], ...]}  # Yosys' "Time spent" line: pass, %, seconds
      "ecp5": {...}, "xc7": {...}}
 
 Categories (every raw cell falls in exactly one; unknown cells go to "other"):
@@ -155,19 +155,26 @@ def _tail(path: Path, lines: int = 25) -> str:
     return "\n".join(text.rstrip().splitlines()[-lines:])
 
 
-_END_RE = re.compile(r"End of script\. Logfile hash: \S+, CPU: user ([\d.]+)s system ([\d.]+)s")
-_PASS_RE = re.compile(r"(\d+)% +\d+x (\S+) \(")
+# Yosys >= 0.5x: "End of script. Logfile hash: ..., time: 4.74s, user: 4.74s, system: 0.00s";
+# older: "End of script. Logfile hash: ..., CPU: user 4.74s system 0.00s".
+_END_RE = re.compile(r"End of script\. Logfile hash: \S+, (?:time: ([\d.]+)s|CPU: user ([\d.]+)s system ([\d.]+)s)")
+_PASS_RE = re.compile(r"(\d+)% +\d+x (\S+) \((\d+) sec\)")
 
 
 def _timing_from_log(log: str) -> tuple[float | None, list[list]]:
     m = _END_RE.search(log)
-    cpu = round(float(m.group(1)) + float(m.group(2)), 2) if m else None
+    if m is None:
+        secs = None
+    elif m.group(1) is not None:
+        secs = float(m.group(1))
+    else:
+        secs = round(float(m.group(2)) + float(m.group(3)), 2)
     passes: list[list] = []
     idx = log.rfind("Time spent:")
     if idx >= 0:
-        for pct, name in _PASS_RE.findall(log[idx:idx + 2000]):
-            passes.append([name, float(pct)])
-    return cpu, passes[:5]
+        line = log[idx:].splitlines()[0]
+        passes = [[name, int(pct), int(sec)] for pct, name, sec in _PASS_RE.findall(line)]
+    return secs, passes
 
 
 def _run_target(target: str, sources: list[Path], top: str, tdir: Path,
@@ -205,10 +212,10 @@ def _run_target(target: str, sources: list[Path], top: str, tdir: Path,
         raise SynthError(target, f"no usable stat.json ({e})", _tail(tdir / "yosys.log")) from None
     cells = {k: int(v) for k, v in sorted(cells.items()) if k != "$scopeinfo"}
     counts, other = categorise(family, cells)
-    cpu, passes = _timing_from_log((tdir / "yosys.log").read_text(errors="replace"))
+    ysecs, passes = _timing_from_log((tdir / "yosys.log").read_text(errors="replace"))
     return {"target": target, "device": device, "script": script, "counts": counts,
             "cells": cells, "other_cells": other, "num_cells": sum(cells.values()),
-            "seconds": seconds, "yosys_seconds": cpu, "top_passes": passes}
+            "seconds": seconds, "yosys_seconds": ysecs, "top_passes": passes}
 
 
 def synth_counts(verilog_path: str | os.PathLike | Sequence[str | os.PathLike], top: str,

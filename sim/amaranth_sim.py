@@ -6,8 +6,6 @@ from dataclasses import dataclass
 import numpy as np
 from amaranth.sim import Simulator
 
-from ..hdl.leg import LegCore
-
 __all__ = ["LegSimResult", "simulate_leg", "corner_targets", "random_targets"]
 
 
@@ -33,16 +31,20 @@ def random_targets(plan, n: int, seed: int) -> dict:
     return {i.name: rng.integers(i.lo, i.hi + 1, n) for i in plan.inputs}
 
 
-def simulate_leg(core: LegCore, targets: dict, *, ready_prob: float = 1.0, valid_prob: float = 1.0,
+def simulate_leg(core, targets: dict, *, ready_prob: float = 1.0, valid_prob: float = 1.0,
                  seed: int = 0, vcd: str | None = None) -> LegSimResult:
     """Stream ``targets`` (port integers) through ``core``; collect outputs and latencies.
+
+    ``core`` is a :class:`LegCore` or a :class:`PlanEvaluator` (anything with ``i``/``o``
+    streams and a ``latency``).
 
     ``ready_prob`` / ``valid_prob`` < 1 apply random backpressure / input gaps.
     """
     names = list(targets)
     n = len(targets[names[0]])
     rng = np.random.default_rng(seed)
-    got = {s: [] for s in core.servos}
+    servos = [name for name, _ in core.o.payload.shape()]
+    got = {s: [] for s in servos}
     t_in, t_out = [], []
     state = {"cycles": 0}
 
@@ -61,7 +63,7 @@ def simulate_leg(core: LegCore, targets: dict, *, ready_prob: float = 1.0, valid
                 t_in.append(cyc)
                 k += 1
             if ctx.get(core.o.valid) and ctx.get(core.o.ready):
-                for s in core.servos:
+                for s in servos:
                     got[s].append(ctx.get(core.o.payload[s]))
                 t_out.append(cyc)
             await ctx.tick()

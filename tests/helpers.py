@@ -1,0 +1,30 @@
+"""Small hand-built plans for exhaustive tests."""
+import numpy as np
+
+from ikseries.fit.horner import horner
+from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput
+
+
+def tiny_plan(seed=0, clamp=(-100, 100)) -> Plan:
+    """Two small inputs, a random 2-variable polynomial, rounded and clamped: small enough
+    to evaluate exhaustively over every port value."""
+    rng = np.random.default_rng(seed)
+    inputs = [PlanInput("a", "mm", 2, 0, 12, 4, False), PlanInput("b", "deg", 1, -10, 9, 5, True)]
+    b = PlanBuilder(inputs)
+    a_n = b.align(b.reinterpret(b.input_nodes["a"], 4), 6)   # a / 4 in [0, 0.75]
+    b_n = b.reinterpret(b.input_nodes["b"], 5)               # b / 16 in [-0.31, 0.28]
+    poly = {(i, j): float(rng.normal() * 50) for i in range(4) for j in range(3) if i + j <= 4}
+    acc = horner(b, poly, [a_n, b_n], 5)
+    out = b.clamp(b.round(acc, 0), *clamp)
+    return b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
+
+
+def all_ports(plan):
+    ranges = []
+    for i in plan.inputs:
+        lo, hi = ((-(1 << (i.width - 1)), (1 << (i.width - 1)) - 1) if i.signed else (0, (1 << i.width) - 1))
+        ranges.append(np.arange(lo, hi + 1))
+    grid = np.meshgrid(*ranges, indexing="ij")
+    return {i.name: g.ravel() for i, g in zip(plan.inputs, grid)}
+
+

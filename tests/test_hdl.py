@@ -1,0 +1,140 @@
+"""Amaranth simulation of the generated RTL against the golden model."""
+import numpy as np
+import pytest
+from amaranth.sim import Simulator
+
+from helpers import all_ports, tiny_plan
+from ikseries.hdl.evaluator import PlanEvaluator
+from ikseries.hdl.leg import LegCore
+from ikseries.hdl.pwm import ServoPWM
+from ikseries.sim import golden
+from ikseries.sim.amaranth_sim import corner_targets, random_targets, simulate_leg
+
+
+def _check(core, plan, targets, **kw):
+    res = simulate_leg(core, targets, **kw)
+    exp = golden.outputs(plan, targets)
+    for s in exp:
+        assert np.array_equal(res.outputs[s], exp[s]), s
+    return res
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_evaluator_exhaustive_at_small_widths(seed):
+    """Every port value (in range and clamped out-of-range) of a tiny plan, bit for bit."""
+    plan = tiny_plan(seed)
+    core = PlanEvaluator(plan)
+    res = _check(core, plan, all_ports(plan))
+    assert set(res.latencies.tolist()) == {core.latency}
+
+
+def test_leg_core_bit_exact_and_latency_full_plan(plan):
+    """Thousands of random targets plus every corner through the real plan."""
+    core = LegCore(plan, period=960000)
+    t = {k: np.concatenate([c, r]) for (k, c), r in
+         zip(corner_targets(plan).items(), random_targets(plan, 3000, 11).values())}
+    res = _check(core, plan, t)
+    assert set(res.latencies.tolist()) == {core.latency} == {plan.latency}
+
+
+def test_leg_core_under_backpressure_and_gaps(small_plan):
+    core = LegCore(small_plan, period=960000)
+    res = _check(core, small_plan, random_targets(small_plan, 600, 5), ready_prob=0.5, valid_prob=0.6, seed=3)
+    assert res.latencies.min() == core.latency
+
+
+def test_evaluator_rejects_bad_plan():
+    with pytest.raises(TypeError, match="plan must be a Plan, not 'x'"):
+        PlanEvaluator("x")
+
+
+# -- PWM -----------------------------------------------------------------------------------
+def run_pwm(pwm, cycles, widths=()):
+    """Sample pwm every cycle; ``widths`` = [(cycle, width)] offered on i at that cycle."""
+    trace = []
+
+    async def bench(ctx):
+        todo = dict(widths)
+        for c in range(cycles):
+            if c in todo:
+                ctx.set(pwm.i.valid, 1)
+                ctx.set(pwm.i.payload, todo[c])
+            else:
+                ctx.set(pwm.i.valid, 0)
+            trace.append(ctx.get(pwm.pwm))
+            await ctx.tick()
+
+    sim = Simulator(pwm)
+    sim.add_clock(1e-6)
+    sim.add_testbench(bench)
+    sim.run()
+    return np.array(trace)
+
+
+def pulses(trace):
+    """(start, length) of every high run."""
+    d = np.diff(np.concatenate([[0], trace, [0]]))
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    return list(zip(starts.tolist(), (ends - starts).tolist()))
+
+
+def test_pwm_low_until_first_width_then_exact_pulses():
+    pwm = ServoPWM(period=20, width_bits=5)
+    tr = run_pwm(pwm, 100, [(5, 7)])
+    assert not tr[:21].any()           # the period running at the load keeps width 0
+    assert pulses(tr) == [(21, 7), (41, 7), (61, 7), (81, 7)]
+
+
+def test_pwm_width_change_applies_at_next_period_only():
+    pwm = ServoPWM(period=20, width_bits=5, reset_width=4)
+    # width 9 offered in the middle of a pulse, 2 in the middle of the next period
+    tr = run_pwm(pwm, 80, [(3, 9), (30, 2)])
+    assert pulses(tr) == [(1, 4), (21, 9), (41, 2), (61, 2)]
+
+
+def test_pwm_width_offered_on_the_last_cycle_is_applied():
+    pwm = ServoPWM(period=10, width_bits=4)
+    tr = run_pwm(pwm, 30, [(9, 3)])
+    assert pulses(tr) == [(11, 3), (21, 3)]
+
+
+@pytest.mark.parametrize("kw, msg", [
+    ({"period": 1, "width_bits": 4}, "period must be an integer >= 2 cycles, not 1"),
+    ({"period": 10, "width_bits": 0}, "width_bits must be a positive integer, not 0"),
+    ({"period": 10, "width_bits": 4, "reset_width": 16}, "reset_width must be an integer in [0, 15], not 16"),
+])
+def test_pwm_parameter_errors(kw, msg):
+    with pytest.raises(ValueError) as e:
+        ServoPWM(**kw)
+    assert str(e.value) == msg
+
+
+def test_leg_core_drives_pwm_with_its_outputs():
+    """A transferred width reaches its servo's PWM output at the next period start:
+    no pulse before, then exactly ``width`` high cycles per period."""
+    plan = tiny_plan(3, clamp=(0, 100))
+    period = 128
+    core = LegCore(plan, period=period)
+    every = all_ports(plan)
+    y = golden.outputs(plan, every)["y"]
+    k = int(np.flatnonzero((y > 5) & (y < 100))[0])   # a target whose width is inside the period
+    ports = {n: int(v[k]) for n, v in every.items()}
+    want = int(y[k])
+    trace = []
+
+    async def bench(ctx):
+        ctx.set(core.o.ready, 1)
+        ctx.set(core.i.valid, 1)
+        ctx.set(core.i.payload, ports)
+        for _ in range(3 * period):
+            trace.append(ctx.get(core.pwm_y))
+            await ctx.tick()
+            ctx.set(core.i.valid, 0)
+
+    sim = Simulator(core)
+    sim.add_clock(1e-6)
+    sim.add_testbench(bench)
+    sim.run()
+    assert 0 < want < period
+    # the first period (already running at reset) carries no pulse; then one per period
+    assert pulses(np.array(trace)) == [(period + 1, want), (2 * period + 1, want)]

@@ -1,0 +1,89 @@
+"""Evaluation plan: interval analysis, certified rounding bound, serialisation."""
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from helpers import all_ports, tiny_plan
+from ikseries.fit.horner import parity_split
+from ikseries.fit.plan import Plan, bits_for
+from ikseries.sim import golden
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_every_node_stays_in_its_interval_for_every_port_value(seed):
+    plan = tiny_plan(seed)
+    vals = golden.evaluate(plan, all_ports(plan))
+    for k, n in enumerate(plan.nodes):
+        v = np.asarray(vals[k])
+        assert v.min() >= n.lo and v.max() <= n.hi, (k, n.op)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_rounding_bound_holds_exhaustively(seed):
+    plan = tiny_plan(seed)
+    ports = all_ports(plan)
+    iv, fv = golden.evaluate(plan, ports), golden.evaluate_ideal(plan, ports)
+    bound = plan.rounding_bounds()
+    pre = plan.outputs[0].preround
+    for k in plan.cone(pre):
+        err = np.abs(np.asarray(iv[k]) * 2.0 ** -plan.nodes[k].frac - fv[k])
+        assert err.max() <= bound[k] * (1 + 1e-12) + 1e-12, (k, plan.nodes[k].op)
+
+
+def test_ideal_evaluation_is_the_float_polynomial():
+    plan = tiny_plan(1)
+    ports = all_ports(plan)
+    a = np.clip(ports["a"], 0, 12) / 4 / 4
+    bb = np.clip(ports["b"], -10, 9) / 2 / 16
+    rng = np.random.default_rng(1)
+    poly = {(i, j): float(rng.normal() * 50) for i in range(4) for j in range(3) if i + j <= 4}
+    want = sum(c * a ** i * bb ** j for (i, j), c in poly.items())
+    got = golden.evaluate_ideal(plan, ports)[plan.outputs[0].preround]
+    assert np.allclose(got, want, rtol=0, atol=1e-9)
+
+
+def test_json_round_trip_and_tamper_detection():
+    plan = tiny_plan(2)
+    text = plan.dumps()
+    again = Plan.from_json(json.loads(text))
+    assert again.dumps() == text
+    d = json.loads(text)
+    d["nodes"][-1]["hi"] += 1
+    with pytest.raises(ValueError, match="does not match the recomputed"):
+        Plan.from_json(d)
+    d = json.loads(text)
+    d["version"] = 99
+    with pytest.raises(ValueError, match="plan version must be 1, not 99"):
+        Plan.from_json(d)
+
+
+def test_bits_for():
+    assert bits_for(0, 0) == (1, False)
+    assert bits_for(0, 255) == (8, False)
+    assert bits_for(-128, 127) == (8, True)
+    assert bits_for(-129, 0) == (9, True)
+    assert bits_for(-1, 128) == (9, True)
+    for lo, hi in itertools.product(range(-70, 70, 7), repeat=2):
+        if lo <= hi:
+            w, s = bits_for(lo, hi)
+            rng = (-(1 << (w - 1)), (1 << (w - 1)) - 1) if s else (0, (1 << w) - 1)
+            assert rng[0] <= lo and hi <= rng[1]
+            w2 = w - 1
+            if w2 >= 1:
+                rng2 = (-(1 << (w2 - 1)), (1 << (w2 - 1)) - 1) if s else (0, (1 << w2) - 1)
+                assert not (rng2[0] <= lo and hi <= rng2[1])
+
+
+def test_parity_split():
+    poly = {(1, 0, 0): 1.0, (0, 1, 2): 2.0, (2, 2, 0): 3.0, (0, 3, 0): 4.0}
+    even, odd = parity_split(poly, 1)
+    assert even == {(1, 0, 0): 1.0, (2, 1, 0): 3.0}
+    assert odd == {(0, 0, 2): 2.0, (0, 1, 0): 4.0}
+
+
+def test_input_outside_its_port_is_rejected():
+    plan = tiny_plan(0)
+    with pytest.raises(ValueError, match="input a must fit its 4-bit port"):
+        golden.evaluate(plan, {"a": np.array([16]), "b": np.array([0])})

@@ -1,0 +1,71 @@
+import tomllib
+
+import pytest
+
+from ikseries.robot import RobotError, load_robot, parse_robot, preset_names, preset_text
+
+
+def base():
+    return tomllib.loads(preset_text("cylinder-leg"))
+
+
+def test_presets_list_and_default():
+    assert "cylinder-leg" in preset_names()
+    r = parse_robot(base())
+    assert r.servos == ("s1", "s2", "s3") and r.ticks_per_pu == 24.0 and r.pwm_period_ticks == 960000
+
+
+def _set(d, path, value):
+    keys = path.split(".")
+    for k in keys[:-1]:
+        d = d[k]
+    if value is _DEL:
+        del d[keys[-1]]
+    else:
+        d[keys[-1]] = value
+
+
+_DEL = object()
+
+
+@pytest.mark.parametrize("path, value, message", [
+    ("fit.tolerance_pu", -1, "fit.tolerance_pu must be > 0 pu, not -1"),
+    ("fit.tolerance_pu", "x", "fit.tolerance_pu must be > 0 pu, not 'x'"),
+    ("geometry.femur", -60.0, "geometry.femur must be > 0, not -60.0"),
+    ("geometry.femur", _DEL, "geometry.femur is missing"),
+    ("geometry.type", "hexapod", "geometry.type must be one of ['cylinder-leg'], not 'hexapod'"),
+    ("geometry.knee", 3.0, "unknown field geometry.knee"),
+    ("workspace.r.max", -1.0, "workspace.r.max must be > workspace.r.min (0.0), not -1.0"),
+    ("workspace.theta.min", -270.0, "workspace.theta must lie within [-180, 180] deg, not [-270.0, 180.0]"),
+    ("workspace.z.frac_bits", 2.5, "workspace.z.frac_bits must be an integer, not 2.5"),
+    ("workspace.z.frac_bits", 40, "workspace.z.frac_bits must be in 0..16, not 40"),
+    ("workspace.r.max", 400.0, "workspace: target (r=100, theta=-45, z=0) is unreachable: tip distance"),
+    ("calibration.directions", [1, 2, 1], "calibration.directions must be a list of 3 values each +1 or -1, not [1, 2, 1]"),
+    ("calibration.pu_per_degree", 0, "calibration.pu_per_degree must be > 0, not 0"),
+    ("calibration.pulse_max_us", 400.0, "calibration.pulse_max_us must be > pulse_min_us (500.0), not 400.0"),
+    ("calibration.neutral_pose.z", 500.0, "calibration.neutral_pose: target (r=0, theta=0, z=500) is unreachable"),
+    ("hardware.clock_hz", 1e6, "hardware.clock_hz must be an integer, not 1000000.0"),
+    ("hardware.clock_hz", 1_000_000, "hardware.clock_hz must give at least one PWM tick per pulse unit (>= 2e+06 Hz), not 1000000"),
+    ("hardware.pwm_period_us", 2000.0, "hardware.pwm_period_us must be > calibration.pulse_max_us (2500), not 2000.0"),
+    ("name", "my leg", "name must be a non-empty string of letters, digits, '-' and '_', not 'my leg'"),
+    ("colour", "red", "unknown field colour"),
+])
+def test_bad_description_names_field_and_value(path, value, message):
+    d = base()
+    _set(d, path, value)
+    with pytest.raises(RobotError) as e:
+        parse_robot(d)
+    assert message in str(e.value)
+    assert "\n" not in str(e.value)
+
+
+def test_load_robot_file_errors(tmp_path):
+    with pytest.raises(RobotError, match="cannot read robot description"):
+        load_robot(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = \n")
+    with pytest.raises(RobotError, match="invalid TOML"):
+        load_robot(bad)
+    good = tmp_path / "leg.toml"
+    good.write_text(preset_text("cylinder-leg").replace('name = "cylinder-leg"', 'name = "my-leg"'))
+    assert load_robot(good).name == "my-leg"
