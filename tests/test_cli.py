@@ -1,0 +1,104 @@
+"""The command line: presets, eval, build, and one-line errors."""
+import json
+import re
+
+import pytest
+
+from ikseries.cli import main
+from ikseries.robot import preset_text
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_presets(capsys):
+    code, out, _ = run(capsys, "presets")
+    assert code == 0 and out.startswith("cylinder-leg\t")
+
+
+@pytest.fixture(scope="module")
+def small_toml(tmp_path_factory):
+    p = tmp_path_factory.mktemp("robot") / "small-leg.toml"
+    p.write_text(preset_text("cylinder-leg").replace('name = "cylinder-leg"', 'name = "small-leg"')
+                 .replace("tolerance_pu = 0.5 ", "tolerance_pu = 4.0 "))
+    return p
+
+
+@pytest.fixture(scope="module")
+def built(small_toml, tmp_path_factory):
+    out = tmp_path_factory.mktemp("build") / "small"
+    assert main(["build", str(small_toml), "--no-synth", "-q", "-o", str(out)]) == 0
+    return out
+
+
+def test_build_writes_every_artifact(built):
+    names = sorted(p.name for p in built.iterdir())
+    assert names == ["manifest.json", "plan.json", "report.json", "report.md", "small_leg_core.v"]
+    rep = json.loads((built / "report.json").read_text())
+    man = json.loads((built / "manifest.json").read_text())
+    assert rep["simulation"]["mismatches"] == 0
+    assert rep["simulation"]["latency_cycles_measured"] == rep["latency_cycles"] == man["latency_cycles"]
+    assert rep["accuracy_points"] >= 1_000_000
+    assert all(s["error_pu"]["total"] <= 4.0 for s in rep["servos"])
+    # every port the manifest names exists in the Verilog with that width
+    v = (built / "small_leg_core.v").read_text()
+    top = re.search(r"^module small_leg_core\(.*?^endmodule", v, re.M | re.S).group(0)
+    ports = {name: int(w) + 1 if w else 1 for w, name in
+             re.findall(r"^\s*(?:input|output)\s+(?:\[(\d+):0\]\s+)?(\w+);", top, re.M)}
+    for f in man["inputs"]["fields"] + man["outputs"]["fields"]:
+        assert ports[f["port"]] == f["width"], f
+    for p in man["pwm"]:
+        assert ports[p["port"]] == 1
+    assert {"clk", "rst"} <= set(ports)
+    md = (built / "report.md").read_text()
+    assert "| s1 |" in md and "Latency" in md
+
+
+def test_build_is_byte_identical(built, small_toml, tmp_path):
+    out = tmp_path / "again"
+    assert main(["build", str(small_toml), "--no-synth", "-q", "-o", str(out)]) == 0
+    for f in ("small_leg_core.v", "plan.json", "manifest.json"):
+        assert (out / f).read_bytes() == (built / f).read_bytes(), f
+
+
+def test_eval_with_plan(capsys, built, small_toml):
+    code, out, _ = run(capsys, "eval", "--robot", str(small_toml), "--plan", str(built / "plan.json"),
+                       "10", "45", "5")
+    assert code == 0
+    rows = [l.split() for l in out.splitlines() if l.startswith("s")][1:]
+    assert [r[0] for r in rows] == ["s1", "s2", "s3"]
+    assert all(abs(float(r[4])) <= 4.0 for r in rows)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["eval", "50", "0", "0"], "ikseries: error: r must be within [0, 40] mm, not 50\n"),
+    (["eval", "10", "0", "-1"], "ikseries: error: z must be within [0, 40] mm, not -1\n"),
+    (["eval", "--preset", "nope", "1", "1", "1"],
+     "ikseries: error: preset must be one of ['cylinder-leg'], not 'nope'\n"),
+    (["build", "--preset", "cylinder-leg", "also.toml"],
+     "ikseries: error: give either a robot description file or --preset, not both\n"),
+])
+def test_bad_arguments_give_one_line_errors(capsys, argv, message):
+    code, out, err = run(capsys, *argv)
+    assert code == 2 and err == message
+
+
+def test_bad_robot_file_writes_nothing(capsys, tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(preset_text("cylinder-leg").replace("tibia = 90.0", "tibia = -90.0"))
+    out = tmp_path / "out"
+    code, _, err = run(capsys, "build", str(bad), "-o", str(out))
+    assert code == 2 and err == "ikseries: error: geometry.tibia must be > 0, not -90.0\n"
+    assert not out.exists()
+
+
+def test_unmeetable_tolerance_writes_nothing(capsys, tmp_path):
+    tight = tmp_path / "tight.toml"
+    tight.write_text(preset_text("cylinder-leg").replace("tolerance_pu = 0.5 ", "tolerance_pu = 0.01 "))
+    out = tmp_path / "out"
+    code, _, err = run(capsys, "build", str(tight), "-q", "-o", str(out))
+    assert code == 1 and "tolerance 0.01 pu leaves no approximation budget" in err and err.count("\n") == 1
+    assert not out.exists() and list(tmp_path.iterdir()) == [tight]
