@@ -72,7 +72,7 @@ def manifest(robot, plan: Plan, core: LegCore, name: str) -> dict:
         "format": MANIFEST_FORMAT, "version": 1,
         "module": name,
         "robot": robot.name,
-        "clock": {"port": "clk", "frequency_hz": clk, "edge": "rising"},
+        "clock": {"port": "clk", "frequency_hz": clk, "edge": "rising", "constraint": f"{name}.sdc"},
         "reset": {"port": "rst", "polarity": "active-high", "synchronous": True,
                   "state": "pipeline empty (o_valid low), PWM outputs low, no pulses until the first "
                            "target is transferred on o"},

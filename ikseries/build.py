@@ -12,6 +12,7 @@ import numpy as np
 
 from . import __version__
 from .accuracy import measure
+from .constraints.timing import clock_sdc
 from .fit.fitter import FitError, fit_robot
 from .fit.plan import quantize
 from .hdl.export import leg_verilog, manifest, module_name
@@ -93,11 +94,12 @@ def build(robot, out_dir, *, synth: bool = True, progress=print) -> dict:
     try:
         vfile = f"{name}.v"
         (tmp / vfile).write_text(verilog_text)
+        (tmp / f"{name}.sdc").write_text(clock_sdc(name, robot.clock_hz))
         resources = None
         if synth:
             from .synth import synth_counts
             t0 = time.perf_counter()
-            resources = synth_counts(tmp / vfile, name, workdir=tmp / "synth", progress=progress)
+            resources = synth_counts(tmp / vfile, name, workdir=tmp / "synth", progress=progress, jobs=2)
             times["synth_s"] = round(time.perf_counter() - t0, 1)
             shutil.rmtree(tmp / "synth", ignore_errors=True)
         man = manifest(robot, plan, core, name)
@@ -114,7 +116,7 @@ def build(robot, out_dir, *, synth: bool = True, progress=print) -> dict:
             f.replace(dest)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    progress(f"wrote {out_dir}/: {vfile}, plan.json, manifest.json, report.md, report.json")
+    progress(f"wrote {out_dir}/: {vfile}, {name}.sdc, plan.json, manifest.json, report.md, report.json")
     return report
 
 

@@ -36,7 +36,9 @@ def built(small_toml, tmp_path_factory):
 
 def test_build_writes_every_artifact(built):
     names = sorted(p.name for p in built.iterdir())
-    assert names == ["manifest.json", "plan.json", "report.json", "report.md", "small_leg_core.v"]
+    assert names == ["manifest.json", "plan.json", "report.json", "report.md", "small_leg_core.sdc",
+                     "small_leg_core.v"]
+    assert "create_clock -name clk -period 20.8333 [get_ports {clk}]" in (built / "small_leg_core.sdc").read_text()
     rep = json.loads((built / "report.json").read_text())
     man = json.loads((built / "manifest.json").read_text())
     assert rep["simulation"]["mismatches"] == 0

@@ -1,0 +1,479 @@
+"""cocotb testbench of the exported leg core (``ikseries.hdl.export.leg_verilog``).
+
+Runs inside the simulator (Icarus or Verilator); start it with :func:`ikseries.sim.runner.run`.
+Configuration comes from environment variables set by the runner:
+
+``IKSERIES_PLAN``      plan JSON the Verilog was generated from
+``IKSERIES_PERIOD``    PWM period (clock cycles) the Verilog was generated with
+``IKSERIES_LATENCY``   expected latency, input transfer edge -> output transfer edge
+``IKSERIES_SEED``      seed of the random targets and handshakes (default 1)
+``IKSERIES_N_RANDOM``  number of random back-to-back targets (default 3000)
+
+Expected pulse widths come from the golden integer model (:mod:`ikseries.sim.golden`),
+never from the bench. Ports: clk, rst (active-high, synchronous), i_valid/i_ready/i_<input>,
+o_valid/o_ready/o_<servo>, pwm_<servo>.
+
+Timing conventions: the clock starts low at ``t0`` and rises at ``t0 + T/2 + e*T``
+(rising edge ``e``); the falling edge at ``t0 + e*T`` precedes rising edge ``e``. The bench
+writes inputs at falling edges and samples after ``ReadOnly()`` at falling edges, so what it
+samples is what the next rising edge sees; a transfer "at edge e" means valid & ready were
+sampled high by rising edge ``e``.
+"""
+from __future__ import annotations
+
+import bisect
+import itertools
+import json
+import os
+
+import numpy as np
+
+import cocotb
+from cocotb.clock import Clock
+from cocotb.simtime import convert, get_sim_time
+from cocotb.triggers import FallingEdge, ReadOnly, Timer, ValueChange
+
+from ikseries.fit.plan import Plan
+from ikseries.sim import golden
+from ikseries.sim.runner import ENV_LATENCY, ENV_N_RANDOM, ENV_PERIOD, ENV_PLAN, ENV_SEED
+
+CLK_NS = 10
+MAX_ERRORS = 12     # messages kept per check
+
+
+def _port_range(i) -> tuple[int, int]:
+    return ((-(1 << (i.width - 1)), (1 << (i.width - 1)) - 1) if i.signed else (0, (1 << i.width) - 1))
+
+
+def corner_targets(plan: Plan) -> dict:
+    """Every combination of each input's lo / hi (and 0 where in range), then every combination
+    of each input's port extremes (out of range: the core clamps them to the range)."""
+    def grid(values_per_input):
+        combos = list(dict.fromkeys(itertools.product(*values_per_input)))
+        return {i.name: np.array([c[k] for c in combos], dtype=np.int64) for k, i in enumerate(plan.inputs)}
+    in_range = grid([sorted({i.lo, i.hi} | ({0} if i.lo <= 0 <= i.hi else set())) for i in plan.inputs])
+    ports = grid([sorted(set(_port_range(i))) for i in plan.inputs])
+    return {n: np.concatenate([in_range[n], ports[n]]) for n in in_range}
+
+
+def random_targets(plan: Plan, rng, n: int) -> dict:
+    return {i.name: rng.integers(i.lo, i.hi + 1, n, dtype=np.int64) for i in plan.inputs}
+
+
+def concat(*targets) -> dict:
+    return {n: np.concatenate([t[n] for t in targets]) for n in targets[0]}
+
+
+class Checker:
+    """Collects failures of one check; ``done()`` fails the test listing the first ones."""
+
+    def __init__(self, what: str):
+        self.what, self.count, self.msgs = what, 0, []
+
+    def __call__(self, cond, msg) -> bool:
+        if not cond:
+            self.count += 1
+            if len(self.msgs) < MAX_ERRORS:
+                self.msgs.append(msg() if callable(msg) else msg)
+        return bool(cond)
+
+    def done(self):
+        assert self.count == 0, (f"{self.what}: {self.count} failure(s); first ones:\n  "
+                                 + "\n  ".join(self.msgs))
+
+
+class Leg:
+    """Driver, monitor and timing bookkeeping for one cocotb test."""
+
+    def __init__(self, dut, test_id: int):
+        self.dut = dut
+        self.log = dut._log
+        with open(os.environ[ENV_PLAN]) as f:
+            self.plan = Plan.from_json(json.load(f))
+        self.period = int(os.environ[ENV_PERIOD])
+        self.latency = int(os.environ[ENV_LATENCY])
+        self.seed = int(os.environ.get(ENV_SEED, "1"))
+        self.n_random = int(os.environ.get(ENV_N_RANDOM, "3000"))
+        self.rng = np.random.default_rng([self.seed, test_id])
+        self.inputs = list(self.plan.inputs)
+        self.servos = [o.name for o in self.plan.outputs]
+        self.i_sig = {i.name: getattr(dut, f"i_{i.name}") for i in self.inputs}
+        self.o_sig = {s: getattr(dut, f"o_{s}") for s in self.servos}
+        self.pwm_sig = {s: getattr(dut, f"pwm_{s}") for s in self.servos}
+        self.T = int(convert(CLK_NS, "ns", to="step"))
+        assert self.T % 2 == 0
+        self.clock = None
+        self.t0 = None
+        self.e1 = None          # first rising edge with rst low (relative edge 1)
+
+    # ---- time ---------------------------------------------------------------------------
+    def upcoming(self) -> int:
+        """Index of the next rising edge; only valid at a falling-edge time."""
+        q, r = divmod(get_sim_time("step") - self.t0, self.T)
+        assert r == 0, f"bench not at a falling edge (t={get_sim_time('step')}, t0={self.t0})"
+        return q
+
+    def edge_at(self, t: int) -> int:
+        """Rising-edge index of time ``t`` (must be a rising-edge time)."""
+        q, r = divmod(t - self.t0 - self.T // 2, self.T)
+        assert r == 0, f"signal changed at t={t} steps, not at a rising clock edge"
+        return q
+
+    async def goto(self, e: int):
+        """Move to the falling edge right before rising edge ``e`` (strictly in the future)."""
+        now = get_sim_time("step")
+        target = self.t0 + e * self.T
+        assert target > now, f"goto({e}) is not in the future"
+        await Timer(target - now - self.T // 2, "step")   # lands on rising edge e-1
+        await FallingEdge(self.dut.clk)
+        assert get_sim_time("step") == target
+
+    # ---- start / reset ----------------------------------------------------------------
+    def drive_inputs(self, values: dict | None):
+        """Drive target ``values`` ({input: int}); None: random port junk (i_valid is low)."""
+        for i in self.inputs:
+            if values is None:
+                lo, hi = _port_range(i)
+                v = int(self.rng.integers(lo, hi + 1))
+            else:
+                v = int(values[i.name])
+            self.i_sig[i.name].value = v
+
+    async def start(self, reset_cycles: int = 3):
+        dut = self.dut
+        dut.rst.value = 1
+        dut.i_valid.value = 0
+        dut.o_ready.value = 0
+        self.drive_inputs(None)
+        self.t0 = get_sim_time("step")
+        # C clock (GPI): about 1.5x faster than the Python one on Icarus
+        self.clock = Clock(dut.clk, CLK_NS, unit="ns", impl="gpi")
+        self.clock.start(start_high=False)
+        chk = Checker("reset state")
+        for c in range(reset_cycles):
+            await FallingEdge(dut.clk)
+            await ReadOnly()
+            # after a reset edge: pipeline empty, PWM outputs low
+            chk(int(dut.o_valid.value) == 0, f"o_valid high after {c + 1} reset edge(s)")
+            for s, sig in self.pwm_sig.items():
+                chk(int(sig.value) == 0, f"pwm_{s} high after {c + 1} reset edge(s)")
+        chk.done()
+        await FallingEdge(dut.clk)
+        dut.rst.value = 0
+        self.e1 = self.upcoming()
+
+    def stop(self):
+        if self.clock is not None:
+            self.clock.stop()
+            self.clock = None
+
+    # ---- streaming ----------------------------------------------------------------------
+    async def stream(self, targets: dict, regimes, regime_len: int = 64):
+        """Offer ``targets`` in order and collect the outputs.
+
+        ``regimes``: list of (p_valid, p_ready); every ``regime_len`` cycles one is chosen at
+        random. i_valid is offered with probability p_valid, o_ready with p_ready (1.0 =
+        always). Checks the handshake rules on the way; returns (outputs, in edges, out edges,
+        stall edges, handshake checker).
+        """
+        dut, rng = self.dut, self.rng
+        n = len(next(iter(targets.values())))
+        got = {s: [] for s in self.servos}
+        in_e, out_e, stall_e = [], [], []
+        hs = Checker("stream handshake")
+        k, held, cycle, drain = 0, None, 0, 0
+        p_valid, p_ready = regimes[0]
+        limit = 50 * n + 10 * self.latency + 1000
+        while drain <= self.latency + 4:
+            await FallingEdge(dut.clk)
+            e = self.upcoming()
+            if cycle % regime_len == 0:
+                p_valid, p_ready = regimes[rng.integers(len(regimes))]
+            offer = k < n and (p_valid >= 1 or rng.random() < p_valid)
+            ready = p_ready >= 1 or rng.random() < p_ready
+            dut.i_valid.value = int(offer)
+            self.drive_inputs({name: targets[name][k] for name in targets} if offer else None)
+            dut.o_ready.value = int(ready)
+            await ReadOnly()
+            ov, ir = int(dut.o_valid.value), int(dut.i_ready.value)
+            pay = tuple(int(self.o_sig[s].value) for s in self.servos) if ov else None
+            hs(ir or not ready, lambda: f"edge {e}: i_ready low while o_ready high (stalls the stream)")
+            hs(not (ov and not ready and ir), lambda: f"edge {e}: i_ready high while o_valid & !o_ready")
+            if held is not None:
+                hs(ov and pay == held, lambda: f"edge {e}: o_valid/o payload changed while stalled: "
+                                               f"{held} -> {pay if ov else 'o_valid low'}")
+            held = pay if ov and not ready else None
+            if offer and ir:
+                in_e.append(e)
+                k += 1
+            if ov and ready:
+                if hs(len(out_e) < n, lambda: f"edge {e}: output beyond the {n} targets sent: {pay}"):
+                    out_e.append(e)
+                    for s, v in zip(self.servos, pay):
+                        got[s].append(v)
+            if ov and not ready:
+                stall_e.append(e)
+            if len(out_e) == n:
+                drain += 1
+            cycle += 1
+            if not hs(cycle < limit, f"no progress: {len(in_e)} inputs and {len(out_e)} outputs "
+                                     f"of {n} after {cycle} cycles"):
+                break
+        await FallingEdge(dut.clk)
+        dut.i_valid.value = 0
+        dut.o_ready.value = 1
+        return {s: np.array(v, dtype=np.int64) for s, v in got.items()}, in_e, out_e, stall_e, hs
+
+    def check_stream(self, targets, got, in_e, out_e, stall_e, hs, exact_latency: bool):
+        """Bit-exact and in-order vs golden; latency per target (stall cycles subtracted)."""
+        n = len(next(iter(targets.values())))
+        exp = golden.outputs(self.plan, targets)
+        hs.done()
+        cnt = Checker("transfer count")
+        cnt(len(in_e) == n, f"{len(in_e)} input transfers for {n} targets")
+        cnt(len(out_e) == n, f"{len(out_e)} output transfers for {n} targets")
+        cnt.done()
+        bits = Checker(f"outputs vs golden model ({n} targets)")
+        for j in range(n):
+            bad = [s for s in self.servos if got[s][j] != exp[s][j]]
+            bits(not bad, lambda: (f"target {j} " + str({nm: int(v[j]) for nm, v in targets.items()})
+                                   + ": " + ", ".join(f"{s} got {int(got[s][j])} expected {int(exp[s][j])}"
+                                                      for s in bad)))
+        bits.done()
+        lat = Checker(f"latency (expected {self.latency} cycles)")
+        for j, (a, b) in enumerate(zip(in_e, out_e)):
+            stalls = bisect.bisect_left(stall_e, b) - bisect.bisect_right(stall_e, a)
+            if exact_latency:
+                lat(b - a == self.latency and stalls == 0,
+                    lambda: f"target {j}: input edge {a}, output edge {b}: {b - a} cycles")
+            else:
+                lat(b - a - stalls == self.latency,
+                    lambda: f"target {j}: input edge {a}, output edge {b}: {b - a} cycles "
+                            f"including {stalls} stall cycle(s) -> {b - a - stalls}")
+        lat.done()
+        return exp
+
+
+@cocotb.test()
+async def test_back_to_back(dut):
+    """Corner + random targets, one per cycle, o_ready always high: bit-exact outputs in order,
+    i_ready never low, exactly one output per cycle, latency == IKSERIES_LATENCY for every target."""
+    leg = Leg(dut, 1)
+    try:
+        await leg.start()
+        targets = concat(corner_targets(leg.plan), random_targets(leg.plan, leg.rng, leg.n_random))
+        n = len(next(iter(targets.values())))
+        got, in_e, out_e, stall_e, hs = await leg.stream(targets, [(1.0, 1.0)])
+        leg.check_stream(targets, got, in_e, out_e, stall_e, hs, exact_latency=True)
+        thr = Checker("throughput (one target per cycle)")
+        thr(np.all(np.diff(in_e) == 1), "input transfers not on consecutive edges")
+        thr(np.all(np.diff(out_e) == 1), "output transfers not on consecutive edges")
+        thr.done()
+        leg.log.info("%d targets (%d corner) back to back: bit-exact, latency %d cycles each, "
+                     "edges %d..%d", n, n - leg.n_random, leg.latency, in_e[0], out_e[-1])
+    finally:
+        leg.stop()
+
+
+@cocotb.test()
+async def test_backpressure(dut):
+    """Random i_valid gaps and random o_ready backpressure: outputs bit-exact, in order, none
+    dropped or duplicated; o_valid and payload hold while stalled; i_ready high whenever o_ready
+    is high and low while o_valid & !o_ready; latency == expected + stall cycles in between."""
+    leg = Leg(dut, 2)
+    try:
+        await leg.start()
+        targets = concat(corner_targets(leg.plan), random_targets(leg.plan, leg.rng, max(leg.n_random // 2, 1)))
+        n = len(next(iter(targets.values())))
+        regimes = [(0.5, 0.5), (0.9, 0.3), (0.3, 0.9), (1.0, 0.7), (0.8, 1.0), (0.1, 0.1), (1.0, 0.0)]
+        got, in_e, out_e, stall_e, hs = await leg.stream(targets, regimes, regime_len=48)
+        leg.check_stream(targets, got, in_e, out_e, stall_e, hs, exact_latency=False)
+        cycles = out_e[-1] - in_e[0] + 1
+        leg.log.info("%d targets over %d cycles with %d stall cycles: bit-exact, in order, "
+                     "latency %d + stalls", n, cycles, len(stall_e), leg.latency)
+    finally:
+        leg.stop()
+
+
+def _pwm_expected(transfers, period: int, n_end: int) -> np.ndarray:
+    """Expected pwm value after each relative edge 1..n_end for one servo.
+
+    ``transfers``: list of (relative transfer edge, width). The width latched at relative edge
+    k*period (the last transfer at an edge <= k*period; 0 before any) is active in period k,
+    and the registered output is high after edges k*period + 1 .. k*period + width.
+    """
+    n = np.arange(1, n_end + 1)
+    k_max = (n_end - 1) // period
+    active = np.zeros(k_max + 1, dtype=np.int64)
+    for k in range(1, k_max + 1):
+        before = [w for t, w in transfers if t <= k * period]
+        active[k] = before[-1] if before else 0
+    return ((n - 1) % period < active[(n - 1) // period]).astype(np.int64)
+
+
+def _transitions(values: np.ndarray, first_edge: int = 1) -> list[tuple[int, int]]:
+    """(edge, new value) wherever ``values`` (after edges first_edge, ...) changes; starts from 0."""
+    v = np.concatenate([[0], values])
+    idx = np.flatnonzero(np.diff(v))
+    return [(int(i) + first_edge, int(v[i + 1])) for i in idx]
+
+
+async def _watch(sig, log: list):
+    while True:
+        await ValueChange(sig)
+        log.append((get_sim_time("step"), int(sig.value)))
+
+
+@cocotb.test()
+async def test_pwm(dut):
+    """PWM waveforms against the widths transferred on o (o_ready held high).
+
+    Relative edge 1 is the first rising edge after reset; period k starts at relative edge
+    k*P (P = IKSERIES_PERIOD). Schedule of output transfers: A at P/2 and B at P/2+1 (B
+    replaces A), C at P (the boundary edge itself: applies to period 1), D at P+1 (during C's
+    pulse: applies to period 2 only), F at 2P+5 (during D's pulse), nothing afterwards (F
+    repeats in periods 3 and 4). F has a width >= P on some servo if such a target exists
+    (constant high across the period boundary). Checks: low after reset and through period 0
+    although A, B, C arrive in it; every rising edge at a period start, one period apart;
+    high time == the width last transferred up to that period start; the exact list of pwm
+    (and o_valid) transitions equals the model's; reset at the end forces every output low.
+    """
+    leg = Leg(dut, 3)
+    P, L = leg.period, leg.latency
+    try:
+        assert P // 2 - L >= 2, f"PWM test needs a period of at least {2 * L + 4} cycles, got {P}"
+        # pick targets by their golden widths
+        pool = random_targets(leg.plan, leg.rng, 4000)
+        w = golden.outputs(leg.plan, pool)
+        W = np.stack([w[s] for s in leg.servos], axis=1)
+        short = np.flatnonzero(np.all((W > 0) & (W < P), axis=1))
+        long_ = np.flatnonzero(np.any(W >= P, axis=1) & np.any(W < P, axis=1))
+        assert len(short) >= 4, (f"PWM test needs targets whose widths are all below the period "
+                                 f"{P}; golden widths span {W.min()}..{W.max()}")
+        picks: list[int] = []
+        for j in short:        # A, B, C, D: widths differ per servo from the ones already picked
+            if all(np.all(W[j] != W[p]) for p in picks):
+                picks.append(int(j))
+            if len(picks) == 4:
+                break
+        # F: a target with a width >= P if there is one, preferring short other widths (their
+        # pulses in period 4 bound the simulated time)
+        f_pool = [int(j) for j in (long_ if len(long_) else short)
+                  if all(np.all(W[j] != W[p]) for p in picks)]
+        picks.append(min(f_pool, key=lambda j: int(np.max(W[j], initial=0, where=W[j] < P))))
+        if not len(long_):
+            leg.log.info("no target has a width >= the period %d: constant-high case not covered", P)
+        names = "ABCDF"
+        sched_rel = {"A": P // 2, "B": P // 2 + 1, "C": P, "D": P + 1, "F": 2 * P + 5}  # output edges
+        tgt = {nm: {i.name: int(pool[i.name][j]) for i in leg.inputs} for nm, j in zip(names, picks)}
+        wid = {nm: {s: int(W[j, c]) for c, s in enumerate(leg.servos)} for nm, j in zip(names, picks)}
+        for nm in names:
+            leg.log.info("target %s %s at relative output edge %d: widths %s", nm, tgt[nm],
+                         sched_rel[nm], wid[nm])
+        f_short = [wid["F"][s] for s in leg.servos if wid["F"][s] < P]
+        n_end = 4 * P + 1 + (max(f_short) if f_short else 0) + 8   # last relative edge observed
+
+        await leg.start()
+        dut.o_ready.value = 1
+        rel0 = leg.e1 - 1                       # absolute edge = rel0 + relative edge
+        await ReadOnly()
+        chk = Checker("PWM at reset release")
+        for s, sig in leg.pwm_sig.items():
+            chk(int(sig.value) == 0, f"pwm_{s} high at reset release")
+        chk.done()
+        logs = {s: [] for s in leg.servos}
+        ov_log, ir_log = [], []
+        for s in leg.servos:
+            cocotb.start_soon(_watch(leg.pwm_sig[s], logs[s]))
+        cocotb.start_soon(_watch(dut.o_valid, ov_log))
+        cocotb.start_soon(_watch(dut.i_ready, ir_log))
+
+        # drive: input at (output edge - L); sample the output payload before its transfer edge
+        actions: dict = {}
+        for nm in names:
+            e_out = rel0 + sched_rel[nm]
+            actions.setdefault(e_out - L, {})["drive"] = nm
+            actions.setdefault(e_out, {}).setdefault("sample", []).append(nm)
+        for e in [e for e, a in actions.items() if a.get("drive")]:
+            if not actions.get(e + 1, {}).get("drive"):
+                actions.setdefault(e + 1, {})["drive"] = ""        # i_valid low again
+        io = Checker("o transfers in the PWM test")
+        for e in sorted(actions):
+            act = actions[e]
+            await leg.goto(e)
+            if "drive" in act:
+                dut.i_valid.value = int(bool(act["drive"]))
+                leg.drive_inputs(tgt[act["drive"]] if act["drive"] else None)
+            await ReadOnly()
+            if act.get("drive"):
+                io(int(dut.i_ready.value) == 1, f"i_ready low at the input edge of {act['drive']}")
+            for nm in act.get("sample", []):
+                got = {s: int(leg.o_sig[s].value) for s in leg.servos}
+                io(int(dut.o_valid.value) == 1 and got == wid[nm],
+                   f"{nm}: o_valid={dut.o_valid.value} o={got} before edge {e}, expected {wid[nm]}")
+        io.done()
+
+        # run freely to the end of the observation window, then reset while F is still active
+        await leg.goto(rel0 + n_end + 1)
+        dut.rst.value = 1
+        await FallingEdge(dut.clk)
+        await ReadOnly()
+        rst_chk = Checker("reset while pulsing")
+        before = {s: [v for t, v in logs[s] if leg.edge_at(t) - rel0 <= n_end] for s in leg.servos}
+        for s, sig in leg.pwm_sig.items():
+            rst_chk(int(sig.value) == 0, f"pwm_{s} still high one edge after rst")
+        rst_chk(int(dut.o_valid.value) == 0, "o_valid high after rst")
+        high_at_reset = [s for s in leg.servos if before[s] and before[s][-1] == 1]
+        rst_chk(bool(high_at_reset) or not len(long_),
+                f"no output high when rst was raised, though F has a width >= {P}: {wid['F']}")
+
+        # ---- compare the recorded waveforms with the model --------------------------------
+        transfers = {s: [(sched_rel[nm], wid[nm][s]) for nm in names] for s in leg.servos}
+        pulse = Checker(f"PWM pulses (period {P})")
+        wave = Checker("PWM transitions vs model")
+        for s in leg.servos:
+            rec = [(leg.edge_at(t) - rel0, v) for t, v in logs[s]]
+            rec = [(n, v) for n, v in rec if n <= n_end]
+            exp_tr = _transitions(_pwm_expected(transfers[s], P, n_end))
+            wave(rec == exp_tr, lambda: f"pwm_{s}: recorded (relative edge, value) {rec[:12]} "
+                                        f"expected {exp_tr[:12]}")
+            # the brief's measurements, made on the recording itself
+            rises = [n for n, v in rec if v == 1]
+            falls = [n for n, v in rec if v == 0]
+            first_start = (sched_rel["A"] // P + 1) * P + 1
+            pulse(not rises or rises[0] >= first_start,
+                  f"pwm_{s}: pulse at relative edge {rises[:1]} before the first period start "
+                  f"after the first target ({first_start})")
+            for r in rises:
+                k, off = divmod(r - 1, P)
+                pulse(off == 0, f"pwm_{s}: rising edge at relative edge {r}, not at a period start")
+                last = [wv for t, wv in transfers[s] if t <= k * P]
+                want = last[-1] if last else 0
+                fall = next((x for x in falls if x > r), None)
+                if want < P:
+                    pulse(fall == r + want, f"pwm_{s}: period {k}: high {None if fall is None else fall - r} "
+                                            f"cycles, expected {want} (the width last transferred)")
+            for a, b in zip(rises, rises[1:]):
+                pulse((b - a) % P == 0, f"pwm_{s}: rising edges {a} and {b} are "
+                                        f"{b - a} cycles apart, period {P}")
+            leg.log.info("pwm_%s: rising edges (relative) %s, falling %s; expected widths per period %s",
+                         s, rises, falls, [([wv for t, wv in transfers[s] if t <= k * P] or [0])[-1]
+                                           for k in range((n_end - 1) // P + 1)])
+            pulse(len(rises) >= 3, f"pwm_{s}: only {len(rises)} pulses seen")
+        # o_valid: high exactly in the cycle before each output transfer edge
+        ov_rec = [(leg.edge_at(t) - rel0, v) for t, v in ov_log]
+        ov_vals = np.zeros(n_end, dtype=np.int64)
+        for nm in names:
+            ov_vals[sched_rel[nm] - 2] = 1      # high after relative edge (transfer edge - 1)
+        ov_exp = _transitions(ov_vals)
+        wave([x for x in ov_rec if x[0] <= n_end] == ov_exp,
+             lambda: f"o_valid: recorded {ov_rec[:12]} expected {ov_exp}")
+        wave(not [x for x in ir_log if leg.edge_at(x[0]) - rel0 <= n_end],
+             lambda: f"i_ready changed with o_ready high: {ir_log[:6]}")
+        wave.done()
+        pulse.done()
+        rst_chk.done()
+        leg.log.info("PWM: %d relative edges observed, waveforms match; reset with %s high "
+                     "drove every output low", n_end, high_at_reset or "no output")
+    finally:
+        leg.stop()
