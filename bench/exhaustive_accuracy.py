@@ -20,7 +20,7 @@ import numpy as np
 
 from ikseries.accuracy import measure
 from ikseries.fit.plan import Plan
-from ikseries.robot import parse_robot_record
+from ikseries.robot import robot_from_record
 
 
 def main(argv=None):
@@ -33,7 +33,7 @@ def main(argv=None):
         sys.exit(f"--stride must be >= 1, not {args.stride}")
     bdir = Path(args.build_dir)
     plan = Plan.from_json(json.loads((bdir / "plan.json").read_text()))
-    robot = parse_robot_record(plan.meta["robot_description"])
+    robot = robot_from_record(plan.meta["robot_description"])
     r_in, th_in, z_in = plan.inputs
     rs = np.arange(r_in.lo, r_in.hi + 1, args.stride)
     zs = np.arange(z_in.lo, z_in.hi + 1, args.stride)

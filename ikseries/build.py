@@ -1,7 +1,6 @@
 """``ikseries build``: robot description -> fit -> plan -> Verilog, manifest, report."""
 from __future__ import annotations
 
-import dataclasses
 import json
 import shutil
 import tempfile
@@ -18,6 +17,7 @@ from .fit.plan import quantize
 from .hdl.export import leg_verilog, manifest, module_name
 from .hdl.leg import LegCore
 from .report import render_markdown
+from .robot import robot_record
 from .sim import golden
 from .sim.amaranth_sim import corner_targets, random_targets, simulate_leg
 
@@ -26,12 +26,6 @@ __all__ = ["BuildError", "build"]
 
 class BuildError(RuntimeError):
     """The build cannot produce a design that meets the robot's requirements."""
-
-
-def robot_record(robot) -> dict:
-    d = dataclasses.asdict(robot)
-    d["geometry"] = {"type": "cylinder-leg", **dataclasses.asdict(robot.geometry)}
-    return d
 
 
 def _simulate(core, plan, progress) -> dict:

@@ -51,7 +51,7 @@ def _cached_plan(robot, path):
     """The plan in ``path`` (or build/<robot>/plan.json when it was built from this robot)."""
     import json
 
-    from .build import robot_record
+    from .robot import robot_record
     from .fit.plan import Plan
     given = path is not None
     path = Path(path) if given else Path("build") / robot.name / "plan.json"
@@ -63,7 +63,7 @@ def _cached_plan(robot, path):
         plan = Plan.from_json(json.loads(path.read_text()))
     except (ValueError, KeyError, TypeError) as e:
         raise CliError(f"{path}: not a valid ikseries plan: {e}") from None
-    if json.loads(json.dumps(robot_record(robot))) != plan.meta.get("robot_description"):
+    if robot_record(robot) != plan.meta.get("robot_description"):
         if given:
             raise CliError(f"{path} was built for a different robot description than {robot.name!r}")
         return None

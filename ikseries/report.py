@@ -50,11 +50,19 @@ def render_markdown(r: dict) -> str:
     res = r.get("resources")
     out += ["## FPGA resources (Yosys, before place-and-route)", ""]
     if res:
+        from .synth import DEVICES, overflows
         cats = ["LUT", "FF", "carry", "DSP", "BRAM"]
-        out += [_row(["target", *cats, "synthesis time (s)"]), _row(["---"] * (len(cats) + 2))]
+        out += [_row(["target", *cats, "fits reference device?", "synthesis time (s)"]),
+                _row(["---"] * (len(cats) + 3))]
         for tgt, d in res.items():
-            c = d.get("counts", d)
-            out.append(_row([tgt, *(c.get(k, 0) for k in cats), d.get("seconds", "")]))
+            c = d["counts"]
+            over = overflows(tgt, c)
+            fits = (f"{DEVICES[tgt][0]}: " + ("yes (by cell count)" if not over else
+                    "no: " + ", ".join(f"{k} {u}/{a}" for k, (u, a) in over.items())))
+            out.append(_row([tgt, *(c.get(k, 0) for k in cats), fits, d.get("seconds", "")]))
+        out += ["", "Cell counts after synthesis, before place-and-route; carry cells are 1 bit (iCE40), "
+                "2 bits (ECP5) or 4 bits (xc7) each. This fully pipelined, one-target-per-cycle design "
+                "is sized for throughput, not area."]
     else:
         out.append("Synthesis was skipped (--no-synth).")
     out += ["", "## Coefficients", "",

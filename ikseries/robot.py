@@ -1,6 +1,8 @@
 """Robot descriptions: TOML format, validation and built-in presets."""
 from __future__ import annotations
 
+import dataclasses
+import json
 import tomllib
 from dataclasses import dataclass
 from importlib import resources
@@ -10,7 +12,8 @@ import numpy as np
 
 from .kinematics import Calibration, CylinderLeg, UnreachableError
 
-__all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot"]
+__all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot",
+           "robot_record", "robot_from_record"]
 
 
 class RobotError(ValueError):
@@ -214,6 +217,29 @@ def _check_reachable(robot: Robot) -> None:
         robot.geometry.ik(*grid)
     except UnreachableError as e:
         raise RobotError(f"workspace: {e}") from None
+
+
+def robot_record(robot: Robot) -> dict:
+    """JSON-ready record of every parameter of ``robot`` (stored in the fit artifact)."""
+    d = dataclasses.asdict(robot)
+    gtype = next(k for k, v in GEOMETRIES.items() if isinstance(robot.geometry, v))
+    d["geometry"] = {"type": gtype, **dataclasses.asdict(robot.geometry)}
+    d["inputs"] = [dataclasses.asdict(i) for i in robot.inputs]
+    return json.loads(json.dumps(d))
+
+
+def robot_from_record(d: dict) -> Robot:
+    """Inverse of :func:`robot_record` (the record is re-validated)."""
+    try:
+        geo = dict(d["geometry"])
+        cls = GEOMETRIES[geo.pop("type")]
+        fields = {k: v for k, v in d.items() if k not in ("geometry", "inputs")}
+        fields["directions"] = tuple(fields["directions"])
+        robot = Robot(geometry=cls(**geo), inputs=tuple(InputSpec(**i) for i in d["inputs"]), **fields)
+    except (KeyError, TypeError) as e:
+        raise RobotError(f"not a robot record: {e}") from None
+    _check_reachable(robot)
+    return robot
 
 
 def load_robot(path) -> Robot:

@@ -55,7 +55,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
-__all__ = ["CATEGORIES", "TARGETS", "SynthError", "categorise", "synth_counts", "yosys_command"]
+__all__ = ["CATEGORIES", "DEVICES", "TARGETS", "overflows", "SynthError", "categorise", "synth_counts", "yosys_command"]
 
 CATEGORIES = ("LUT", "FF", "carry", "DSP", "BRAM", "LUTRAM", "mux", "io", "other")
 
@@ -65,6 +65,23 @@ TARGETS: dict[str, tuple[str, str, str]] = {
     "ecp5": ("ECP5", "synth_ecp5", "ecp5"),
     "xc7": ("Xilinx 7-series", "synth_xilinx -family xc7 -flatten", "xilinx"),
 }
+
+#: target -> (reference device, its capacity per category) for the report's "fits" check.
+#: iCE40UP5K: 5280 logic cells (one LUT4 + one FF each), 8 SB_MAC16, 30 EBR;
+#: LFE5U-25F: 24288 LUT4 / FF, 28 MULT18X18D, 56 EBR; XC7A35T: 20800 LUT6, 41600 FF,
+#: 90 DSP48E1, 50 RAMB36 (counted as 100 RAMB18).
+DEVICES: dict[str, tuple[str, dict[str, int]]] = {
+    "ice40": ("iCE40UP5K", {"LUT": 5280, "FF": 5280, "DSP": 8, "BRAM": 30}),
+    "ecp5": ("LFE5U-25F", {"LUT": 24288, "FF": 24288, "DSP": 28, "BRAM": 56}),
+    "xc7": ("XC7A35T", {"LUT": 20800, "FF": 41600, "DSP": 90, "BRAM": 100}),
+}
+
+
+def overflows(target: str, counts: dict) -> dict[str, tuple[int, int]]:
+    """Categories where ``counts`` exceed the target's reference device: {cat: (used, available)}."""
+    _, cap = DEVICES[target]
+    return {k: (counts.get(k, 0), v) for k, v in cap.items() if counts.get(k, 0) > v}
+
 
 # (category, regex) in order; the first full match wins.
 _RULES: dict[str, list[tuple[str, str]]] = {
