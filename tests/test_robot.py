@@ -69,3 +69,11 @@ def test_load_robot_file_errors(tmp_path):
     good = tmp_path / "leg.toml"
     good.write_text(preset_text("cylinder-leg").replace('name = "cylinder-leg"', 'name = "my-leg"'))
     assert load_robot(good).name == "my-leg"
+
+
+def test_robot_record_round_trip():
+    from ikseries.robot import robot_from_record, robot_record
+    r = parse_robot(base())
+    assert robot_from_record(robot_record(r)) == r
+    with pytest.raises(RobotError, match="not a robot record"):
+        robot_from_record({"geometry": {"type": "cylinder-leg"}})
