@@ -25,6 +25,8 @@ __all__ = ["FitError", "ServoFit", "fit_robot", "plan_inputs", "workspace_sample
 
 MAX_DEGREE = 12
 FIT_SEED = 20261124
+FIT_SAMPLES = (30000, 3000)      # random interior points, points per face
+CHECK_SAMPLES = (100000, 10000)  # + points per edge / 4
 
 
 class FitError(RuntimeError):
@@ -236,8 +238,8 @@ def fit_robot(robot, progress=lambda msg: None) -> tuple[Plan, list[ServoFit]]:
     cf = CylinderFeatures.for_robot(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)))
     progress(f"coordinate stage: cos/sin series of degree {2 * len(cf.trig.cos_coeffs) - 2} / "
              f"{2 * len(cf.trig.sin_coeffs) - 1}, max error {cf.trig.max_error:.2e}")
-    fit_pts = workspace_samples(robot, 30000, 3000, FIT_SEED)
-    check_pts = workspace_samples(robot, 100000, 10000, FIT_SEED + 1, edges=True)
+    fit_pts = workspace_samples(robot, *FIT_SAMPLES, FIT_SEED)
+    check_pts = workspace_samples(robot, *CHECK_SAMPLES, FIT_SEED + 1, edges=True)
     sets = [(cf.exact(*p), robot.pulses_pu(*p)) for p in (fit_pts, check_pts)]
     fits = []
     for k, name in enumerate(robot.servos):
@@ -249,6 +251,9 @@ def fit_robot(robot, progress=lambda msg: None) -> tuple[Plan, list[ServoFit]]:
     meta = {
         "robot": robot.name,
         "budget_pu": vars(budget),
+        "method": {"fit": "Lawson near-minimax + exchange on a check set, lowest total degree",
+                   "seed": FIT_SEED, "fit_samples": FIT_SAMPLES, "check_samples": CHECK_SAMPLES,
+                   "max_degree": MAX_DEGREE},
         "features": {"kind": "cylindrical->cartesian", "names": list(cf.names), "kx": cf.kx,
                      "z_center": cf.z_center, "kz": cf.kz, "frac_bits": fv,
                      "trig": {"kt": cf.trig.kt, "cos": list(cf.trig.cos_coeffs),

@@ -1,8 +1,11 @@
 """``ikseries build``: robot description -> fit -> plan -> Verilog, manifest, report."""
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -28,12 +31,12 @@ class BuildError(RuntimeError):
     """The build cannot produce a design that meets the robot's requirements."""
 
 
-def _simulate(core, plan, progress) -> dict:
+def _simulate(core, plan, progress, vcd=None) -> dict:
     """Amaranth simulation: bit-exact against the golden model, latency measured."""
     targets = {k: np.concatenate([c, r]) for (k, c), r in
                zip(corner_targets(plan).items(), random_targets(plan, 1000, 7).values())}
     t0 = time.perf_counter()
-    res = simulate_leg(core, targets)
+    res = simulate_leg(core, targets, vcd=vcd)
     exp = golden.outputs(plan, targets)
     mismatches = int(sum(np.count_nonzero(res.outputs[s] != exp[s]) for s in exp))
     lat = sorted(set(int(x) for x in res.latencies))
@@ -46,11 +49,65 @@ def _simulate(core, plan, progress) -> dict:
             "latency_cycles_measured": lat[0], "seconds": round(time.perf_counter() - t0, 2)}
 
 
-def build(robot, out_dir, *, synth: bool = True, progress=print) -> dict:
+@contextlib.contextmanager
+def _output_to(log: Path):
+    """Send this process's stdout/stderr file descriptors (and so the simulators') to ``log``."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with open(log, "ab") as f:
+        os.dup2(f.fileno(), 1)
+        os.dup2(f.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+
+
+def _cocotb(plan_file: Path, period: int, simulators, workdir: Path, logdir: Path, progress) -> dict:
+    """cocotb on the exported Verilog: bit-exact streaming with and without backpressure.
+
+    ``simulators`` is a list of names, or "auto" for every installed one. The simulator
+    output goes to ``logdir/cocotb_<simulator>.log``.
+    """
+    from .sim.runner import SIMULATORS, run, simulator_available
+    out = {}
+    if simulators == "auto":
+        simulators = [s for s in SIMULATORS if simulator_available(s)[0]]
+        for s in sorted(set(SIMULATORS) - set(simulators)):
+            progress(f"cocotb on {s}: skipped ({simulator_available(s)[1]})")
+    for sim in simulators:
+        ok, why = simulator_available(sim)
+        if not ok:
+            raise BuildError(f"cannot run cocotb on {sim}: {why}")
+        progress(f"cocotb on {sim}: building and simulating the exported Verilog")
+        log = logdir / f"cocotb_{sim}.log"
+        with _output_to(log):
+            res = run(plan_file, period, sim, workdir / sim, n_random=1000,
+                      testcase="test_back_to_back,test_backpressure")
+        failed = {t: m for t, (ok_, m) in res.tests.items() if not ok_}
+        if not res.ok or failed:
+            raise BuildError(f"cocotb on {sim} failed (log: {log}): "
+                             + "; ".join(f"{t}: {m}" for t, m in failed.items()).replace("\n", " "))
+        progress(f"cocotb on {sim}: {', '.join(sorted(res.tests))} passed, latency {res.latency} cycles")
+        out[sim] = {"tests": sorted(res.tests), "passed": True, "latency_cycles_measured": res.latency,
+                    "build_s": round(res.build_s, 1), "test_s": round(res.test_s, 1)}
+    return out
+
+
+def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print) -> dict:
     """Run the whole pipeline and write every artifact into ``out_dir``.
 
-    Files are written to a temporary directory and moved into place at the end,
-    so a failed build leaves nothing half-written.
+    Files are written to a temporary directory next to ``out_dir`` and moved into
+    place at the end, so a failed build leaves nothing half-written. ``vcd`` also
+    writes the waveform of the verification simulation (``sim.vcd``); ``cocotb``
+    names simulators ("icarus", "verilator") that also run the exported Verilog
+    ("auto": every installed one; empty: none).
     """
     out_dir = Path(out_dir)
     times = {}
@@ -82,10 +139,11 @@ def build(robot, out_dir, *, synth: bool = True, progress=print) -> dict:
     progress("exporting Verilog")
     verilog_text = leg_verilog(core, name)
     times["verilog_s"] = round(time.perf_counter() - t0, 1)
-    sim = _simulate(core, plan, progress)
 
-    tmp = Path(tempfile.mkdtemp(prefix=".ikseries-", dir=out_dir.parent if out_dir.parent.exists() else None))
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}-", dir=out_dir.parent))
     try:
+        sim = _simulate(core, plan, progress, vcd=str(tmp / "sim.vcd") if vcd else None)
         vfile = f"{name}.v"
         (tmp / vfile).write_text(verilog_text)
         (tmp / f"{name}.sdc").write_text(clock_sdc(name, robot.clock_hz))
@@ -96,9 +154,17 @@ def build(robot, out_dir, *, synth: bool = True, progress=print) -> dict:
             resources = synth_counts(tmp / vfile, name, workdir=tmp / "synth", progress=progress, jobs=2)
             times["synth_s"] = round(time.perf_counter() - t0, 1)
             shutil.rmtree(tmp / "synth", ignore_errors=True)
+        (tmp / "plan.json").write_text(plan.dumps())
+        cocotb_res = {}
+        if cocotb:
+            t0 = time.perf_counter()
+            cocotb_res = _cocotb(tmp / "plan.json", robot.pwm_period_ticks, cocotb, tmp / "cocotb", tmp,
+                                 progress)
+            times["cocotb_s"] = round(time.perf_counter() - t0, 1)
+            shutil.rmtree(tmp / "cocotb", ignore_errors=True)
         man = manifest(robot, plan, core, name)
         report = make_report(robot, plan, fits, acc, sim, man, resources, times, vfile)
-        (tmp / "plan.json").write_text(plan.dumps())
+        report["cocotb"] = cocotb_res
         (tmp / "manifest.json").write_text(json.dumps(man, indent=1, sort_keys=True) + "\n")
         (tmp / "report.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
         (tmp / "report.md").write_text(render_markdown(report))
@@ -107,7 +173,7 @@ def build(robot, out_dir, *, synth: bool = True, progress=print) -> dict:
             dest = out_dir / f.name
             if dest.is_dir():
                 shutil.rmtree(dest)
-            f.replace(dest)
+            shutil.move(f, dest)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     progress(f"wrote {out_dir}/: {vfile}, {name}.sdc, plan.json, manifest.json, report.md, report.json")

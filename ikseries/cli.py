@@ -41,7 +41,14 @@ def cmd_build(args):
     from .build import build
     robot = _robot(args)
     out = Path(args.output) if args.output else Path("build") / robot.name
-    rep = build(robot, out, synth=not args.no_synth, progress=_progress(args.quiet))
+    if args.cocotb == "auto":
+        sims = "auto"
+    else:
+        sims = [x for x in args.cocotb.split(",") if x and x != "none"]
+        bad = [x for x in sims if x not in ("icarus", "verilator")]
+        if bad:
+            raise CliError(f"--cocotb must be auto, none or a list from icarus,verilator, not {bad[0]!r}")
+    rep = build(robot, out, synth=not args.no_synth, vcd=args.vcd, cocotb=sims, progress=_progress(args.quiet))
     worst = max(s["error_pu"]["total"] for s in rep["servos"])
     print(f"{robot.name}: max error {worst:.3f} pu (tolerance {robot.tolerance_pu:g}), "
           f"latency {rep['latency_cycles']} cycles, output in {out}/")
@@ -110,6 +117,10 @@ def main(argv=None):
     b.add_argument("--preset", help="built-in robot name (see `ikseries presets`)")
     b.add_argument("-o", "--output", help="output directory (default build/<robot>)")
     b.add_argument("--no-synth", action="store_true", help="skip Yosys resource counts")
+    b.add_argument("--vcd", action="store_true", help="also write sim.vcd, the waveform of the verification run")
+    b.add_argument("--cocotb", metavar="SIMS", default="auto",
+                   help="verify the exported Verilog with cocotb on these simulators: auto (every "
+                        "installed one, the default), none, or a list such as icarus,verilator")
     b.add_argument("-q", "--quiet", action="store_true")
     e = sub.add_parser("eval", help="pulse of each servo: reference IK vs golden integer model")
     e.add_argument("--preset")

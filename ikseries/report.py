@@ -45,6 +45,9 @@ def render_markdown(r: dict) -> str:
             f"measured in simulation: {r['simulation']['latency_cycles_measured']} cycles "
             f"({r['simulation']['targets']} targets, {r['simulation']['mismatches']} mismatches against "
             "the golden model).",
+            *[f"- cocotb on {sim} (exported Verilog): {', '.join(c['tests'])} passed, latency "
+              f"{c['latency_cycles_measured']} cycles (build {c['build_s']} s, simulation {c['test_s']} s)."
+              for sim, c in (r.get("cocotb") or {}).items()],
             f"- Throughput: one target per cycle = {r['throughput_targets_per_s']:,.0f} leg solutions/s "
             "at the configured clock.", ""]
     res = r.get("resources")

@@ -30,19 +30,25 @@ def small_toml(tmp_path_factory):
 @pytest.fixture(scope="module")
 def built(small_toml, tmp_path_factory):
     out = tmp_path_factory.mktemp("build") / "small"
-    assert main(["build", str(small_toml), "--no-synth", "-q", "-o", str(out)]) == 0
+    assert main(["build", str(small_toml), "--no-synth", "--vcd", "--cocotb", "icarus", "-q",
+                 "-o", str(out)]) == 0
     return out
 
 
 def test_build_writes_every_artifact(built):
     names = sorted(p.name for p in built.iterdir())
-    assert names == ["manifest.json", "plan.json", "report.json", "report.md", "small_leg_core.sdc",
-                     "small_leg_core.v"]
+    assert names == ["cocotb_icarus.log", "manifest.json", "plan.json", "report.json", "report.md", "sim.vcd",
+                     "small_leg_core.sdc", "small_leg_core.v"]
+    vcd = (built / "sim.vcd").read_text()
+    assert "$enddefinitions" in vcd and "pwm_s1" in vcd
     assert "create_clock -name clk -period 20.8333 [get_ports {clk}]" in (built / "small_leg_core.sdc").read_text()
     rep = json.loads((built / "report.json").read_text())
     man = json.loads((built / "manifest.json").read_text())
     assert rep["simulation"]["mismatches"] == 0
     assert rep["simulation"]["latency_cycles_measured"] == rep["latency_cycles"] == man["latency_cycles"]
+    assert rep["cocotb"]["icarus"]["passed"]
+    assert rep["cocotb"]["icarus"]["latency_cycles_measured"] == rep["latency_cycles"]
+    assert rep["cocotb"]["icarus"]["tests"] == ["test_back_to_back", "test_backpressure"]
     assert rep["accuracy_points"] >= 1_000_000
     assert all(s["error_pu"]["total"] <= 4.0 for s in rep["servos"])
     # every port the manifest names exists in the Verilog with that width
@@ -61,7 +67,7 @@ def test_build_writes_every_artifact(built):
 
 def test_build_is_byte_identical(built, small_toml, tmp_path):
     out = tmp_path / "again"
-    assert main(["build", str(small_toml), "--no-synth", "-q", "-o", str(out)]) == 0
+    assert main(["build", str(small_toml), "--no-synth", "--cocotb", "none", "-q", "-o", str(out)]) == 0
     for f in ("small_leg_core.v", "plan.json", "manifest.json"):
         assert (out / f).read_bytes() == (built / f).read_bytes(), f
 
@@ -82,6 +88,8 @@ def test_eval_with_plan(capsys, built, small_toml):
      "ikseries: error: preset must be one of ['cylinder-leg'], not 'nope'\n"),
     (["build", "--preset", "cylinder-leg", "also.toml"],
      "ikseries: error: give either a robot description file or --preset, not both\n"),
+    (["build", "--cocotb", "modelsim"],
+     "ikseries: error: --cocotb must be auto, none or a list from icarus,verilator, not 'modelsim'\n"),
 ])
 def test_bad_arguments_give_one_line_errors(capsys, argv, message):
     code, out, err = run(capsys, *argv)
@@ -103,4 +111,4 @@ def test_unmeetable_tolerance_writes_nothing(capsys, tmp_path):
     out = tmp_path / "out"
     code, _, err = run(capsys, "build", str(tight), "-q", "-o", str(out))
     assert code == 1 and "tolerance 0.01 pu leaves no approximation budget" in err and err.count("\n") == 1
-    assert not out.exists() and list(tmp_path.iterdir()) == [tight]
+    assert not out.exists() and sorted(tmp_path.iterdir()) == [tight]

@@ -43,7 +43,6 @@ def test_leg_core_under_backpressure_and_gaps(small_plan):
     assert res.latencies.min() == core.latency
 
 
-@pytest.mark.filterwarnings("ignore::amaranth.hdl.UnusedElaboratable")
 def test_evaluator_rejects_bad_plan():
     with pytest.raises(TypeError, match="plan must be a Plan, not 'x'"):
         PlanEvaluator("x")
@@ -99,7 +98,6 @@ def test_pwm_width_offered_on_the_last_cycle_is_applied():
     assert pulses(tr) == [(11, 3), (21, 3)]
 
 
-@pytest.mark.filterwarnings("ignore::amaranth.hdl.UnusedElaboratable")
 @pytest.mark.parametrize("kw, msg", [
     ({"period": 1, "width_bits": 4}, "period must be an integer >= 2 cycles, not 1"),
     ({"period": 10, "width_bits": 0}, "width_bits must be a positive integer, not 0"),
