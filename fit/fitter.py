@@ -12,7 +12,7 @@ Error budget (pu): ``tolerance = approximation + quantization + output rounding
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -39,7 +39,7 @@ class ServoFit:
     allowed: list            # per feature: any / even / odd / none
     degree: int
     poly: dict               # {exponents: float coefficient} over the features (ticks)
-    fit_error_pu: float      # max error on the fit samples (float coefficients)
+    fit_error_ticks: float   # max error on the fit and check samples (float coefficients)
     frac: int = 0            # accumulator / coefficient fractional bits
     bound_pu: float = 0.0    # certified rounding bound
 
@@ -65,8 +65,7 @@ class Budget:
 def plan_inputs(robot) -> list[PlanInput]:
     out = []
     for i in robot.inputs:
-        signed = i.lo < 0
-        w = max(bits_for(i.lo, i.hi)[0], 1)
+        w, signed = bits_for(i.lo, i.hi)
         out.append(PlanInput(i.name, i.unit, i.frac_bits, i.lo, i.hi, w, signed))
     return out
 
@@ -97,7 +96,7 @@ def workspace_samples(robot, n_random: int, n_face: int, seed: int, edges: bool 
     return tuple(p[:, k] for k in range(len(lo)))
 
 
-def _structure(robot, k: int, feats: CylinderFeatures) -> tuple[list, bool]:
+def _structure(robot, k: int) -> tuple[list, bool]:
     """Which powers servo k needs, found numerically from the reference kinematics.
 
     Returns (allowed per feature, whether the y-free part is a constant). The
@@ -180,7 +179,7 @@ def _servo_nodes(b: PlanBuilder, sf: ServoFit, feats: list[int], fv: int) -> int
     return acc
 
 
-def _build(robot, inputs, cf: CylinderFeatures, fits: list[ServoFit], fv: int, meta=None) -> Plan:
+def _build(robot, inputs, cf: CylinderFeatures, fits: list[ServoFit], fv: int) -> Plan:
     b = PlanBuilder(inputs)
     feats = cf.build(b, fv, fv + 4)
     lo, hi = robot.pulse_limits_ticks()
@@ -189,7 +188,7 @@ def _build(robot, inputs, cf: CylinderFeatures, fits: list[ServoFit], fv: int, m
         acc = _servo_nodes(b, sf, feats, fv)
         out = b.clamp(b.round(acc, 0), lo, hi)
         outs.append(PlanOutput(sf.name, out, acc, "ticks", robot.ticks_per_pu))
-    return b.build(outs, meta)
+    return b.build(outs)
 
 
 def _choose_formats(robot, inputs, cf, fits, budget: Budget, progress) -> int:
@@ -243,12 +242,16 @@ def fit_robot(robot, progress=lambda msg: None) -> tuple[Plan, list[ServoFit]]:
     sets = [(cf.exact(*p), robot.pulses_pu(*p)) for p in (fit_pts, check_pts)]
     fits = []
     for k, name in enumerate(robot.servos):
-        allowed, y0c = _structure(robot, k, cf)
+        allowed, y0c = _structure(robot, k)
         progress(f"fitting {name} (powers: x {allowed[0]}, y {allowed[1]}, z {allowed[2]})")
         fits.append(_fit_servo(name, *((p, v[k] * tpp) for p, v in sets), allowed, y0c,
                                budget.approximation * tpp, progress))
     fv = _choose_formats(robot, inputs, cf, fits, budget, progress)
-    meta = {
+    plan = _build(robot, inputs, cf, fits, fv)
+    bounds = plan.rounding_bounds()
+    for sf, o in zip(fits, plan.outputs):
+        sf.bound_pu = bounds[o.preround] / tpp
+    plan.meta = {
         "robot": robot.name,
         "budget_pu": vars(budget),
         "method": {"fit": "Lawson near-minimax + exchange on a check set, lowest total degree",
@@ -260,11 +263,8 @@ def fit_robot(robot, progress=lambda msg: None) -> tuple[Plan, list[ServoFit]]:
                               "sin": list(cf.trig.sin_coeffs), "max_error": cf.trig.max_error}},
         "servos": [{"name": sf.name, "powers": sf.allowed, "total_degree": sf.degree,
                     "terms": len(sf.poly), "accumulator_frac_bits": sf.frac,
-                    "fit_error_pu": sf.fit_error_pu / tpp, "certified_rounding_pu": sf.bound_pu,
+                    "fit_error_pu": sf.fit_error_ticks / tpp, "certified_rounding_pu": sf.bound_pu,
                     "coefficients": [{"exponents": list(e), "value": c} for e, c in sf.poly.items()]}
                    for sf in fits],
     }
-    plan = _build(robot, inputs, cf, fits, fv, meta)
-    for sf, o in zip(fits, plan.outputs):
-        sf.bound_pu = plan.rounding_bounds()[o.preround] / tpp
     return plan, fits

@@ -169,6 +169,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         (tmp / "report.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
         (tmp / "report.md").write_text(render_markdown(report))
         out_dir.mkdir(parents=True, exist_ok=True)
+        written = sorted(f.name for f in tmp.iterdir())
         for f in sorted(tmp.iterdir()):
             dest = out_dir / f.name
             if dest.is_dir():
@@ -176,7 +177,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
             shutil.move(f, dest)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    progress(f"wrote {out_dir}/: {vfile}, {name}.sdc, plan.json, manifest.json, report.md, report.json")
+    progress(f"wrote {out_dir}/: " + ", ".join(written))
     return report
 
 

@@ -25,9 +25,10 @@ def _robot(args):
 def _progress(quiet):
     t0 = time.perf_counter()
 
-    def say(msg):
+    def say(msg):  # one write per line: synthesis reports progress from several threads
         if not quiet:
-            print(f"[{time.perf_counter() - t0:6.1f}s] {msg}", file=sys.stderr, flush=True)
+            sys.stderr.write(f"[{time.perf_counter() - t0:6.1f}s] {msg}\n")
+            sys.stderr.flush()
     return say
 
 
