@@ -27,6 +27,10 @@ from .sim.amaranth_sim import corner_targets, random_targets, simulate_leg
 __all__ = ["BuildError", "build"]
 
 
+#: files a build writes only with some options; an earlier build's copies are removed
+OPTIONAL_ARTIFACTS = ("sim.vcd", "cocotb_icarus.log", "cocotb_verilator.log")
+
+
 class BuildError(RuntimeError):
     """The build cannot produce a design that meets the robot's requirements."""
 
@@ -170,6 +174,9 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         (tmp / "report.md").write_text(render_markdown(report))
         out_dir.mkdir(parents=True, exist_ok=True)
         written = sorted(f.name for f in tmp.iterdir())
+        for stale in OPTIONAL_ARTIFACTS:   # left by an earlier build with other options
+            if stale not in written and (out_dir / stale).is_file():
+                (out_dir / stale).unlink()
         for f in sorted(tmp.iterdir()):
             dest = out_dir / f.name
             if dest.is_dir():

@@ -110,7 +110,9 @@ def cmd_eval(args):
 
 
 def main(argv=None):
+    from . import __version__
     p = argparse.ArgumentParser(prog="ikseries", description=__doc__)
+    p.add_argument("--version", action="version", version=f"ikseries {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True)
     sub.add_parser("presets", help="list the built-in robot descriptions")
     b = sub.add_parser("build", help="fit, generate Verilog + manifest + report")

@@ -67,9 +67,12 @@ def test_build_writes_every_artifact(built):
 
 def test_build_is_byte_identical(built, small_toml, tmp_path):
     out = tmp_path / "again"
+    out.mkdir()
+    (out / "sim.vcd").write_text("stale waveform of an earlier build")
     assert main(["build", str(small_toml), "--no-synth", "--cocotb", "none", "-q", "-o", str(out)]) == 0
     for f in ("small_leg_core.v", "plan.json", "manifest.json"):
         assert (out / f).read_bytes() == (built / f).read_bytes(), f
+    assert not (out / "sim.vcd").exists()   # not written by this build: the stale copy is gone
 
 
 def test_eval_with_plan(capsys, built, small_toml):
