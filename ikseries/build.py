@@ -19,6 +19,7 @@ from .fit.fitter import FitError, fit_robot
 from .fit.plan import quantize
 from .hdl.export import leg_verilog, manifest, module_name
 from .hdl.leg import LegCore
+from .plots import error_map
 from .report import render_markdown
 from .robot import robot_record
 from .sim import golden
@@ -159,6 +160,8 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
             times["synth_s"] = round(time.perf_counter() - t0, 1)
             shutil.rmtree(tmp / "synth", ignore_errors=True)
         (tmp / "plan.json").write_text(plan.dumps())
+        progress("plotting the error map")
+        emap = error_map(robot, plan, tmp / "error_map.png")
         cocotb_res = {}
         if cocotb:
             t0 = time.perf_counter()
@@ -169,6 +172,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         man = manifest(robot, plan, core, name)
         report = make_report(robot, plan, fits, acc, sim, man, resources, times, vfile)
         report["cocotb"] = cocotb_res
+        report["error_map"] = emap
         (tmp / "manifest.json").write_text(json.dumps(man, indent=1, sort_keys=True) + "\n")
         (tmp / "report.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
         (tmp / "report.md").write_text(render_markdown(report))

@@ -28,6 +28,11 @@ def render_markdown(r: dict) -> str:
         out.append(_row([s["name"], f"{e['approximation']:.4f}", f"{e['quantization']:.4f}",
                          f"{e['rounding']:.4f}", f"**{e['total']:.4f}**", at,
                          f"{s['certified_rounding_bound_pu']:.4f}"]))
+    if r.get("error_map"):
+        g = r["error_map"]["grid"]
+        out += ["", "Where the error lies: total error on a " + " x ".join(f"{v} ({k})" for k, v in g.items())
+                + " grid of representable inputs, maximum over the last coordinate:", "",
+                f"![error map]({r['error_map']['file']})"]
     out += ["", "## Series", "",
             _row(["servo", "total degree", "powers (x, y, z)", "terms", "multipliers (incl. coordinate stage)",
                   "coefficient frac bits"]), _row(["---"] * 6)]

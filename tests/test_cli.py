@@ -37,8 +37,9 @@ def built(small_toml, tmp_path_factory):
 
 def test_build_writes_every_artifact(built):
     names = sorted(p.name for p in built.iterdir())
-    assert names == ["cocotb_icarus.log", "manifest.json", "plan.json", "report.json", "report.md", "sim.vcd",
-                     "small_leg_core.sdc", "small_leg_core.v"]
+    assert names == ["cocotb_icarus.log", "error_map.png", "manifest.json", "plan.json", "report.json",
+                     "report.md", "sim.vcd", "small_leg_core.sdc", "small_leg_core.v"]
+    assert (built / "error_map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     vcd = (built / "sim.vcd").read_text()
     assert "$enddefinitions" in vcd and "pwm_s1" in vcd
     assert "create_clock -name clk -period 20.8333 [get_ports {clk}]" in (built / "small_leg_core.sdc").read_text()
