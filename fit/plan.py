@@ -75,6 +75,13 @@ class PlanInput:
     width: int      # port width
     signed: bool
 
+    @property
+    def port_range(self) -> tuple[int, int]:
+        """Every integer the port can carry (in range or not)."""
+        if self.signed:
+            return -(1 << (self.width - 1)), (1 << (self.width - 1)) - 1
+        return 0, (1 << self.width) - 1
+
 
 @dataclass(frozen=True)
 class PlanOutput:
@@ -217,8 +224,7 @@ class PlanBuilder:
 
     @staticmethod
     def _needs_clamp(i: PlanInput) -> bool:
-        full = (-(1 << (i.width - 1)), (1 << (i.width - 1)) - 1) if i.signed else (0, (1 << i.width) - 1)
-        return full != (i.lo, i.hi)
+        return i.port_range != (i.lo, i.hi)
 
     def _append(self, op, args, frac, param=None, ideal=None, share=True) -> int:
         if op not in _OPS or len(args) != _OPS[op]:
@@ -228,9 +234,7 @@ class PlanBuilder:
             return self._memo[key]
         a = [self.nodes[i] for i in args]
         if op == "input":
-            inp = next(i for i in self.inputs if i.name == param)
-            lo, hi = ((-(1 << (inp.width - 1)), (1 << (inp.width - 1)) - 1) if inp.signed
-                      else (0, (1 << inp.width) - 1))
+            lo, hi = next(i for i in self.inputs if i.name == param).port_range
         elif op == "const":
             lo = hi = int(param)
         elif op == "add":

@@ -23,7 +23,8 @@ from .plots import error_map
 from .report import render_markdown
 from .robot import robot_record
 from .sim import golden
-from .sim.amaranth_sim import corner_targets, random_targets, simulate_leg
+from .sim.amaranth_sim import simulate_leg
+from .sim.targets import corner_targets, random_targets
 
 __all__ = ["BuildError", "build"]
 

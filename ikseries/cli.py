@@ -89,17 +89,16 @@ def cmd_eval(args):
     for v, spec in zip(vals, robot.inputs):
         if not np.isfinite(v) or not spec.min <= v <= spec.max:
             raise CliError(f"{spec.name} must be within [{spec.min:g}, {spec.max:g}] {spec.unit}, not {v:g}")
-    try:
-        ref = robot.pulses_pu(*vals)
-    except UnreachableError as e:
-        raise CliError(str(e)) from None
     plan = _cached_plan(robot, args.plan)
     if plan is None:
         _progress(args.quiet)(f"no plan.json for {robot.name} under build/: fitting")
         plan = fit_robot(robot, _progress(args.quiet))[0]
     ints = golden.quantize_inputs(plan, dict(zip([i.name for i in robot.inputs], [[v] for v in vals])))
     q = [float(ints[i.name][0]) * 2.0 ** -i.frac_bits for i in robot.inputs]
-    ref_q = robot.pulses_pu(*q)
+    try:
+        ref_q = robot.pulses_pu(*q)   # the reference at the input the hardware sees
+    except UnreachableError as e:
+        raise CliError(str(e)) from None
     outs = golden.outputs(plan, ints)
     print("input (port integers): " + ", ".join(f"{i.name}={int(ints[i.name][0])}" for i in robot.inputs)
           + "  = " + ", ".join(f"{i.name}={v:g} {i.unit}" for i, v in zip(robot.inputs, q)))

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 from amaranth.sim import Simulator
 
-__all__ = ["LegSimResult", "simulate_leg", "corner_targets", "random_targets"]
+__all__ = ["LegSimResult", "simulate_leg"]
 
 
 @dataclass
@@ -14,21 +14,6 @@ class LegSimResult:
     outputs: dict          # servo -> int64 array, in output order
     latencies: np.ndarray  # cycles from each input transfer to its output transfer
     cycles: int
-
-
-def corner_targets(plan) -> dict:
-    """Every combination of each input's lo / hi (and 0 when inside the range)."""
-    axes = []
-    for i in plan.inputs:
-        vals = {i.lo, i.hi} | ({0} if i.lo < 0 < i.hi else set())
-        axes.append(sorted(vals))
-    grid = np.meshgrid(*axes, indexing="ij")
-    return {i.name: g.ravel().astype(np.int64) for i, g in zip(plan.inputs, grid)}
-
-
-def random_targets(plan, n: int, seed: int) -> dict:
-    rng = np.random.default_rng(seed)
-    return {i.name: rng.integers(i.lo, i.hi + 1, n) for i in plan.inputs}
 
 
 def simulate_leg(core, targets: dict, *, ready_prob: float = 1.0, valid_prob: float = 1.0,

@@ -22,7 +22,6 @@ sampled high by rising edge ``e``.
 from __future__ import annotations
 
 import bisect
-import itertools
 import json
 import os
 
@@ -35,29 +34,11 @@ from cocotb.triggers import FallingEdge, ReadOnly, Timer, ValueChange
 
 from ikseries.fit.plan import Plan
 from ikseries.sim import golden
+from ikseries.sim.targets import corner_targets, random_targets
 from ikseries.sim.runner import ENV_LATENCY, ENV_N_RANDOM, ENV_PERIOD, ENV_PLAN, ENV_SEED
 
 CLK_NS = 10
 MAX_ERRORS = 12     # messages kept per check
-
-
-def _port_range(i) -> tuple[int, int]:
-    return ((-(1 << (i.width - 1)), (1 << (i.width - 1)) - 1) if i.signed else (0, (1 << i.width) - 1))
-
-
-def corner_targets(plan: Plan) -> dict:
-    """Every combination of each input's lo / hi (and 0 where in range), then every combination
-    of each input's port extremes (out of range: the core clamps them to the range)."""
-    def grid(values_per_input):
-        combos = list(dict.fromkeys(itertools.product(*values_per_input)))
-        return {i.name: np.array([c[k] for c in combos], dtype=np.int64) for k, i in enumerate(plan.inputs)}
-    in_range = grid([sorted({i.lo, i.hi} | ({0} if i.lo <= 0 <= i.hi else set())) for i in plan.inputs])
-    ports = grid([sorted(set(_port_range(i))) for i in plan.inputs])
-    return {n: np.concatenate([in_range[n], ports[n]]) for n in in_range}
-
-
-def random_targets(plan: Plan, rng, n: int) -> dict:
-    return {i.name: rng.integers(i.lo, i.hi + 1, n, dtype=np.int64) for i in plan.inputs}
 
 
 def concat(*targets) -> dict:
@@ -133,7 +114,7 @@ class Leg:
         """Drive target ``values`` ({input: int}); None: random port junk (i_valid is low)."""
         for i in self.inputs:
             if values is None:
-                lo, hi = _port_range(i)
+                lo, hi = i.port_range
                 v = int(self.rng.integers(lo, hi + 1))
             else:
                 v = int(values[i.name])
@@ -261,7 +242,7 @@ async def test_back_to_back(dut):
     leg = Leg(dut, 1)
     try:
         await leg.start()
-        targets = concat(corner_targets(leg.plan), random_targets(leg.plan, leg.rng, leg.n_random))
+        targets = concat(corner_targets(leg.plan, port_extremes=True), random_targets(leg.plan, leg.n_random, leg.rng))
         n = len(next(iter(targets.values())))
         got, in_e, out_e, stall_e, hs = await leg.stream(targets, [(1.0, 1.0)])
         leg.check_stream(targets, got, in_e, out_e, stall_e, hs, exact_latency=True)
@@ -283,7 +264,7 @@ async def test_backpressure(dut):
     leg = Leg(dut, 2)
     try:
         await leg.start()
-        targets = concat(corner_targets(leg.plan), random_targets(leg.plan, leg.rng, max(leg.n_random // 2, 1)))
+        targets = concat(corner_targets(leg.plan, port_extremes=True), random_targets(leg.plan, max(leg.n_random // 2, 1), leg.rng))
         n = len(next(iter(targets.values())))
         regimes = [(0.5, 0.5), (0.9, 0.3), (0.3, 0.9), (1.0, 0.7), (0.8, 1.0), (0.1, 0.1), (1.0, 0.0)]
         got, in_e, out_e, stall_e, hs = await leg.stream(targets, regimes, regime_len=48)
@@ -343,7 +324,7 @@ async def test_pwm(dut):
     try:
         assert P // 2 - L >= 2, f"PWM test needs a period of at least {2 * L + 4} cycles, got {P}"
         # pick targets by their golden widths
-        pool = random_targets(leg.plan, leg.rng, 4000)
+        pool = random_targets(leg.plan, 4000, leg.rng)
         w = golden.outputs(leg.plan, pool)
         W = np.stack([w[s] for s in leg.servos], axis=1)
         short = np.flatnonzero(np.all((W > 0) & (W < P), axis=1))

@@ -27,7 +27,7 @@ def _ports(plan: Plan, ints: dict) -> dict:
     vals = {}
     for i in plan.inputs:
         v = np.asarray(ints[i.name], dtype=np.int64)
-        lo, hi = ((-(1 << (i.width - 1)), (1 << (i.width - 1)) - 1) if i.signed else (0, (1 << i.width) - 1))
+        lo, hi = i.port_range
         if v.size and (v.min() < lo or v.max() > hi):
             raise ValueError(f"input {i.name} must fit its {i.width}-bit port "
                              f"[{lo}, {hi}], not {int(v.min() if v.min() < lo else v.max())}")

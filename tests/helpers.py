@@ -22,7 +22,7 @@ def tiny_plan(seed=0, clamp=(-100, 100)) -> Plan:
 def all_ports(plan):
     ranges = []
     for i in plan.inputs:
-        lo, hi = ((-(1 << (i.width - 1)), (1 << (i.width - 1)) - 1) if i.signed else (0, (1 << i.width) - 1))
+        lo, hi = i.port_range
         ranges.append(np.arange(lo, hi + 1))
     grid = np.meshgrid(*ranges, indexing="ij")
     return {i.name: g.ravel() for i, g in zip(plan.inputs, grid)}

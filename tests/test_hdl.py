@@ -8,7 +8,8 @@ from ikseries.hdl.evaluator import PlanEvaluator
 from ikseries.hdl.leg import LegCore
 from ikseries.hdl.pwm import ServoPWM
 from ikseries.sim import golden
-from ikseries.sim.amaranth_sim import corner_targets, random_targets, simulate_leg
+from ikseries.sim.amaranth_sim import simulate_leg
+from ikseries.sim.targets import corner_targets, random_targets
 
 
 def _check(core, plan, targets, **kw):
