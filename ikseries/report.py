@@ -47,7 +47,7 @@ def render_markdown(r: dict) -> str:
             f"{pl['max_width']} bits.", "",
             "## Timing", "",
             f"- Latency: **{r['latency_cycles']} cycles** ({r['latency_ns']:.1f} ns at the configured clock), "
-            f"measured in simulation: {r['simulation']['latency_cycles_measured']} cycles "
+            f"measured in the Amaranth simulation: {r['simulation']['latency_cycles_measured']} cycles "
             f"({r['simulation']['targets']} targets, {r['simulation']['mismatches']} mismatches against "
             "the golden model).",
             *[f"- cocotb on {sim} (exported Verilog): {', '.join(c['tests'])} passed, latency "

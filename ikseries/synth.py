@@ -55,6 +55,8 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
+from .wasm_cache import warm_yosys
+
 __all__ = ["CATEGORIES", "DEVICES", "TARGETS", "overflows", "SynthError", "categorise", "synth_counts", "yosys_command"]
 
 CATEGORIES = ("LUT", "FF", "carry", "DSP", "BRAM", "LUTRAM", "mux", "io", "other")
@@ -276,6 +278,8 @@ def synth_counts(verilog_path: str | os.PathLike | Sequence[str | os.PathLike], 
     else:
         root = Path(workdir).resolve()
         root.mkdir(parents=True, exist_ok=True)
+
+    warm_yosys(yosys_command())   # parallel first runs would race on YoWASP's cache
 
     def one(t: str) -> dict:
         say(f"yosys {TARGETS[t][0]} ({TARGETS[t][1]}) ...")

