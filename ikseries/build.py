@@ -106,6 +106,18 @@ def _cocotb(plan_file: Path, period: int, simulators, workdir: Path, logdir: Pat
     return out
 
 
+def _check_output_dir(out_dir: Path) -> None:
+    """Fail before any work if ``out_dir`` cannot be created or written."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise BuildError(f"output directory {str(out_dir)!r} exists and is not a directory")
+    anc = out_dir
+    while not anc.exists():
+        anc = anc.parent
+    if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
+        raise BuildError(f"cannot create or write the output directory {str(out_dir)!r} "
+                         f"({str(anc)!r} is not a writable directory)")
+
+
 def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print) -> dict:
     """Run the whole pipeline and write every artifact into ``out_dir``.
 
@@ -116,6 +128,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     ("auto": every installed one; empty: none).
     """
     out_dir = Path(out_dir)
+    _check_output_dir(out_dir)
     times = {}
     t0 = time.perf_counter()
     progress(f"fitting {robot.name} (tolerance ±{robot.tolerance_pu:g} pu)")
@@ -146,8 +159,11 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     verilog_text = leg_verilog(core, name)
     times["verilog_s"] = round(time.perf_counter() - t0, 1)
 
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}-", dir=out_dir.parent))
+    try:
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}-", dir=out_dir.parent))
+    except OSError as e:
+        raise BuildError(f"cannot create the output directory {str(out_dir)!r}: {e.strerror}") from None
     try:
         sim = _simulate(core, plan, progress, vcd=str(tmp / "sim.vcd") if vcd else None)
         vfile = f"{name}.v"
@@ -187,6 +203,8 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
             if dest.is_dir():
                 shutil.rmtree(dest)
             shutil.move(f, dest)
+    except OSError as e:
+        raise BuildError(f"cannot write the build output to {str(out_dir)!r}: {e}") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     progress(f"wrote {out_dir}/: " + ", ".join(written))

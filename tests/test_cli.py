@@ -109,6 +109,16 @@ def test_bad_robot_file_writes_nothing(capsys, tmp_path):
     assert not out.exists()
 
 
+def test_unwritable_output_fails_before_fitting(capsys, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    code, _, err = run(capsys, "build", "-q", "-o", str(blocker / "out"))
+    assert code == 1 and err == (f"ikseries: error: cannot create or write the output directory "
+                                 f"'{blocker / 'out'}' ('{blocker}' is not a writable directory)\n")
+    code, _, err = run(capsys, "build", "-q", "-o", str(blocker))
+    assert code == 1 and err == f"ikseries: error: output directory '{blocker}' exists and is not a directory\n"
+
+
 def test_unmeetable_tolerance_writes_nothing(capsys, tmp_path):
     tight = tmp_path / "tight.toml"
     tight.write_text(preset_text("cylinder-leg").replace("tolerance_pu = 0.5 ", "tolerance_pu = 0.01 "))
