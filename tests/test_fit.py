@@ -63,3 +63,18 @@ def test_tolerance_below_output_rounding_is_refused(robot):
 
 def test_looser_tolerance_gives_a_smaller_plan(plan, small_plan):
     assert small_plan.count("mul") < plan.count("mul")
+
+
+def test_no_node_of_the_real_plan_leaves_its_interval(plan):
+    """Every intermediate of the generated datapath stays inside the interval its width was
+    sized from, at every corner (port extremes included) and at random targets."""
+    from ikseries.sim import golden
+    from ikseries.sim.targets import corner_targets, random_targets
+    c = corner_targets(plan, port_extremes=True)
+    r = random_targets(plan, 20_000, 5)
+    vals = golden.evaluate(plan, {k: np.concatenate([c[k], r[k]]) for k in c})
+    for k, n in enumerate(plan.nodes):
+        v = np.asarray(vals[k])
+        assert n.lo <= v.min() and v.max() <= n.hi, (k, n.op, n.lo, n.hi, v.min(), v.max())
+        if n.op != "const":
+            assert n.width <= 62
