@@ -58,7 +58,10 @@ def _verilator_path() -> str | None:
 
 
 def simulator_available(simulator: str) -> tuple[bool, str]:
-    """(available, reason) for ``simulator``: does its binary exist?"""
+    """(available, reason) for ``simulator``: are cocotb and the simulator's binary installed?"""
+    import importlib.util
+    if simulator in SIMULATORS and importlib.util.find_spec("cocotb_tools") is None:
+        return False, "cocotb is not installed (pip install 'ikseries[sim]')"
     if simulator == "icarus":
         missing = [b for b in ("iverilog", "vvp") if shutil.which(b) is None]
         return (not missing, f"Icarus binaries not on PATH: {', '.join(missing)}" if missing else "")
