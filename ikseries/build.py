@@ -212,7 +212,6 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
 
 
 def make_report(robot, plan, fits, acc, sim, man, resources, times, vfile) -> dict:
-    bounds = plan.rounding_bounds()
     servos = []
     for sf, o in zip(fits, plan.outputs):
         cone = plan.cone(o.node)
@@ -226,7 +225,7 @@ def make_report(robot, plan, fits, acc, sim, man, resources, times, vfile) -> di
             "coefficients": [{"exponents": list(e), "integer": quantize(c, sf.frac), "value": c}
                              for e, c in sf.poly.items()],
             "error_pu": acc["servos"][sf.name],
-            "certified_rounding_bound_pu": bounds[o.preround] / o.ticks_per_pu,
+            "certified_rounding_bound_pu": sf.bound_pu,
         })
     return {
         "robot": robot.name,
