@@ -109,6 +109,15 @@ def test_bad_robot_file_writes_nothing(capsys, tmp_path):
     assert not out.exists()
 
 
+def test_unreachable_workspace_is_one_line(capsys, tmp_path):
+    far = tmp_path / "far.toml"
+    far.write_text(preset_text("cylinder-leg").replace("[workspace.r]\nmin = 0.0\nmax = 40.0",
+                                                       "[workspace.r]\nmin = 0.0\nmax = 90.0"))
+    code, _, err = run(capsys, "build", str(far), "-o", str(tmp_path / "out"))
+    assert code == 2 and err.count("\n") == 1
+    assert err.startswith("ikseries: error: workspace: target (r=") and "is unreachable" in err
+
+
 def test_unwritable_output_fails_before_fitting(capsys, tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("x")
