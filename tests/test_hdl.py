@@ -139,3 +139,16 @@ def test_leg_core_drives_pwm_with_its_outputs():
     assert 0 < want < period
     # the first period (already running at reset) carries no pulse; then one per period
     assert pulses(np.array(trace)) == [(period + 1, want), (2 * period + 1, want)]
+
+
+def test_leg_core_parameter_errors():
+    plan = tiny_plan(3, clamp=(0, 100))
+    with pytest.raises(ValueError) as e:
+        LegCore(plan, period=128, reset_widths={"q": 3})
+    assert str(e.value) == "reset_widths keys must be servos ['y'], not 'q'"
+    signed_plan = tiny_plan(3)   # output may be negative
+    lo = signed_plan.nodes[signed_plan.outputs[0].node].lo
+    assert lo < 0
+    with pytest.raises(ValueError) as e:
+        LegCore(signed_plan, period=128)
+    assert str(e.value) == f"plan output y must be a non-negative pulse width, but its range starts at {lo}"
