@@ -138,7 +138,7 @@ def _fit_servo(name, fit_set, check_set, allowed, y0_const, budget_ticks, progre
 
     ``fit_set`` and ``check_set`` are (features, target ticks). Lawson's method runs on the
     fit set; the worst check points are then added to it (an exchange step) until the
-    check set also meets the budget or three rounds have passed.
+    check set also meets the budget, for at most four Lawson rounds per degree.
     """
     pts, target = fit_set
     cpts, ctarget = check_set
@@ -193,7 +193,7 @@ def _build(robot, inputs, cf: CylinderFeatures, fits: list[ServoFit], fv: int) -
 
 def _choose_formats(robot, inputs, cf, fits, budget: Budget, progress) -> int:
     """Narrowest feature precision ``fv`` and per-servo accumulator precision meeting the
-    certified quantization budget. Sets ``ServoFit.frac``/``bound_pu``; returns ``fv``."""
+    certified quantization budget. Sets ``ServoFit.frac``; returns ``fv``."""
     tpp = robot.ticks_per_pu
 
     def bound(sf, fv, frac):

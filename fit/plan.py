@@ -159,8 +159,8 @@ class Plan:
                 e = ma * eb + mb * ea + ea * eb
             elif n.op == "shr":
                 e = err[n.args[0]] + (1 - 2.0 ** -n.param) * sc
-            else:  # shl, frac, clamp: exact (clamping only moves towards the ideal range)
-                e = err[n.args[0]]
+            else:  # shl, frac: exact; clamp: the ideal value is clamped too, and a clamp
+                e = err[n.args[0]]  # never increases a distance (it is 1-Lipschitz)
             err.append(e)
         return err
 

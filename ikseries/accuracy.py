@@ -15,15 +15,14 @@ from .sim import golden
 __all__ = ["verification_points", "measure"]
 
 
-def verification_points(robot, n_random: int = 400_000, n_face: int = 10_000, seed: int = 1,
-                        grid_step: tuple | None = None) -> dict:
+def verification_points(robot, n_random: int = 400_000, n_face: int = 10_000, seed: int = 1) -> dict:
     """Port integers for a dense grid + random points + every face of the workspace box."""
     specs = robot.inputs
     rng = np.random.default_rng(seed)
     # dense grid: about 41 x 361 x 41 points for cylinder-leg (1 mm, 1 deg)
     axes = []
     for k, i in enumerate(specs):
-        step = (grid_step[k] if grid_step else max(1, round((i.hi - i.lo) / (360 if i.unit == "deg" else 40))))
+        step = max(1, round((i.hi - i.lo) / (360 if i.unit == "deg" else 40)))
         axes.append(np.unique(np.append(np.arange(i.lo, i.hi + 1, step), i.hi)))
     grid = np.meshgrid(*axes, indexing="ij")
     cols = [[g.ravel()] for g in grid]

@@ -24,13 +24,19 @@ from .report import render_markdown
 from .robot import robot_record
 from .sim import golden
 from .sim.amaranth_sim import simulate_leg
+from .sim.runner import SIMULATORS
 from .sim.targets import corner_targets, random_targets
 
-__all__ = ["BuildError", "build"]
+__all__ = ["BuildError", "build", "default_output_dir"]
 
 
 #: files a build writes only with some options; an earlier build's copies are removed
-OPTIONAL_ARTIFACTS = ("sim.vcd", "cocotb_icarus.log", "cocotb_verilator.log")
+OPTIONAL_ARTIFACTS = ("sim.vcd", *(f"cocotb_{sim}.log" for sim in SIMULATORS))
+
+
+def default_output_dir(robot) -> Path:
+    """Where ``ikseries build`` writes when no ``-o`` is given."""
+    return Path("build") / robot.name
 
 
 class BuildError(RuntimeError):
@@ -187,9 +193,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
             times["cocotb_s"] = round(time.perf_counter() - t0, 1)
             shutil.rmtree(tmp / "cocotb", ignore_errors=True)
         man = manifest(robot, plan, core, name)
-        report = make_report(robot, plan, fits, acc, sim, man, resources, times, vfile)
-        report["cocotb"] = cocotb_res
-        report["error_map"] = emap
+        report = make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, times, vfile)
         (tmp / "manifest.json").write_text(json.dumps(man, indent=1, sort_keys=True) + "\n")
         (tmp / "report.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
         (tmp / "report.md").write_text(render_markdown(report))
@@ -211,7 +215,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     return report
 
 
-def make_report(robot, plan, fits, acc, sim, man, resources, times, vfile) -> dict:
+def make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, times, vfile) -> dict:
     servos = []
     for sf, o in zip(fits, plan.outputs):
         cone = plan.cone(o.node)
@@ -244,6 +248,8 @@ def make_report(robot, plan, fits, acc, sim, man, resources, times, vfile) -> di
         "latency_ns": man["latency_ns"],
         "throughput_targets_per_s": man["throughput"]["targets_per_second_at_clock"],
         "simulation": sim,
+        "cocotb": cocotb_res,
+        "error_map": emap,
         "resources": resources,
         "times_s": times,
     }

@@ -39,16 +39,17 @@ def cmd_presets(args):
 
 
 def cmd_build(args):
-    from .build import build
+    from .build import build, default_output_dir
+    from .sim.runner import SIMULATORS
     robot = _robot(args)
-    out = Path(args.output) if args.output else Path("build") / robot.name
+    out = Path(args.output) if args.output else default_output_dir(robot)
     if args.cocotb == "auto":
         sims = "auto"
     else:
         sims = [x for x in args.cocotb.split(",") if x and x != "none"]
-        bad = [x for x in sims if x not in ("icarus", "verilator")]
+        bad = [x for x in sims if x not in SIMULATORS]
         if bad:
-            raise CliError(f"--cocotb must be auto, none or a list from icarus,verilator, not {bad[0]!r}")
+            raise CliError(f"--cocotb must be auto, none or a list from {','.join(SIMULATORS)}, not {bad[0]!r}")
     rep = build(robot, out, synth=not args.no_synth, vcd=args.vcd, cocotb=sims, progress=_progress(args.quiet))
     worst = max(s["error_pu"]["total"] for s in rep["servos"])
     print(f"{robot.name}: max error {worst:.3f} pu (tolerance {robot.tolerance_pu:g}), "
@@ -59,10 +60,11 @@ def _cached_plan(robot, path):
     """The plan in ``path`` (or build/<robot>/plan.json when it was built from this robot)."""
     import json
 
-    from .robot import robot_record
+    from .build import default_output_dir
     from .fit.plan import Plan
+    from .robot import robot_record
     given = path is not None
-    path = Path(path) if given else Path("build") / robot.name / "plan.json"
+    path = Path(path) if given else default_output_dir(robot) / "plan.json"
     if not path.exists():
         if given:
             raise CliError(f"plan file {str(path)!r} does not exist")
