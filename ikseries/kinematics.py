@@ -8,10 +8,19 @@ Angles are in degrees, lengths in millimetres, pulses in pulse units (pu).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 
-__all__ = ["UnreachableError", "CylinderLeg", "Calibration"]
+__all__ = ["UnreachableError", "CylinderLeg", "Calibration", "NUMPY_MATH", "RAD2DEG"]
+
+RAD2DEG = 180.0 / np.pi
+
+#: The math namespace of the pure IK formulas (``Geometry.angles(xp, ...)``): float64 numpy.
+#: An interval / derivative namespace with the same names (``sqrt, atan2, acos, asin, cos,
+#: sin``) evaluates the same formula rigorously over a cell (see ``fit/certify.py``).
+NUMPY_MATH = SimpleNamespace(sqrt=np.sqrt, atan2=np.arctan2, acos=np.arccos, asin=np.arcsin,
+                             cos=np.cos, sin=np.sin)
 
 
 class UnreachableError(ValueError):
@@ -64,6 +73,30 @@ class CylinderLeg:
         return np.hypot(dx, y), np.degrees(np.arctan2(y, dx)), np.asarray(z, dtype=np.float64)
 
     # -- inverse kinematics ------------------------------------------------
+    def angles(self, xp, r, theta, z):
+        """Pure IK formula (no reachability checks) over the math namespace ``xp``.
+
+        Uses only ``+ - * /``, integer powers, constants and ``xp.sqrt / atan2 / acos /
+        cos / sin``, so the same code runs on float arrays (``NUMPY_MATH``) and on
+        interval-with-derivative numbers for the certified bound. Angles in degrees.
+        """
+        th = theta * (1.0 / RAD2DEG)
+        x = self.neutral_distance + r * xp.cos(th)
+        y = r * xp.sin(th)
+        return self.angles_cartesian(xp, x, y, z)
+
+    def angles_cartesian(self, xp, x, y, z):
+        """Pure IK formula for the tip (x, y, Z); see :meth:`angles`."""
+        f, t = self.femur, self.tibia
+        u = xp.sqrt(x * x + y * y) - self.coxa
+        v = self.z_datum + z
+        d2 = u * u + v * v
+        d = xp.sqrt(d2)
+        s1 = xp.atan2(y, x) * RAD2DEG
+        s2 = (xp.acos((f * f + d2 - t * t) / (2 * f * d)) - xp.atan2(v, u)) * RAD2DEG
+        s3 = 180.0 - xp.acos((f * f + t * t - d2) / (2 * f * t)) * RAD2DEG
+        return s1, s2, s3
+
     def ik_cartesian(self, x, y, z):
         """Joint angles (S1, S2, S3) in degrees for tip (x, y, Z).
 

@@ -51,3 +51,13 @@ def test_direction_sign_mirrors_the_pulse(robot):
     b = np.array(flipped.pulses_pu(30.0, 40.0, 5.0))
     n = robot.neutral_pulse_pu
     assert np.allclose(b[0] - n, -(a[0] - n)) and np.isclose(b[1], a[1]) and np.allclose(b[2] - n, -(a[2] - n))
+
+
+def test_pure_formula_matches_checked_ik():
+    """``angles(xp, ...)`` (used for the certified bound) is the same IK as ``ik``."""
+    from ikseries.kinematics import NUMPY_MATH, CylinderLeg
+    g = CylinderLeg()
+    rng = np.random.default_rng(0)
+    r, th, z = rng.random(2000) * 40, rng.random(2000) * 360 - 180, rng.random(2000) * 40
+    for a, b in zip(g.ik(r, th, z), g.angles(NUMPY_MATH, r, th, z)):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-9)
