@@ -1,11 +1,18 @@
 """Coordinate stage: input ports -> normalised fitting variables.
 
-For a cylindrical target (R, theta, Z) the servo polynomials are fitted over
-the Cartesian features ``xn = (x - D) / 2**kx = R cos(theta) / 2**kx``,
-``yn = R sin(theta) / 2**kx`` and ``zn = (Z - Zc) / 2**kz``, which need far fewer
-terms than a direct series in (R, theta, Z). cos and sin are themselves integer
-series in ``t = theta / 2**kt`` (even and odd, from the theta symmetry), shared
-by all servos. Scale factors are powers of two, so normalising is wiring only.
+Every robot is fitted over Cartesian *frame* coordinates (x, y[, z]) with the
+servo-axis frame's vertical through the origin:
+
+- a cylindrical target (R, theta, Z) becomes ``x - D = R cos(theta)``,
+  ``y = R sin(theta)``, Z; cos and sin are integer series in ``t = theta / 2**kt``
+  (even and odd, from the theta symmetry), shared by all servos;
+- a Cartesian target is its own frame.
+
+A servo polynomial uses either the normalised frame coordinates
+``(c - centre) / 2**k`` ("cartesian") or, when the servo's angle does not change
+under rotation about the vertical axis, the normalised squared plan radius
+``rho2 = x**2 + y**2`` plus the remaining coordinates ("radial"), which turns a
+3-D fit into a 2-D one. Scale factors are powers of two, so normalising is wiring.
 """
 from __future__ import annotations
 
@@ -18,11 +25,12 @@ from .horner import horner
 from .plan import PlanBuilder
 from .polyfit import fit_lawson, total_degree_terms, vander
 
-__all__ = ["TrigSeries", "CylinderFeatures", "fit_trig", "pow2_scale"]
+__all__ = ["TrigSeries", "fit_trig", "pow2_scale", "Normaliser", "CylindricalStage", "CartesianStage",
+           "coordinate_stage"]
 
 
 def pow2_scale(half_range: float) -> int:
-    """Smallest k with 2**k >= half_range."""
+    """Smallest k >= 0 with 2**k >= half_range."""
     return max(0, math.ceil(math.log2(half_range))) if half_range > 0 else 0
 
 
@@ -56,32 +64,109 @@ def fit_trig(theta_min: float, theta_max: float, tol: float) -> TrigSeries:
 
 
 @dataclass(frozen=True)
-class CylinderFeatures:
-    """Normalised Cartesian features of a cylindrical target, and their plan nodes."""
-    trig: TrigSeries
-    kx: int           # xn = R cos / 2**kx, yn = R sin / 2**kx
-    z_center: float   # on the Z input grid
-    kz: int
-
-    names = ("xn", "yn", "zn")
+class Normaliser:
+    """``(value - centre) / 2**shift``: centre on the value's grid, power-of-two scale."""
+    centre: float
+    shift: int
 
     @classmethod
-    def for_robot(cls, robot, trig_tol: float) -> "CylinderFeatures":
-        r, th, z = robot.inputs
-        zc_q = round((z.min + z.max) / 2 * 2 ** z.frac_bits) / 2 ** z.frac_bits
-        return cls(fit_trig(th.min, th.max, trig_tol), pow2_scale(r.max),
-                   zc_q, pow2_scale(max(z.max - zc_q, zc_q - z.min)))
+    def for_range(cls, lo: float, hi: float, grid_frac: int | None = None) -> "Normaliser":
+        """Centre 0 for a range symmetric about 0 (so parity can be used), else the midpoint
+        (rounded to the ``grid_frac`` grid if given)."""
+        if lo == -hi:
+            c = 0.0
+        else:
+            c = (lo + hi) / 2
+            if grid_frac is not None:
+                c = round(c * 2 ** grid_frac) / 2 ** grid_frac
+        return cls(float(c), pow2_scale(max(hi - c, c - lo)))
 
-    def exact(self, r, theta, z) -> np.ndarray:
-        """Feature values (N, 3) with exact trigonometry (what the fit targets)."""
-        th = np.radians(theta)
-        s = 2.0 ** -self.kx
-        return np.stack([r * np.cos(th) * s, r * np.sin(th) * s, (z - self.z_center) * 2.0 ** -self.kz], 1)
+    def __call__(self, v):
+        return (np.asarray(v, dtype=np.float64) - self.centre) * 2.0 ** -self.shift
+
+    def build(self, b: PlanBuilder, node: int, fv: int) -> int:
+        """Normalised ``node`` with ``fv`` fractional bits."""
+        if self.centre:
+            node = b.add(node, b.const(-self.centre, b.frac(node)))
+        return b.align(b.reinterpret(node, b.frac(node) + self.shift), fv)
+
+    def meta(self) -> dict:
+        return {"centre": self.centre, "shift": self.shift}
+
+
+class _Stage:
+    """Shared behaviour: frame coordinates, their normalisers and the radial feature."""
+
+    names: tuple[str, ...]
+    norms: tuple[Normaliser, ...]
+    rho2_norm: Normaliser | None
+
+    def exact(self, *inputs) -> np.ndarray:
+        """Normalised frame coordinates (N, n) with exact arithmetic (what the fit targets)."""
+        return np.stack([nm(c) for nm, c in zip(self.norms, self.frame(*inputs))], 1)
+
+    def rho2(self, *inputs) -> np.ndarray:
+        x, y = self.frame(*inputs)[:2]
+        return x * x + y * y
+
+    def exact_radial(self, *inputs) -> np.ndarray:
+        """Normalised (rho2, remaining frame coordinates...) (N, n - 1)."""
+        f = self.frame(*inputs)
+        cols = [self.rho2_norm(f[0] * f[0] + f[1] * f[1])]
+        cols += [nm(c) for nm, c in zip(self.norms[2:], f[2:])]
+        return np.stack(cols, 1)
+
+    @property
+    def has_plan_axes(self) -> bool:
+        return self.names[:2] == ("x", "y")
+
+    def _rho2_normaliser(self, robot) -> Normaliser | None:
+        if not self.has_plan_axes:
+            return None
+        axes = [np.linspace(i.min, i.max, 65) for i in robot.inputs]
+        grid = [g.ravel() for g in np.meshgrid(*axes, indexing="ij")]
+        r2 = self.rho2(*grid)
+        return Normaliser.for_range(float(r2.min()), float(r2.max()))
+
+    def build_radial(self, b: PlanBuilder, fv: int) -> list[int]:
+        """Nodes of the radial features (after :meth:`build` on the same builder)."""
+        rho2 = self._rho2_node(b)
+        return [self.rho2_norm.build(b, rho2, fv), *self._normalised[2:]]
+
+    def base_meta(self) -> dict:
+        return {"names": list(self.names), "normalisers": [n.meta() for n in self.norms],
+                "rho2": self.rho2_norm.meta() if self.rho2_norm else None}
+
+
+class CylindricalStage(_Stage):
+    """Frame (x, y, z) of a cylindrical target (R, theta, Z) around the neutral point at
+    distance D: x = D + R cos(theta), y = R sin(theta)."""
+
+    kind = "cylindrical"
+    names = ("x", "y", "z")
+
+    def __init__(self, robot, trig_tol: float):
+        g = robot.geometry
+        r, th, z = robot.inputs
+        self.geometry = g
+        self.offset = g.neutral_distance
+        self.trig = fit_trig(th.min, th.max, trig_tol)
+        kx = pow2_scale(r.max)
+        self.norms = (Normaliser(self.offset, kx), Normaliser(0.0, kx),
+                      Normaliser.for_range(z.min, z.max, z.frac_bits))
+        self.rho2_norm = self._rho2_normaliser(robot)
+
+    def frame(self, r, theta, z):
+        return self.geometry.to_cartesian(r, theta, z)
+
+    def ik_frame(self, x, y, z):
+        return self.geometry.ik_cartesian(x, y, z)
 
     def build(self, b: PlanBuilder, fv: int, fc: int) -> list[int]:
-        """Add the coordinate stage to ``b``: features with ``fv`` fractional bits.
+        """Add the coordinate stage to ``b``: normalised (x, y, z) with ``fv`` fractional bits.
 
-        ``fc`` is the fractional precision of t**2, cos and sin.
+        ``fc`` is the fractional precision of t**2, cos and sin. Call before
+        :meth:`build_radial` on the same builder.
         """
         rn, thn, zn = (b.input_nodes[n] for n in ("r", "theta", "z"))
         t = b.reinterpret(thn, b.frac(thn) + self.trig.kt)
@@ -94,10 +179,69 @@ class CylinderFeatures:
         # keeps every later width tight.
         lim = int(np.ceil((1.0 + 1.5 * self.trig.max_error) * 2 ** fc))
         cos, sin = (b.clamp(v, -lim, lim) for v in (cos, sin))
-        feats = []
-        for trig in (cos, sin):
-            p = b.mul(rn, trig)
-            feats.append(b.align(b.reinterpret(p, b.frac(p) + self.kx), fv))
-        zq = b.add(zn, b.const(-self.z_center, b.frac(zn)))
-        feats.append(b.align(b.reinterpret(zq, b.frac(zq) + self.kz), fv))
-        return feats
+        self._rcos = b.mul(rn, cos)
+        rsin = b.mul(rn, sin)
+        kx = self.norms[0].shift
+        self._normalised = [b.align(b.reinterpret(p, b.frac(p) + kx), fv) for p in (self._rcos, rsin)]
+        self._normalised.append(self.norms[2].build(b, zn, fv))
+        self._r = rn
+        return list(self._normalised)
+
+    def _rho2_node(self, b: PlanBuilder) -> int:
+        # rho2 = R**2 + 2 D R cos(theta) + D**2: needs no sine, so the radial servos'
+        # cones skip the sine series.
+        r2 = b.mul(self._r, self._r)
+        cf = 0 if float(2 * self.offset).is_integer() else 12
+        twod = b.mul(self._rcos, b.const(2 * self.offset, cf))
+        f = b.frac(twod)
+        acc = b.add(b.align(r2, f), twod)
+        return b.add(acc, b.const(self.offset ** 2, f))
+
+    def meta(self) -> dict:
+        return {"kind": self.kind, **self.base_meta(),
+                "trig": {"kt": self.trig.kt, "cos": list(self.trig.cos_coeffs),
+                         "sin": list(self.trig.sin_coeffs), "max_error": self.trig.max_error}}
+
+    def describe(self) -> str:
+        return (f"coordinate stage: cos/sin series of degree {2 * len(self.trig.cos_coeffs) - 2} / "
+                f"{2 * len(self.trig.sin_coeffs) - 1}, max error {self.trig.max_error:.2e}")
+
+
+class CartesianStage(_Stage):
+    """A Cartesian target is its own frame; normalising is a constant add and wiring."""
+
+    kind = "cartesian"
+
+    def __init__(self, robot):
+        self.geometry = robot.geometry
+        self.names = tuple(i.name for i in robot.inputs)
+        self.norms = tuple(Normaliser.for_range(i.min, i.max, i.frac_bits) for i in robot.inputs)
+        self.rho2_norm = self._rho2_normaliser(robot)
+
+    def frame(self, *inputs):
+        return tuple(np.asarray(v, dtype=np.float64) for v in inputs)
+
+    def ik_frame(self, *coords):
+        return self.geometry.ik(*coords)
+
+    def build(self, b: PlanBuilder, fv: int, fc: int) -> list[int]:
+        self._inputs = [b.input_nodes[n] for n in self.names]
+        self._normalised = [nm.build(b, n, fv) for nm, n in zip(self.norms, self._inputs)]
+        return list(self._normalised)
+
+    def _rho2_node(self, b: PlanBuilder) -> int:
+        x, y = self._inputs[:2]
+        return b.add(b.mul(x, x), b.mul(y, y))
+
+    def meta(self) -> dict:
+        return {"kind": self.kind, **self.base_meta()}
+
+    def describe(self) -> str:
+        return "coordinate stage: Cartesian inputs (normalising only)"
+
+
+def coordinate_stage(robot, trig_tol: float):
+    """The coordinate stage for ``robot``'s kind of target."""
+    if getattr(robot.geometry, "coordinates", "cartesian") == "cylindrical":
+        return CylindricalStage(robot, trig_tol)
+    return CartesianStage(robot)

@@ -16,12 +16,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .features import CylinderFeatures
+from ..kinematics import UnreachableError
+from .features import Normaliser, coordinate_stage
 from .horner import horner, parity_split
 from .plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for
 from .polyfit import fit_lawson, fit_least_squares, total_degree_terms, vander
 
-__all__ = ["FitError", "ServoFit", "fit_robot", "plan_inputs", "workspace_samples"]
+__all__ = ["FitError", "ServoFit", "FeatureSet", "fit_robot", "plan_inputs", "workspace_samples",
+           "output_multipliers"]
 
 MAX_DEGREE = 12
 FIT_SEED = 20261124
@@ -36,7 +38,7 @@ class FitError(RuntimeError):
 @dataclass
 class ServoFit:
     name: str
-    allowed: list            # per feature: any / even / odd / none
+    features: "FeatureSet"   # the variables and their allowed powers
     degree: int
     poly: dict               # {exponents: float coefficient} over the features (ticks)
     fit_error_ticks: float   # max error on the fit and check samples (float coefficients)
@@ -96,102 +98,217 @@ def workspace_samples(robot, n_random: int, n_face: int, seed: int, edges: bool 
     return tuple(p[:, k] for k in range(len(lo)))
 
 
-def _structure(robot, k: int) -> tuple[list, bool]:
-    """Which powers servo k needs, found numerically from the reference kinematics.
+@dataclass(frozen=True)
+class FeatureSet:
+    """The variables one servo polynomial is fitted over.
 
-    Returns (allowed per feature, whether the y-free part is a constant). The
-    theta symmetry of the cylindrical target becomes a parity in y: theta ->
-    -theta keeps x and flips y. "even": f(x, -y, z) = f(x, y, z); "odd":
-    f(x, y, z) + f(x, -y, z) = 2 f(x, 0, z).
+    ``kind``: "radial" (normalised rho2 = x**2 + y**2, then the remaining frame
+    coordinates), "cartesian" (normalised frame coordinates) or "direct" (normalised
+    input ports, e.g. R, theta, Z as in the integer power series paper).
+    ``allowed[k]``: any / even / odd / none powers of variable k. ``zero_free``: index of
+    an odd variable whose zero-power terms vanish except the constant (the servo value
+    on that variable's zero plane is constant), or None.
     """
-    rng = np.random.default_rng(FIT_SEED + k)
-    r, th, z = robot.inputs
-    n = 2000
-    rr = r.min + (r.max - r.min) * rng.random(n)
-    tt = th.min + (th.max - th.min) * rng.random(n)
-    zz = z.min + (z.max - z.min) * rng.random(n)
-    g = robot.geometry
-    x, y, zc = g.to_cartesian(rr, tt, zz)
-    f = lambda a, b, c: robot.calibration.pulses(g.ik_cartesian(a, b, c))[k]  # noqa: E731
-    p0, pm, py0 = f(x, y, zc), f(x, -y, zc), f(x, 0 * y, zc)
+    kind: str
+    names: tuple
+    allowed: tuple
+    zero_free: int | None = None
+
+    def terms(self, degree: int) -> list:
+        terms = total_degree_terms(degree, list(self.allowed))
+        if self.zero_free is not None:
+            k = self.zero_free
+            terms = [e for e in terms if e[k] > 0 or sum(e) == 0]
+        return terms
+
+
+def _analyse(f, coords: list, norms, names, kind: str) -> FeatureSet:
+    """Parity and dependence of ``f`` (pulses of one servo) in each coordinate, numerically.
+
+    Parity is only usable for a coordinate normalised about 0: "even" if
+    f(..., -c, ...) = f(..., c, ...), "odd" if f(c) + f(-c) = 2 f(0). A target
+    that the reflection makes unreachable means "any".
+    """
+    p0 = f(*coords)
     eps = 1e-9 * max(1.0, float(np.ptp(p0)))
-    if np.max(np.abs(pm - p0)) < eps:
-        ypar = "even"
-    elif np.max(np.abs(p0 + pm - 2 * py0)) < eps:
-        ypar = "odd"
-    else:
-        ypar = "any"
-    zdep = np.max(np.abs(f(x, y, np.full(n, z.min)) - f(x, y, np.full(n, z.max)))) > eps
-    y0_const = ypar == "odd" and np.ptp(py0) < eps
-    return ["any", ypar, "any" if zdep else "none"], bool(y0_const)
+    allowed, zero_free = [], None
+    for k, (c, nm) in enumerate(zip(coords, norms)):
+        def at(v):
+            cc = list(coords)
+            cc[k] = v
+            try:
+                return f(*cc)
+            except UnreachableError:
+                return None
+        lo, hi = at(np.full_like(c, c.min())), at(np.full_like(c, c.max()))
+        if lo is not None and hi is not None and np.max(np.abs(lo - hi)) < eps \
+                and np.max(np.abs(lo - p0)) < eps:
+            allowed.append("none")
+            continue
+        par = "any"
+        if nm.centre == 0:
+            pm, pz = at(-c), at(0 * c)
+            if pm is not None and np.max(np.abs(pm - p0)) < eps:
+                par = "even"
+            elif pm is not None and pz is not None and np.max(np.abs(p0 + pm - 2 * pz)) < eps:
+                par = "odd"
+                if zero_free is None and np.ptp(pz) < eps:
+                    zero_free = k
+        allowed.append(par)
+    return FeatureSet(kind, tuple(names), tuple(allowed), zero_free)
 
 
-def _terms(degree: int, allowed: list, y0_const: bool) -> list:
-    terms = total_degree_terms(degree, allowed)
-    if y0_const:
-        terms = [e for e in terms if e[1] > 0 or sum(e) == 0]
-    return terms
+def _feature_sets(robot, stage, k: int) -> list[FeatureSet]:
+    """Candidate variable sets for servo ``k``, cheapest-looking first."""
+    rng = np.random.default_rng(FIT_SEED + k)
+    n = 2000
+    pts = [i.min + (i.max - i.min) * rng.random(n) for i in robot.inputs]
+    cal = robot.calibration
+    fk = lambda *c: cal.pulses(stage.ik_frame(*c))[k]  # noqa: E731
+    frame = list(stage.frame(*pts))
+    out = []
+    if stage.has_plan_axes:
+        rho = np.hypot(frame[0], frame[1])
+        try:
+            radial = np.max(np.abs(fk(rho, 0 * rho, *frame[2:]) - fk(*frame))) < 1e-9 * max(
+                1.0, float(np.ptp(fk(*frame))))
+        except UnreachableError:
+            radial = False
+        if radial:
+            rest = _analyse(fk, frame, stage.norms, stage.names, "cartesian")
+            out.append(FeatureSet("radial", ("rho2", *stage.names[2:]), ("any", *rest.allowed[2:])))
+    out.append(_analyse(fk, frame, stage.norms, stage.names, "cartesian"))
+    if stage.kind != "cartesian":
+        norms = [Normaliser.for_range(i.min, i.max, i.frac_bits) for i in robot.inputs]
+        fi = lambda *c: robot.pulses_pu(*c)[k]  # noqa: E731
+        out.append(_analyse(fi, pts, norms, [i.name for i in robot.inputs], "direct"))
+    return out
 
 
-def _fit_servo(name, fit_set, check_set, allowed, y0_const, budget_ticks, progress) -> ServoFit:
-    """Lowest total degree whose near-minimax fit meets ``budget_ticks`` on the check set.
-
-    ``fit_set`` and ``check_set`` are (features, target ticks). Lawson's method runs on the
-    fit set; the worst check points are then added to it (an exchange step) until the
-    check set also meets the budget, for at most four Lawson rounds per degree.
-    """
-    pts, target = fit_set
-    cpts, ctarget = check_set
-    for deg in range(1, MAX_DEGREE + 1):
-        terms = _terms(deg, allowed, y0_const)
-        a = vander(pts, terms)
-        c = fit_least_squares(a, target)
-        err = float(np.max(np.abs(a @ c - target)))
-        if err <= 8 * budget_ticks:
-            ca = vander(cpts, terms)
-            xa, xt = a, target
-            for _ in range(4):
-                c, err = fit_lawson(xa, xt, 30)
-                cerr = np.abs(ca @ c - ctarget)
-                err = max(err, float(cerr.max()))
-                if err <= budget_ticks:
-                    break
-                worst = np.argsort(cerr)[-500:]
-                xa, xt = np.concatenate([xa, ca[worst]]), np.concatenate([xt, ctarget[worst]])
-        progress(f"  {name}: degree {deg}, {len(terms)} terms, max fit error {err:.4g} ticks")
-        if err <= budget_ticks:
-            return ServoFit(name, allowed, deg, dict(zip(terms, (float(v) for v in c))), err)
-    raise FitError(f"servo {name}: no polynomial up to total degree {MAX_DEGREE} reaches the "
-                   f"approximation budget of {budget_ticks:g} ticks")
+def _input_norms(robot) -> list:
+    return [Normaliser.for_range(i.min, i.max, i.frac_bits) for i in robot.inputs]
 
 
-def _servo_nodes(b: PlanBuilder, sf: ServoFit, feats: list[int], fv: int) -> int:
-    """Lower one servo polynomial: E(x, y^2, z) + y * O(x, y^2, z), nested Horner."""
-    if sf.allowed[1] == "any":
-        return horner(b, sf.poly, feats, sf.frac)
-    y2 = b.mul(feats[1], feats[1], fv)
-    even, odd = parity_split(sf.poly, 1)
-    vars_ = [feats[0], y2, feats[2]]
-    acc = horner(b, even, vars_, sf.frac) if even else None
+def _features(robot, stage, kind: str, pts) -> np.ndarray:
+    """Exact feature values (N, n) of ``kind`` at real input points."""
+    if kind == "radial":
+        return stage.exact_radial(*pts)
+    if kind == "cartesian":
+        return stage.exact(*pts)
+    return np.stack([nm(v) for nm, v in zip(_input_norms(robot), pts)], 1)
+
+
+class _Nodes:
+    """Feature nodes of every kind on one builder, built on first use."""
+
+    def __init__(self, robot, stage, b: PlanBuilder, fv: int):
+        self.robot, self.stage, self.b, self.fv = robot, stage, b, fv
+        self._kinds: dict = {}
+
+    def __getitem__(self, kind: str) -> list:
+        if "cartesian" not in self._kinds:
+            self._kinds["cartesian"] = self.stage.build(self.b, self.fv, self.fv + 4)
+        if kind not in self._kinds:
+            if kind == "radial":
+                self._kinds[kind] = self.stage.build_radial(self.b, self.fv)
+            else:
+                self._kinds[kind] = [nm.build(self.b, self.b.input_nodes[i.name], self.fv)
+                                     for nm, i in zip(_input_norms(self.robot), self.robot.inputs)]
+        return self._kinds[kind]
+
+
+def _servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], fv: int, frac: int) -> int:
+    """Lower one servo polynomial by nested Horner; for the first even/odd variable v,
+    ``E(..., v**2, ...) + v * O(..., v**2, ...)``."""
+    k = next((j for j, a in enumerate(fs.allowed) if a in ("even", "odd")), None)
+    if k is None:
+        return horner(b, poly, feats, frac)
+    v2 = b.mul(feats[k], feats[k], fv)
+    even, odd = parity_split(poly, k)
+    vars_ = feats[:k] + [v2] + feats[k + 1:]
+    acc = horner(b, even, vars_, frac) if even else None
     if odd:
-        o = b.mul(feats[1], horner(b, odd, vars_, sf.frac), sf.frac)
+        o = b.mul(feats[k], horner(b, odd, vars_, frac), frac)
         acc = o if acc is None else b.add(acc, o)
     return acc
 
 
-def _build(robot, inputs, cf: CylinderFeatures, fits: list[ServoFit], fv: int) -> Plan:
+def _build(robot, inputs, stage, fits: list[ServoFit], fv: int) -> Plan:
     b = PlanBuilder(inputs)
-    feats = cf.build(b, fv, fv + 4)
+    nodes = _Nodes(robot, stage, b, fv)
     lo, hi = robot.pulse_limits_ticks()
     outs = []
     for sf in fits:
-        acc = _servo_nodes(b, sf, feats, fv)
+        acc = _servo_nodes(b, sf.features, sf.poly, nodes[sf.features.kind], fv, sf.frac)
         out = b.clamp(b.round(acc, 0), lo, hi)
         outs.append(PlanOutput(sf.name, out, acc, "ticks", robot.ticks_per_pu))
     return b.build(outs)
 
 
-def _choose_formats(robot, inputs, cf, fits, budget: Budget, progress) -> int:
+def output_multipliers(plan: Plan) -> dict:
+    """Multipliers each output needs, counting the shared coordinate stage in full."""
+    return {o.name: sum(1 for i in plan.cone(o.node) if plan.nodes[i].op == "mul") for o in plan.outputs}
+
+
+def _cost(robot, inputs, stage, fs: FeatureSet, terms: list) -> int:
+    """Multipliers of the servo evaluation (coordinate stage included) for ``terms``,
+    known before fitting: the structure alone decides it."""
+    # distinct coefficients: equal ones would share Horner sub-expressions
+    sf = ServoFit("cost", fs, 0, {e: 1.0 + k / 4096 for k, e in enumerate(terms)}, 0.0, frac=16)
+    plan = _build(robot, inputs, stage, [sf], 16)
+    return output_multipliers(plan)["cost"]
+
+
+def _fit_terms(terms, fit_set, check_set, budget_ticks, rounds: int = 4):
+    """Lawson near-minimax on the fit set, then exchange rounds adding the worst check
+    points. Returns (coefficients, max error over fit and check sets)."""
+    (pts, target), (cpts, ctarget) = fit_set, check_set
+    a, ca = vander(pts, terms), vander(cpts, terms)
+    xa, xt = a, target
+    for _ in range(rounds):
+        c, err = fit_lawson(xa, xt, 30)
+        cerr = np.abs(ca @ c - ctarget)
+        err = max(err, float(cerr.max()))
+        if err <= budget_ticks:
+            break
+        worst = np.argsort(cerr)[-500:]
+        xa, xt = np.concatenate([xa, ca[worst]]), np.concatenate([xt, ctarget[worst]])
+    return c, err
+
+
+def _fit_servo(robot, inputs, stage, name, candidates, sets, budget_ticks, progress) -> ServoFit:
+    """The cheapest (fewest multipliers) polynomial over any candidate variable set whose
+    near-minimax fit meets ``budget_ticks`` on the check set.
+
+    ``sets[kind]`` = (fit set, check set), each (features, target ticks). Per candidate the
+    total degree rises until the fit meets the budget or the structure already costs
+    more than the best plan found.
+    """
+    best = None
+    for fs in candidates:
+        fit_set, check_set = sets[fs.kind]
+        for deg in range(1, MAX_DEGREE + 1):
+            terms = fs.terms(deg)
+            cost = _cost(robot, inputs, stage, fs, terms)
+            if best is not None and cost >= best[0]:
+                break
+            a = vander(fit_set[0], terms)
+            err = float(np.max(np.abs(a @ fit_least_squares(a, fit_set[1]) - fit_set[1])))
+            if err > 8 * budget_ticks:
+                continue
+            c, err = _fit_terms(terms, fit_set, check_set, budget_ticks)
+            progress(f"  {name}: {fs.kind} {'/'.join(fs.names)}, degree {deg}, {len(terms)} terms, "
+                     f"{cost} multipliers, max fit error {err:.4g} ticks")
+            if err <= budget_ticks:
+                best = (cost, ServoFit(name, fs, deg, dict(zip(terms, (float(v) for v in c))), err))
+                break
+    if best is None:
+        raise FitError(f"servo {name}: no polynomial up to total degree {MAX_DEGREE} reaches the "
+                       f"approximation budget of {budget_ticks:g} ticks")
+    return best[1]
+
+
+def _choose_formats(robot, inputs, stage, fits, budget: Budget, progress) -> int:
     """Narrowest feature precision ``fv`` and per-servo accumulator precision meeting the
     certified quantization budget. Sets ``ServoFit.frac``; returns ``fv``."""
     tpp = robot.ticks_per_pu
@@ -199,12 +316,12 @@ def _choose_formats(robot, inputs, cf, fits, budget: Budget, progress) -> int:
     def bound(sf, fv, frac):
         sf.frac = frac
         try:
-            plan = _build(robot, inputs, cf, [sf], fv)
+            plan = _build(robot, inputs, stage, [sf], fv)
         except OverflowError:
             return np.inf
         return plan.rounding_bounds()[plan.outputs[0].preround] / tpp
 
-    for fv in range(10, 40):
+    for fv in range(8, 40):
         fracs = []
         for sf in fits:
             lo, hi = 0, 24
@@ -234,35 +351,40 @@ def fit_robot(robot, progress=lambda msg: None) -> tuple[Plan, list[ServoFit]]:
     inputs = plan_inputs(robot)
     # cos/sin error e moves the tip by up to R_max * e; keep that to ~1 % of the budget
     rmax = max(abs(robot.inputs[0].min), abs(robot.inputs[0].max))
-    cf = CylinderFeatures.for_robot(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)))
-    progress(f"coordinate stage: cos/sin series of degree {2 * len(cf.trig.cos_coeffs) - 2} / "
-             f"{2 * len(cf.trig.sin_coeffs) - 1}, max error {cf.trig.max_error:.2e}")
+    stage = coordinate_stage(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)))
+    progress(stage.describe())
     fit_pts = workspace_samples(robot, *FIT_SAMPLES, FIT_SEED)
     check_pts = workspace_samples(robot, *CHECK_SAMPLES, FIT_SEED + 1, edges=True)
-    sets = [(cf.exact(*p), robot.pulses_pu(*p)) for p in (fit_pts, check_pts)]
+    targets = [robot.pulses_pu(*p) for p in (fit_pts, check_pts)]
+    feats: dict = {}
     fits = []
     for k, name in enumerate(robot.servos):
-        allowed, y0c = _structure(robot, k)
-        progress(f"fitting {name} (powers: x {allowed[0]}, y {allowed[1]}, z {allowed[2]})")
-        fits.append(_fit_servo(name, *((p, v[k] * tpp) for p, v in sets), allowed, y0c,
-                               budget.approximation * tpp, progress))
-    fv = _choose_formats(robot, inputs, cf, fits, budget, progress)
-    plan = _build(robot, inputs, cf, fits, fv)
+        candidates = _feature_sets(robot, stage, k)
+        for fs in candidates:
+            if fs.kind not in feats:
+                feats[fs.kind] = [_features(robot, stage, fs.kind, p) for p in (fit_pts, check_pts)]
+        sets = {fs.kind: tuple((f, t[k] * tpp) for f, t in zip(feats[fs.kind], targets)) for fs in candidates}
+        progress(f"fitting {name}: candidates " + "; ".join(
+            f"{fs.kind} ({', '.join(f'{v} {a}' for v, a in zip(fs.names, fs.allowed))})" for fs in candidates))
+        fits.append(_fit_servo(robot, inputs, stage, name, candidates, sets, budget.approximation * tpp,
+                               progress))
+    fv = _choose_formats(robot, inputs, stage, fits, budget, progress)
+    plan = _build(robot, inputs, stage, fits, fv)
     bounds = plan.rounding_bounds()
     for sf, o in zip(fits, plan.outputs):
         sf.bound_pu = bounds[o.preround] / tpp
+    mults = output_multipliers(plan)
     plan.meta = {
         "robot": robot.name,
         "budget_pu": vars(budget),
-        "method": {"fit": "Lawson near-minimax + exchange on a check set, lowest total degree",
+        "method": {"fit": "Lawson near-minimax + exchange on a check set; per servo the variable set "
+                          "and total degree with the fewest multipliers",
                    "seed": FIT_SEED, "fit_samples": FIT_SAMPLES, "check_samples": CHECK_SAMPLES,
                    "max_degree": MAX_DEGREE},
-        "features": {"kind": "cylindrical->cartesian", "names": list(cf.names), "kx": cf.kx,
-                     "z_center": cf.z_center, "kz": cf.kz, "frac_bits": fv,
-                     "trig": {"kt": cf.trig.kt, "cos": list(cf.trig.cos_coeffs),
-                              "sin": list(cf.trig.sin_coeffs), "max_error": cf.trig.max_error}},
-        "servos": [{"name": sf.name, "powers": sf.allowed, "total_degree": sf.degree,
-                    "terms": len(sf.poly), "accumulator_frac_bits": sf.frac,
+        "features": {**stage.meta(), "frac_bits": fv},
+        "servos": [{"name": sf.name, "variables": sf.features.kind, "names": list(sf.features.names),
+                    "powers": dict(zip(sf.features.names, sf.features.allowed)), "total_degree": sf.degree,
+                    "terms": len(sf.poly), "multipliers": mults[sf.name], "accumulator_frac_bits": sf.frac,
                     "fit_error_pu": sf.fit_error_ticks / tpp, "certified_rounding_pu": sf.bound_pu,
                     "coefficients": [{"exponents": list(e), "value": c} for e, c in sf.poly.items()]}
                    for sf in fits],

@@ -159,7 +159,9 @@ class Plan:
                 e = ma * eb + mb * ea + ea * eb
             elif n.op == "shr":
                 e = err[n.args[0]] + (1 - 2.0 ** -n.param) * sc
-            else:  # shl, frac: exact; clamp: the ideal value is clamped too, and a clamp
+            elif n.op == "frac":  # same integer, real value scaled by 2**(frac(a) - frac)
+                e = err[n.args[0]] * 2.0 ** (self.nodes[n.args[0]].frac - n.frac)
+            else:  # shl: exact; clamp: the ideal value is clamped too, and a clamp
                 e = err[n.args[0]]  # never increases a distance (it is 1-Lipschitz)
             err.append(e)
         return err

@@ -222,7 +222,8 @@ def make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, t
         servos.append({
             "name": sf.name,
             "total_degree": sf.degree,
-            "powers": dict(zip(("x", "y", "z"), sf.allowed)),
+            "variables": sf.features.kind,
+            "powers": dict(zip(sf.features.names, sf.features.allowed)),
             "terms": len(sf.poly),
             "accumulator_frac_bits": sf.frac,
             "multipliers": sum(1 for i in cone if plan.nodes[i].op == "mul"),

@@ -57,6 +57,7 @@ class CylinderLeg:
     servos = ("s1", "s2", "s3")
     servo_names = ("coxa", "femur", "tibia")
     cartesian_names = ("x", "y", "z")
+    coordinates = "cylindrical"
 
     # -- coordinate maps ---------------------------------------------------
     def to_cartesian(self, r, theta, z):

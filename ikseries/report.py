@@ -34,11 +34,15 @@ def render_markdown(r: dict) -> str:
                 + " grid of representable inputs, maximum over the last coordinate:", "",
                 f"![error map]({r['error_map']['file']})"]
     out += ["", "## Series", "",
-            _row(["servo", "total degree", "powers (x, y, z)", "terms", "multipliers (incl. coordinate stage)",
-                  "coefficient frac bits"]), _row(["---"] * 6)]
+            "Variables: *radial* = (x² + y², z), *cartesian* = (x, y, z) in the servo-axis frame, "
+            "*direct* = the input ports; chosen per servo as the fewest multipliers that meet the "
+            "approximation budget.", "",
+            _row(["servo", "variables", "total degree", "powers", "terms", "multipliers (incl. coordinate stage)",
+                  "coefficient frac bits"]), _row(["---"] * 7)]
     for s in r["servos"]:
         p = s["powers"]
-        out.append(_row([s["name"], s["total_degree"], f"{p['x']}, {p['y']}, {p['z']}", s["terms"],
+        out.append(_row([s["name"], s["variables"], s["total_degree"],
+                         ", ".join(f"{k} {v}" for k, v in p.items()), s["terms"],
                          s["multipliers"], s["accumulator_frac_bits"]]))
     pl = r["plan"]
     out += ["", f"Whole plan: {pl['nodes']} operations, {pl['multipliers']} multipliers "

@@ -32,15 +32,41 @@ def test_measured_quantization_within_certified_bound(robot, plan, accuracy):
 
 def test_symmetry_and_unused_variables_are_found(fitted):
     _, fits = fitted
-    by = {f.name: f for f in fits}
-    assert by["s1"].allowed == ["any", "odd", "none"]      # odd in theta, independent of Z
-    assert by["s2"].allowed == by["s3"].allowed == ["any", "even", "any"]
+    by = {f.name: f.features for f in fits}
+    # coxa: odd in y (theta), independent of Z; femur/tibia: invariant under rotation about
+    # the coxa axis, so fitted over (x**2 + y**2, z) only
+    assert (by["s1"].kind, by["s1"].allowed) == ("cartesian", ("any", "odd", "none"))
+    assert by["s1"].zero_free == 1
+    assert by["s2"] == by["s3"]
+    assert (by["s2"].kind, by["s2"].names, by["s2"].allowed) == ("radial", ("rho2", "z"), ("any", "any"))
     for f in fits:
-        par = f.allowed[1]
         for e in f.poly:
-            assert par != "even" or e[1] % 2 == 0
-            assert par != "odd" or e[1] % 2 == 1 or sum(e) == 0
-            assert f.allowed[2] != "none" or e[2] == 0
+            for a, x in zip(f.features.allowed, e):
+                assert a != "even" or x % 2 == 0
+                assert a != "odd" or x % 2 == 1 or sum(e) == 0
+                assert a != "none" or x == 0
+
+
+def test_every_servo_within_the_multiplier_target(plan):
+    """Issue target: <= 100 multiply-adds per servo evaluation, coordinate stage included."""
+    from ikseries.fit.fitter import output_multipliers
+    mults = output_multipliers(plan)
+    assert set(mults) == {"s1", "s2", "s3"}
+    assert all(0 < m <= 100 for m in mults.values()), mults
+
+
+def test_feature_analysis_detects_parity_and_dependence():
+    from ikseries.fit.features import Normaliser
+    from ikseries.fit.fitter import _analyse
+    rng = np.random.default_rng(3)
+    c = [rng.uniform(-1, 1, 500), rng.uniform(-2, 2, 500), rng.uniform(1, 3, 500)]
+    norms = [Normaliser(0.0, 0), Normaliser(0.0, 1), Normaliser(2.0, 0)]
+    fs = _analyse(lambda a, b, z: a ** 2 + np.sin(b) * 0 + 3.0, c, norms, "abz", "cartesian")
+    assert fs.allowed == ("even", "none", "none") and fs.zero_free is None
+    fs = _analyse(lambda a, b, z: np.sin(a) + 7.0 + b * z, c, norms, "abz", "cartesian")
+    assert fs.allowed == ("odd", "odd", "any") and fs.zero_free is None
+    fs = _analyse(lambda a, b, z: np.sin(a) * z, c, norms, "abz", "cartesian")
+    assert fs.allowed == ("odd", "none", "any") and fs.zero_free == 0
 
 
 def test_verification_points_cover_grid_faces_and_range(robot):

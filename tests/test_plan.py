@@ -7,7 +7,7 @@ import pytest
 
 from helpers import all_ports, tiny_plan
 from ikseries.fit.horner import parity_split
-from ikseries.fit.plan import Plan, bits_for
+from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for
 from ikseries.sim import golden
 
 
@@ -87,3 +87,24 @@ def test_input_outside_its_port_is_rejected():
     plan = tiny_plan(0)
     with pytest.raises(ValueError, match="input a must fit its 4-bit port"):
         golden.evaluate(plan, {"a": np.array([16]), "b": np.array([0])})
+
+
+def test_rounding_bound_scales_with_a_binary_point_change():
+    """Reinterpreting a value to fewer fractional bits multiplies its real error, to more
+    bits divides it; the bound must follow both ways (exhaustively checked)."""
+    inputs = [PlanInput("a", "mm", 0, 0, 63, 6, False)]
+    b = PlanBuilder(inputs)
+    a = b.reinterpret(b.input_nodes["a"], 6)             # a / 64
+    p = b.mul(a, b.const(0.3, 7), 6)                     # rounded const, truncated product
+    up = b.reinterpret(p, 2)                             # x 16: error x 16
+    down = b.reinterpret(p, 10)                          # / 16
+    plan = b.build([PlanOutput("u", up, up, "ticks", 1.0), PlanOutput("d", down, down, "ticks", 1.0)])
+    ports = all_ports(plan)
+    iv, fv = golden.evaluate(plan, ports), golden.evaluate_ideal(plan, ports)
+    bound = plan.rounding_bounds()
+    for o in plan.outputs:
+        k = o.node
+        err = np.abs(np.asarray(iv[k]) * 2.0 ** -plan.nodes[k].frac - fv[k]).max()
+        assert err <= bound[k] * (1 + 1e-12)
+        assert bound[k] <= 4 * err   # and not wildly pessimistic
+    assert bound[plan.outputs[0].node] == 256 * bound[plan.outputs[1].node]
