@@ -20,12 +20,13 @@ from ..kinematics import UnreachableError
 from .features import Normaliser, coordinate_stage
 from .horner import horner, parity_split
 from .plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for
-from .polyfit import fit_lawson, fit_least_squares, total_degree_terms, vander
+from .polyfit import fit_least_squares, lawson, total_degree_terms, vander
 
 __all__ = ["FitError", "ServoFit", "FeatureSet", "fit_robot", "plan_inputs", "workspace_samples",
            "output_multipliers"]
 
 MAX_DEGREE = 12
+PRUNE_REJECTS = 3
 FIT_SEED = 20261124
 FIT_SAMPLES = (30000, 3000)      # random interior points, points per face
 CHECK_SAMPLES = (100000, 10000)  # + points per edge / 4
@@ -259,26 +260,31 @@ def _cost(robot, inputs, stage, fs: FeatureSet, terms: list) -> int:
     return output_multipliers(plan)["cost"]
 
 
-def _fit_terms(terms, fit_set, check_set, budget_ticks, rounds: int = 4):
+def _fit_terms(terms, fit_set, check_set, budget_ticks, rounds: int = 4, warm=None, iterations: int = 30):
     """Lawson near-minimax on the fit set, then exchange rounds adding the worst check
-    points. Returns (coefficients, max error over fit and check sets)."""
-    (pts, target), (cpts, ctarget) = fit_set, check_set
-    a, ca = vander(pts, terms), vander(cpts, terms)
-    xa, xt = a, target
+    points. Returns (coefficients, max error over fit and check sets, state); ``state``
+    (working rows and Lawson weights) warm-starts a fit of a subset of the terms."""
+    cpts, ctarget = check_set
+    ca = vander(cpts, terms)
+    if warm is None:
+        xp, xt, w = fit_set[0], fit_set[1], None
+    else:
+        xp, xt, w = warm
     for _ in range(rounds):
-        c, err = fit_lawson(xa, xt, 30)
+        c, err, w = lawson(vander(xp, terms), xt, iterations, w)
         cerr = np.abs(ca @ c - ctarget)
         err = max(err, float(cerr.max()))
         if err <= budget_ticks:
             break
         worst = np.argsort(cerr)[-500:]
-        xa, xt = np.concatenate([xa, ca[worst]]), np.concatenate([xt, ctarget[worst]])
-    return c, err
+        xp, xt = np.concatenate([xp, cpts[worst]]), np.concatenate([xt, ctarget[worst]])
+        w = None if warm is None else np.concatenate([w, np.full(len(worst), w.max())])
+    return c, err, (xp, xt, w)
 
 
 def _fit_servo(robot, inputs, stage, name, candidates, sets, budget_ticks, progress) -> ServoFit:
     """The cheapest (fewest multipliers) polynomial over any candidate variable set whose
-    near-minimax fit meets ``budget_ticks`` on the check set.
+    near-minimax fit meets ``budget_ticks`` on the check set, then pruned.
 
     ``sets[kind]`` = (fit set, check set), each (features, target ticks). Per candidate the
     total degree rises until the fit meets the budget or the structure already costs
@@ -296,16 +302,59 @@ def _fit_servo(robot, inputs, stage, name, candidates, sets, budget_ticks, progr
             err = float(np.max(np.abs(a @ fit_least_squares(a, fit_set[1]) - fit_set[1])))
             if err > 8 * budget_ticks:
                 continue
-            c, err = _fit_terms(terms, fit_set, check_set, budget_ticks)
+            c, err, state = _fit_terms(terms, fit_set, check_set, budget_ticks)
             progress(f"  {name}: {fs.kind} {'/'.join(fs.names)}, degree {deg}, {len(terms)} terms, "
                      f"{cost} multipliers, max fit error {err:.4g} ticks")
             if err <= budget_ticks:
-                best = (cost, ServoFit(name, fs, deg, dict(zip(terms, (float(v) for v in c))), err))
+                best = (cost, ServoFit(name, fs, deg, dict(zip(terms, (float(v) for v in c))), err), state)
                 break
     if best is None:
         raise FitError(f"servo {name}: no polynomial up to total degree {MAX_DEGREE} reaches the "
                        f"approximation budget of {budget_ticks:g} ticks")
-    return best[1]
+    cost, sf, state = best
+    return _prune(robot, inputs, stage, sf, cost, sets[sf.features.kind], state, budget_ticks, progress)
+
+
+def _prune(robot, inputs, stage, sf: ServoFit, cost: int, data, state, budget_ticks, progress) -> ServoFit:
+    """Drop terms while the refitted polynomial still meets the budget.
+
+    Only removals that save a multiplier are tried (in a nested Horner scheme most
+    inner coefficients cost an add, not a multiply), least important first
+    (|coefficient| x largest |monomial| on the check set); stops after
+    ``PRUNE_REJECTS`` refused removals in a row. Each trial refit is warm-started from
+    the current fit's working set and Lawson weights (one exchange round).
+    """
+    fit_set, check_set = data
+    terms = list(sf.poly)
+    coef = np.array([sf.poly[e] for e in terms])
+    rejected: set = set()
+    misses = 0
+    while misses < PRUNE_REJECTS:
+        scale = np.abs(vander(check_set[0], terms)).max(axis=0)
+        order = np.argsort(np.abs(coef) * scale, kind="stable")
+        pick = None
+        for i in order:
+            t = terms[i]
+            if sum(t) == 0 or t in rejected:
+                continue
+            rest = terms[:i] + terms[i + 1:]
+            c2 = _cost(robot, inputs, stage, sf.features, rest)
+            if c2 < cost:
+                pick = (t, rest, c2)
+                break
+        if pick is None:
+            break
+        t, rest, c2 = pick
+        c, err, st = _fit_terms(rest, fit_set, check_set, budget_ticks, rounds=1, warm=state, iterations=12)
+        if err <= budget_ticks:
+            terms, coef, cost, misses, state = rest, c, c2, 0, st
+            sf = ServoFit(sf.name, sf.features, sf.degree, dict(zip(terms, (float(v) for v in c))), err)
+        else:
+            rejected.add(t)
+            misses += 1
+    progress(f"  {sf.name}: pruned to {len(terms)} terms, {cost} multipliers, "
+             f"max fit error {sf.fit_error_ticks:.4g} ticks")
+    return sf
 
 
 def _choose_formats(robot, inputs, stage, fits, budget: Budget, progress) -> int:

@@ -9,7 +9,7 @@ import itertools
 
 import numpy as np
 
-__all__ = ["total_degree_terms", "vander", "evaluate", "fit_lawson", "fit_least_squares"]
+__all__ = ["total_degree_terms", "vander", "evaluate", "fit_lawson", "lawson", "fit_least_squares"]
 
 
 def total_degree_terms(degree: int, allowed: list) -> list[tuple[int, ...]]:
@@ -71,14 +71,23 @@ def fit_least_squares(a: np.ndarray, target: np.ndarray, weights=None) -> np.nda
     return _solve_normal(a / norm, target, weights) / norm
 
 
-def fit_lawson(a: np.ndarray, target: np.ndarray, iterations: int = 25) -> tuple[np.ndarray, float]:
+def fit_lawson(a: np.ndarray, target: np.ndarray, iterations: int = 25, weights=None
+               ) -> tuple[np.ndarray, float]:
     """Near-minimax coefficients by Lawson's iteratively reweighted least squares.
 
     Returns the coefficients with the smallest maximum error seen and that error.
+    ``weights`` (one per row) warm-starts the iteration, e.g. from :func:`lawson_weights`
+    of a neighbouring fit.
     """
+    c, e, _ = lawson(a, target, iterations, weights)
+    return c, e
+
+
+def lawson(a: np.ndarray, target: np.ndarray, iterations: int = 25, weights=None):
+    """:func:`fit_lawson` that also returns the final weights (to warm-start a related fit)."""
     norm = _column_norms(a)
     an = a / norm
-    w = np.full(len(target), 1.0 / len(target))
+    w = np.full(len(target), 1.0 / len(target)) if weights is None else np.asarray(weights, dtype=np.float64)
     best_c, best_e = None, np.inf
     for _ in range(iterations):
         c = _solve_normal(an, target, w)
@@ -91,4 +100,4 @@ def fit_lawson(a: np.ndarray, target: np.ndarray, iterations: int = 25) -> tuple
         if not np.isfinite(s) or s == 0:
             break
         w /= s
-    return best_c / norm, best_e
+    return best_c / norm, best_e, w

@@ -41,7 +41,10 @@ def test_leg_core_bit_exact_and_latency_full_plan(plan):
 def test_leg_core_under_backpressure_and_gaps(small_plan):
     core = LegCore(small_plan, period=960000)
     res = _check(core, small_plan, random_targets(small_plan, 600, 5), ready_prob=0.5, valid_prob=0.6, seed=3)
-    assert res.latencies.min() == core.latency
+    assert res.latencies.min() >= core.latency   # a stall delays every target in flight
+    # input gaps alone never change the latency
+    res = _check(core, small_plan, random_targets(small_plan, 300, 6), valid_prob=0.6, seed=4)
+    assert set(res.latencies.tolist()) == {core.latency}
 
 
 def test_evaluator_rejects_bad_plan():
