@@ -15,24 +15,31 @@ from .sim import golden
 __all__ = ["verification_points", "measure"]
 
 
-def verification_points(robot, n_random: int = 400_000, n_face: int = 10_000, seed: int = 1) -> dict:
-    """Port integers for a dense grid + random points + every face of the workspace box."""
+def verification_points(robot, n_points: int = 1_000_000, n_face: int = 10_000, seed: int = 1) -> dict:
+    """Port integers: a dense grid + every face of the workspace box + random points, at
+    least ``n_points`` in all (or every representable point if there are fewer).
+
+    The grid has about 640,000 points spread evenly over the axes (never finer than the
+    port grid), e.g. 86 x 86 x 86 for a 3-input robot.
+    """
     specs = robot.inputs
     rng = np.random.default_rng(seed)
-    # dense grid: about 41 x 361 x 41 points for cylinder-leg (1 mm, 1 deg)
+    every = int(np.prod([i.hi - i.lo + 1 for i in specs], dtype=np.float64)) <= n_points
+    per_axis = round(640_000 ** (1 / len(specs)))
     axes = []
-    for k, i in enumerate(specs):
-        step = max(1, round((i.hi - i.lo) / (360 if i.unit == "deg" else 40)))
+    for i in specs:
+        step = 1 if every else max(1, round((i.hi - i.lo) / (per_axis - 1)))
         axes.append(np.unique(np.append(np.arange(i.lo, i.hi + 1, step), i.hi)))
     grid = np.meshgrid(*axes, indexing="ij")
     cols = [[g.ravel()] for g in grid]
-    rand = [rng.integers(i.lo, i.hi + 1, n_random) for i in specs]
-    for c, r in zip(cols, rand):
-        c.append(r)
     for k, i in enumerate(specs):
         for v in (i.lo, i.hi):
             for j, s in enumerate(specs):
                 cols[j].append(np.full(n_face, v) if j == k else rng.integers(s.lo, s.hi + 1, n_face))
+    have = sum(len(a) for a in cols[0])
+    n_random = 0 if every else max(0, n_points - have)   # else the grid holds every point
+    for c, i in zip(cols, specs):
+        c.append(rng.integers(i.lo, i.hi + 1, n_random))
     return {i.name: np.concatenate(c).astype(np.int64) for i, c in zip(specs, cols)}
 
 

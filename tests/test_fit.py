@@ -1,5 +1,6 @@
 """The fitted plan of the default robot: accuracy, structure, certified bounds, determinism."""
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -75,6 +76,15 @@ def test_verification_points_cover_grid_faces_and_range(robot):
         v = pts[i.name]
         assert v.min() == i.lo and v.max() == i.hi
         assert np.count_nonzero(v == i.lo) >= 10_000 and np.count_nonzero(v == i.hi) >= 10_000
+        assert len(v) >= 1_000_000
+
+
+def test_verification_points_are_every_point_of_a_small_workspace(small_robot):
+    small = [dataclasses.replace(i, max=i.min + 2, frac_bits=1) for i in small_robot.inputs]
+    robot = dataclasses.replace(small_robot, inputs=tuple(small))
+    pts = verification_points(robot, n_points=10_000, n_face=0)
+    got = set(zip(*(pts[i.name].tolist() for i in small)))
+    assert got == set(itertools.product(*(range(i.lo, i.hi + 1) for i in small)))
 
 
 def test_fit_is_deterministic(small_robot, small_plan):
