@@ -410,7 +410,9 @@ def path_report(geometry: PlanarArm, case: PathCase, *, pu_per_degree: float = 2
         rates = {
             "unit": "deg per unit of t (arc length); per_x / per_y: deg per unit of x / y along the path",
             "at_nodes": {"t": [float(v) for v in nvel], "t2": [float(v) for v in nacc]},
-            "max_abs": {"velocity_t": float(np.max(np.abs(vel))), "acceleration_t": float(np.max(np.abs(acc)))},
+            "max_abs": {"velocity_t": float(np.max(np.abs(vel))), "acceleration_t": float(np.max(np.abs(acc))),
+                        "exact_velocity_t": float(np.max(np.abs(ex_vel[k]))),
+                        "exact_acceleration_t": float(np.max(np.abs(ex_acc[k])))},
             "max_error": {"velocity_t": float(dv[iv]), "velocity_at": _at(iv, tc, x, y),
                           "acceleration_t": float(da[ia]), "acceleration_at": _at(ia, tc, x, y)},
         }
@@ -451,15 +453,22 @@ def path_report(geometry: PlanarArm, case: PathCase, *, pu_per_degree: float = 2
 
 
 def run_divided_differences(geometry: PlanarArm, cases=DEFAULT_CASES, *, pu_per_degree: float = 20.0,
-                            tolerance_pu: float = 0.5) -> dict:
-    """:func:`path_report` for each case: the JSON record of ``ikseries fit --method divided-differences``."""
+                            tolerance_pu: float = 0.5, samples: int = 2001, grid: int = 41,
+                            max_degree: int = 10) -> dict:
+    """:func:`path_report` for each case: the JSON record of ``ikseries fit --method divided-differences``.
+
+    Keyword arguments are those of :func:`path_report`; the geometry's ``phi`` is replaced
+    by each case's.
+    """
     if not isinstance(geometry, PlanarArm):
         raise TypeError(f"geometry must be a PlanarArm, not {geometry!r}")
+    kw = dict(pu_per_degree=pu_per_degree, tolerance_pu=tolerance_pu, samples=samples, grid=grid,
+              max_degree=max_degree)
     return {
         "method": "divided-differences",
         "geometry": dataclasses.asdict(geometry),
         "pu_per_degree": float(pu_per_degree), "tolerance_pu": float(tolerance_pu),
-        "cases": [path_report(geometry, c, pu_per_degree=pu_per_degree, tolerance_pu=tolerance_pu) for c in cases],
+        "cases": [path_report(geometry, c, **kw) for c in cases],
     }
 
 
@@ -474,7 +483,9 @@ def render_markdown(result: dict) -> str:
            "",
            f"Errors against the reference IK, in deg and pu ({result['pu_per_degree']:g} pu/deg); "
            "*along path*: dense samples between the extreme nodes; *box*: the case's 2-D box. "
-           "Minimax: Lawson near-minimax fit (cubic in the path parameter; 2-D total degree).",
+           "Minimax: Lawson near-minimax fit (a cubic in the path parameter; over the box a 2-D polynomial of "
+           "total degree 3, 10 terms, against the divided-differences formula's 7 free coefficients, and the "
+           "lowest total degree within the tolerance). Rate errors: against the exact joint rates.",
            ""]
     for c in result["cases"]:
         w = c["incidence_weights"]
@@ -491,15 +502,23 @@ def render_markdown(result: dict) -> str:
         for s, j in c["joints"].items():
             ws = j["workspace"]
             dd, m3, mt = ws["divided_differences"], ws["minimax_cubic"], ws["minimax_to_tolerance"]
-            me = j["rates"]["max_error"]
+            me, ma = j["rates"]["max_error"], j["rates"]["max_abs"]
             wrap = " (wraps 0/360)" if j["wraps_0_360"] else ""
             out.append(
                 f"| {s}{wrap} | {j['node_residual_deg']:.1e} | {j['max_error_deg']:.4f} / {j['max_error_pu']:.2f} "
                 f"at {_xy(j['at'])} | {j['minimax_path']['max_error_deg']:.4f} / {j['minimax_path']['max_error_pu']:.2f} "
-                f"| {me['velocity_t']:.3g} | {me['acceleration_t']:.3g} "
+                f"| {me['velocity_t']:.3g} (exact max {ma['exact_velocity_t']:.3g}) | {me['acceleration_t']:.3g} "
+                f"(exact max {ma['exact_acceleration_t']:.3g}) "
                 f"| {dd['max_error_deg']:.3g} / {dd['max_error_pu']:.3g} "
                 f"| {m3['max_error_deg']:.3g} / {m3['max_error_pu']:.3g} "
                 f"| degree {mt['degree']} ({mt['terms']} terms): {mt['max_error_pu']:.3g} pu"
                 f"{'' if mt['meets_tolerance'] else ' (not met)'} |")
+        out += ["", "Joint rates of the cubic at the nodes (t: arc length from the first node; "
+                "per x / per y: along the path, per unit of x / y):", "",
+                "| joint | d/dt (deg/unit) | d²/dt² (deg/unit²) | d/dx | d/dy |", "|---|---|---|---|---|"]
+        for s, j in c["joints"].items():
+            n = j["rates"]["at_nodes"]
+            fmt = lambda v: ", ".join(f"{x:.4g}" for x in v) if v else "—"  # noqa: E731
+            out.append(f"| {s} | {fmt(n['t'])} | {fmt(n['t2'])} | {fmt(n.get('per_x'))} | {fmt(n.get('per_y'))} |")
         out.append("")
     return "\n".join(out)
