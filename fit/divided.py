@@ -336,6 +336,30 @@ def _workspace(geometry, case, interps, refs, k, pu, tolerance_pu, grid, max_deg
     }
 
 
+def _rates(ip, samples, nodes, u, dd, ex) -> dict:
+    """Joint velocity and acceleration of the path formula: at the nodes, maxima and errors."""
+    (tc, x, y), (ux, uy), (vel, acc) = samples, u, dd
+    _, nvel, nacc = ip.along(*nodes, ux, uy)
+    dv, da = np.abs(vel - ex[0]), np.abs(acc - ex[1])
+    iv, ia = int(np.argmax(dv)), int(np.argmax(da))
+    rates = {
+        "unit": "deg per unit of t (arc length); per_x / per_y: deg per unit of x / y along the path",
+        "at_nodes": {"t": [float(v) for v in nvel], "t2": [float(v) for v in nacc]},
+        "max_abs": {"velocity_t": float(np.max(np.abs(vel))), "acceleration_t": float(np.max(np.abs(acc))),
+                    "exact_velocity_t": float(np.max(np.abs(ex[0]))),
+                    "exact_acceleration_t": float(np.max(np.abs(ex[1])))},
+        "max_error": {"velocity_t": float(dv[iv]), "velocity_at": _at(iv, tc, x, y),
+                      "acceleration_t": float(da[ia]), "acceleration_at": _at(ia, tc, x, y)},
+    }
+    if ux != 0:
+        rates["at_nodes"]["per_x"] = [float(v / ux) for v in nvel]
+        rates["at_nodes"]["per_x2"] = [float(v / ux ** 2) for v in nacc]
+    if uy != 0:
+        rates["at_nodes"]["per_y"] = [float(v / uy) for v in nvel]
+        rates["at_nodes"]["per_y2"] = [float(v / uy ** 2) for v in nacc]
+    return rates
+
+
 def path_report(geometry: PlanarArm, case: PathCase, *, pu_per_degree: float = 20.0, tolerance_pu: float = 0.5,
                 samples: int = 2001, grid: int = 41, max_degree: int = 10) -> dict:
     """Divided differences on one path: formula, accuracy, FK check, joint rates and comparisons.
@@ -403,25 +427,8 @@ def path_report(geometry: PlanarArm, case: PathCase, *, pu_per_degree: float = 2
         mm_angles.append(_minimax_1d(t, fit_exact[k], tc, len(tn) - 1))
         mm_err = np.abs(mm_angles[k] - exact[k])
         j = int(np.argmax(mm_err))
-        nv, nvel, nacc = ip.along(xn, yn, ux, uy)
+        nv = ip(xn, yn)
         px, py = ip.power()
-        dv, da = np.abs(vel - ex_vel[k]), np.abs(acc - ex_acc[k])
-        iv, ia = int(np.argmax(dv)), int(np.argmax(da))
-        rates = {
-            "unit": "deg per unit of t (arc length); per_x / per_y: deg per unit of x / y along the path",
-            "at_nodes": {"t": [float(v) for v in nvel], "t2": [float(v) for v in nacc]},
-            "max_abs": {"velocity_t": float(np.max(np.abs(vel))), "acceleration_t": float(np.max(np.abs(acc))),
-                        "exact_velocity_t": float(np.max(np.abs(ex_vel[k]))),
-                        "exact_acceleration_t": float(np.max(np.abs(ex_acc[k])))},
-            "max_error": {"velocity_t": float(dv[iv]), "velocity_at": _at(iv, tc, x, y),
-                          "acceleration_t": float(da[ia]), "acceleration_at": _at(ia, tc, x, y)},
-        }
-        if ux != 0:
-            rates["at_nodes"]["per_x"] = [float(v / ux) for v in nvel]
-            rates["at_nodes"]["per_x2"] = [float(v / ux ** 2) for v in nacc]
-        if uy != 0:
-            rates["at_nodes"]["per_y"] = [float(v / uy) for v in nvel]
-            rates["at_nodes"]["per_y2"] = [float(v / uy ** 2) for v in nacc]
         joints[servo] = {
             "node_angles_deg": [float(v) for v in node_angles[k]],
             "node_residual_deg": float(np.max(np.abs(nv - node_angles[k]))),
@@ -429,7 +436,7 @@ def path_report(geometry: PlanarArm, case: PathCase, *, pu_per_degree: float = 2
             "newton_x": list(ip.cx), "newton_y": list(ip.cy), "power_x": px, "power_y": py,
             "power_t": [float(c) for c in newton_to_power(tn, divided_differences(tn, node_angles[k]))],
             "max_error_deg": float(err[i]), "max_error_pu": float(err[i] * pu), "at": _at(i, tc, x, y),
-            "rates": rates,
+            "rates": _rates(ip, (tc, x, y), (xn, yn), (ux, uy), (vel, acc), (ex_vel[k], ex_acc[k])),
             "minimax_path": {"max_error_deg": float(mm_err[j]), "max_error_pu": float(mm_err[j] * pu),
                              "at": _at(j, tc, x, y)},
             "workspace": _workspace(g, case, interps, refs, k, pu, tolerance_pu, grid, max_degree),
@@ -488,12 +495,13 @@ def render_markdown(result: dict) -> str:
            "lowest total degree within the tolerance). Rate errors: against the exact joint rates.",
            ""]
     for c in result["cases"]:
-        w = c["incidence_weights"]
-        out += [f"## {c['case']}: phi = {c['phi_deg']:g} deg, {c['path']}, nodes {c['nodes']['x'] if w['x'] else c['nodes']['y']}",
+        w, fk = c["incidence_weights"], c["fk"]
+        nodes = c["nodes"]["x"] if w["x"] else c["nodes"]["y"]
+        out += [f"## {c['case']}: phi = {c['phi_deg']:g} deg, {c['path']}, nodes {nodes}",
                 "",
-                f"Incidence weights w_x = {w['x']:.4g}, w_y = {w['y']:.4g}. FK position error along the path: "
-                f"divided differences {c['fk']['max_position_error']:.3g} at {_xy(c['fk']['at'])}, "
-                f"minimax cubic {c['fk']['minimax_path_max_position_error']:.3g} at {_xy(c['fk']['minimax_path_at'])}.",
+                (f"Incidence weights w_x = {w['x']:.4g}, w_y = {w['y']:.4g}. FK position error along the path: "
+                 f"divided differences {fk['max_position_error']:.3g} at {_xy(fk['at'])}, "
+                 f"minimax cubic {fk['minimax_path_max_position_error']:.3g} at {_xy(fk['minimax_path_at'])}."),
                 "",
                 "| joint | node residual (deg) | DD along path (deg / pu) at | minimax cubic along path (deg / pu) "
                 "| max velocity error (deg/t) | max acceleration error (deg/t²) | DD over box (deg / pu) "
@@ -504,9 +512,10 @@ def render_markdown(result: dict) -> str:
             dd, m3, mt = ws["divided_differences"], ws["minimax_cubic"], ws["minimax_to_tolerance"]
             me, ma = j["rates"]["max_error"], j["rates"]["max_abs"]
             wrap = " (wraps 0/360)" if j["wraps_0_360"] else ""
+            mp = j["minimax_path"]
             out.append(
                 f"| {s}{wrap} | {j['node_residual_deg']:.1e} | {j['max_error_deg']:.4f} / {j['max_error_pu']:.2f} "
-                f"at {_xy(j['at'])} | {j['minimax_path']['max_error_deg']:.4f} / {j['minimax_path']['max_error_pu']:.2f} "
+                f"at {_xy(j['at'])} | {mp['max_error_deg']:.4f} / {mp['max_error_pu']:.2f} "
                 f"| {me['velocity_t']:.3g} (exact max {ma['exact_velocity_t']:.3g}) | {me['acceleration_t']:.3g} "
                 f"(exact max {ma['exact_acceleration_t']:.3g}) "
                 f"| {dd['max_error_deg']:.3g} / {dd['max_error_pu']:.3g} "
