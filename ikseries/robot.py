@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .kinematics import Calibration, CylinderLeg, UnreachableError
+from .planar_arm import PlanarArm
 
 __all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot",
            "robot_record", "robot_from_record"]
@@ -20,7 +21,7 @@ class RobotError(ValueError):
     """An invalid robot description; the message names the field and the bad value."""
 
 
-GEOMETRIES = {"cylinder-leg": CylinderLeg}
+GEOMETRIES = {"cylinder-leg": CylinderLeg, "planar-arm": PlanarArm}
 
 
 @dataclass(frozen=True)
@@ -138,7 +139,8 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
     cls = GEOMETRIES[gtype]
     fields = [f for f in cls.__dataclass_fields__]
     _no_extra(geo, ["type", *fields], "geometry.")
-    kw = {f: float(_number(geo, f, "geometry.", positive=True)) for f in fields}
+    signed = getattr(cls, "signed_fields", ())  # fields that may be <= 0 (e.g. an angle)
+    kw = {f: float(_number(geo, f, "geometry.", positive=f not in signed)) for f in fields}
     geometry = cls(**kw)
 
     ws = _table(data, "workspace", "")
