@@ -62,6 +62,13 @@ class HexapodLeg:
     not the angle of the tip line; the true femur angle there is -40.53 deg, which is
     what this class computes (FK-consistent). The standing pose (74, 0, 0) is the neutral
     pose of the ``hexapod-leg`` preset, so the servo zeros sit where the paper puts them.
+
+    Preset workspace (``hexapod-leg``): x 54..94, y -40..40, z -20..30 mm, a box around
+    the standing pose: +-20 mm in and out, an 80 mm stride, 30 mm foot lift and 20 mm body
+    raise. Over it the joints stay within coxa -36.5..36.5, femur -81.5..-19.6 and tibia
+    17.0..69.4 deg, inside Table 1 with margin; the femur's -90 deg limit is what bounds
+    the lift (40 mm of lift close to the body would need it). Calibration as in the paper:
+    1500 us (3000 pu) at the standing pose, 10 us (20 pu) per degree, 600..2400 us.
     """
 
     coxa: float = 15.0

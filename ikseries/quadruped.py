@@ -80,6 +80,10 @@ class QuadrupedHind:
     and 80 deg. Reach: ``Lt`` in ``[|thigh - s| + |foot - s|, thigh + shin + foot]``.
     Assumed joint ranges (:attr:`joint_ranges`): hip -90..90 deg from the vertical, knee
     and hock bends 0..150 deg (beyond that the segments fold onto each other).
+
+    Preset workspace (``quadruped-hind``): x -35..35 mm (a 70 mm stride), y -5..30 mm (30 mm
+    toe lift, 5 mm lengthening); ``Lt`` 75..115.4 mm, joints within hip 1..56, knee 54..109,
+    hock 59..120 deg. Servos: 1500 us at the standing pose (0, 0), 10 us/deg, 500..2500 us.
     """
 
     thigh: float = 45.0
@@ -200,6 +204,10 @@ class QuadrupedFore:
     height 105 mm (the hind leg's hip height, so the body stands level), elbow bent about
     60 deg at rest. Assumed joint ranges (:attr:`joint_ranges`): shoulder -90..90 deg from
     the vertical, elbow bend 0..150 deg, wrist -90..90 deg.
+
+    Preset workspace (``quadruped-fore``): as for the hind leg, x -35..35, y -5..30 mm;
+    ``Lt`` 75..115.4 mm, joints within shoulder 1..83 and elbow 32..105 deg. Servos: 1500 us
+    at the standing pose (0, 0), 10 us/deg, 500..2500 us.
     """
 
     upper_arm: float = 50.0
