@@ -77,7 +77,8 @@ class QuadrupedHind:
 
     Chosen lengths (the notes give none): thigh 45, shin 50, foot 35 mm (130 mm straight),
     hip height 105 mm, a 9 g-servo-sized leg standing with knee and hock bent about 70
-    and 80 deg. Reach: ``Lt`` in ``[|thigh - s| + |foot - s|, thigh + shin + foot]``.
+    and 80 deg. Reach: ``Lt`` in the open interval
+    ``(|thigh - s| + |foot - s|, thigh + shin + foot)`` (folded .. straight; both ends singular).
     Assumed joint ranges (:attr:`joint_ranges`): hip -90..90 deg from the vertical, knee
     and hock bends 0..150 deg (beyond that the segments fold onto each other).
 
