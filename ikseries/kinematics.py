@@ -52,12 +52,20 @@ class CylinderLeg:
     neutral_distance: float = 100.0
     z_datum: float = 50.0
 
+    coordinates = "cylindrical"
     inputs = ("r", "theta", "z")
     input_units = ("mm", "deg", "mm")
     servos = ("s1", "s2", "s3")
     servo_names = ("coxa", "femur", "tibia")
     cartesian_names = ("x", "y", "z")
-    coordinates = "cylindrical"
+
+    def workspace_error(self, name, lo, hi):
+        """Message for a workspace range ``[lo, hi]`` of input ``name`` this leg cannot take, else None."""
+        if name == "theta" and (lo < -180 or hi > 180):
+            return f"workspace.theta must lie within [-180, 180] deg, not [{lo!r}, {hi!r}]"
+        if name == "r" and lo < 0:
+            return f"workspace.r.min must be >= 0 mm, not {lo!r}"
+        return None
 
     # -- coordinate maps ---------------------------------------------------
     def to_cartesian(self, r, theta, z):

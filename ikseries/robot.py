@@ -10,8 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .hexapod_leg import HexapodLeg
 from .kinematics import Calibration, CylinderLeg, UnreachableError
 from .planar_arm import PlanarArm
+from .quadruped import QuadrupedFore, QuadrupedHind
 
 __all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot",
            "robot_record", "robot_from_record"]
@@ -21,7 +23,12 @@ class RobotError(ValueError):
     """An invalid robot description; the message names the field and the bad value."""
 
 
-GEOMETRIES = {"cylinder-leg": CylinderLeg, "planar-arm": PlanarArm}
+#: geometry.type -> geometry class. A geometry is a frozen dataclass whose float fields are the
+#: [geometry] fields (each > 0 unless named in the class's ``signed_fields``); its constructor may raise ValueError("<field> must be ..., not ...")
+#: for inconsistent values, and an optional ``workspace_error(name, lo, hi)`` method returns a
+#: message for a workspace range it cannot take (else None).
+GEOMETRIES = {"cylinder-leg": CylinderLeg, "hexapod-leg": HexapodLeg, "planar-arm": PlanarArm,
+              "quadruped-hind": QuadrupedHind, "quadruped-fore": QuadrupedFore}
 
 
 @dataclass(frozen=True)
@@ -45,7 +52,7 @@ class InputSpec:
 class Robot:
     name: str
     description: str
-    geometry: CylinderLeg
+    geometry: object  # an instance of a GEOMETRIES class
     inputs: tuple[InputSpec, ...]
     neutral_pose: dict
     pulse_unit_us: float
@@ -141,7 +148,10 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
     _no_extra(geo, ["type", *fields], "geometry.")
     signed = getattr(cls, "signed_fields", ())  # fields that may be <= 0 (e.g. an angle)
     kw = {f: float(_number(geo, f, "geometry.", positive=f not in signed)) for f in fields}
-    geometry = cls(**kw)
+    try:
+        geometry = cls(**kw)
+    except ValueError as e:
+        raise RobotError(f"geometry.{e}") from None
 
     ws = _table(data, "workspace", "")
     _no_extra(ws, geometry.inputs, "workspace.")
@@ -156,10 +166,10 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
         fb = _number(t, "frac_bits", p, integer=True)
         if not 0 <= fb <= 16:
             raise RobotError(f"{p}frac_bits must be in 0..16, not {fb!r}")
-        if name_i == "theta" and (lo < -180 or hi > 180):
-            raise RobotError(f"workspace.theta must lie within [-180, 180] deg, not [{lo!r}, {hi!r}]")
-        if name_i == "r" and lo < 0:
-            raise RobotError(f"workspace.r.min must be >= 0 mm, not {lo!r}")
+        check = getattr(geometry, "workspace_error", None)
+        problem = check(name_i, lo, hi) if check is not None else None
+        if problem:
+            raise RobotError(problem)
         spec = InputSpec(name_i, unit, float(lo), float(hi), fb)
         if spec.lo > spec.hi:
             raise RobotError(f"{p}: no value with {fb} fractional bits lies in [{lo!r}, {hi!r}]")
@@ -238,7 +248,7 @@ def robot_from_record(d: dict) -> Robot:
         fields = {k: v for k, v in d.items() if k not in ("geometry", "inputs")}
         fields["directions"] = tuple(fields["directions"])
         robot = Robot(geometry=cls(**geo), inputs=tuple(InputSpec(**i) for i in d["inputs"]), **fields)
-    except (KeyError, TypeError) as e:
+    except (KeyError, TypeError, ValueError) as e:
         raise RobotError(f"not a robot record: {e}") from None
     _check_reachable(robot)
     return robot
