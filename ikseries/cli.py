@@ -87,7 +87,10 @@ def cmd_eval(args):
     from .kinematics import UnreachableError
     from .sim import golden
     robot = _robot(args)
-    vals = [args.r, args.theta, args.z]
+    vals = args.values
+    if len(vals) != len(robot.inputs):
+        names = ", ".join(i.name for i in robot.inputs)
+        raise CliError(f"eval needs {len(robot.inputs)} values ({names}) for {robot.name}, not {len(vals)}")
     for v, spec in zip(vals, robot.inputs):
         if not np.isfinite(v) or not spec.min <= v <= spec.max:
             raise CliError(f"{spec.name} must be within [{spec.min:g}, {spec.max:g}] {spec.unit}, not {v:g}")
@@ -131,8 +134,8 @@ def main(argv=None):
     e.add_argument("--robot", help="robot description (TOML)")
     e.add_argument("--plan", help="use this plan.json instead of fitting")
     e.add_argument("-q", "--quiet", action="store_true")
-    for n in ("r", "theta", "z"):
-        e.add_argument(n, type=float, metavar=n.upper())
+    e.add_argument("values", type=float, nargs="+", metavar="VALUE",
+                   help="the target, one value per robot input (cylinder-leg: R THETA Z)")
     args = p.parse_args(argv)
     from .build import BuildError
     from .robot import RobotError

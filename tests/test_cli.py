@@ -88,6 +88,8 @@ def test_eval_with_plan(capsys, built, small_toml):
 @pytest.mark.parametrize("argv, message", [
     (["eval", "50", "0", "0"], "ikseries: error: r must be within [0, 40] mm, not 50\n"),
     (["eval", "10", "0", "-1"], "ikseries: error: z must be within [0, 40] mm, not -1\n"),
+    (["eval", "--preset", "planar-arm", "1", "2", "3"],
+     "ikseries: error: eval needs 2 values (x, y) for planar-arm, not 3\n"),
     (["eval", "--preset", "nope", "1", "1", "1"],
      "ikseries: error: preset must be one of ['cylinder-leg', 'hexapod-leg', 'planar-arm', 'quadruped-fore', 'quadruped-hind'], not 'nope'\n"),
     (["build", "--preset", "cylinder-leg", "also.toml"],
