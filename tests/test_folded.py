@@ -220,3 +220,14 @@ def test_limb_multiplier_parameter_errors(args, msg):
     with pytest.raises(ValueError) as e:
         LimbMultiplier(*args)
     assert str(e.value) == msg
+
+
+def test_folded_exports_to_verilog_with_block_memories():
+    """The value memory and the microcode ROM reach Verilog as initialised memories."""
+    from amaranth.back import verilog
+    core = FoldedEvaluator(tiny_plan(0), multipliers=2, dsp=(4, 4))
+    text = verilog.convert(core, name="folded", emit_src=False)
+    assert "module folded" in text
+    assert text.count("reg [") >= 2 and "initial" in text   # memories with contents
+    consts = sorted(core.program.const_value.values())
+    assert len(consts) == core.program.n_consts and core.program.memory_init()[:len(consts)] != [0] * len(consts)

@@ -1,0 +1,96 @@
+"""Yosys resource counts of the folded evaluator and of the shared hexapod core.
+
+For the cylinder-leg plan: the FoldedEvaluator for a few multiplier counts (iCE40 with
+SB_MAC16-sized limbs, ECP5 with MULT18X18D-sized limbs), the fully pipelined
+PlanEvaluator for comparison (optional, slow), and the 6-leg RobotCore (18 servos) on
+iCE40UP5K. Prints a table and writes JSON.
+
+    .venv/bin/python bench/folded_area.py [--out bench/folded_area.json] [--ks 1 2 4] [--pipelined]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from amaranth.back import verilog
+
+from ikseries.fit.fitter import fit_robot
+from ikseries.hdl.evaluator import PlanEvaluator
+from ikseries.hdl.folded import FoldedEvaluator, microcode_layout
+from ikseries.hdl.shared import RobotCore
+from ikseries.robot import load_preset
+from ikseries.synth import DEVICES, synth_counts
+
+DSP = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
+
+
+def measure(name, core, target, workdir: Path) -> dict:
+    d = workdir / name
+    d.mkdir(parents=True, exist_ok=True)
+    v = d / "top.v"
+    v.write_text(verilog.convert(core, name="top", emit_src=False))
+    r = synth_counts(v, "top", [target], workdir=d / "synth")[target]
+    row = {"design": name, "target": target, "counts": r["counts"], "seconds": r["seconds"]}
+    for attr in ("latency", "initiation_interval", "refresh_hz"):
+        if hasattr(core, attr):
+            row[attr] = getattr(core, attr)
+    ev = getattr(core, "evaluator", core)
+    if isinstance(ev, FoldedEvaluator):
+        p = ev.program
+        row["program"] = {"steps": p.steps, "ops": len(p.ops), "muls": p.count("mul"),
+                          "limbs": list(p.limbs), "store_width": p.store_width, "depth": p.depth,
+                          "consts": p.n_consts, "acc_width": p.acc_width,
+                          "microcode_bits": p.steps * microcode_layout(p).size}
+    return row
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="bench/folded_area.json")
+    ap.add_argument("--work", default="build/folded_area")
+    ap.add_argument("--ks", type=int, nargs="+", default=[1, 2, 4])
+    ap.add_argument("--clock-mhz", type=float, nargs="+", default=[24.0, 48.0])
+    ap.add_argument("--pipelined", action="store_true", help="also synthesise the pipelined PlanEvaluator")
+    args = ap.parse_args(argv)
+    work = Path(args.work).resolve()
+    t0 = time.time()
+    robot = load_preset("cylinder-leg")
+    plan = fit_robot(robot)[0]
+    print(f"plan: {len(plan.nodes)} nodes, {plan.count('mul')} mul, widest node "
+          f"{max(n.width for n in plan.nodes)} bits (fit {time.time() - t0:.0f} s)")
+    rows = []
+    for target in ("ice40", "ecp5"):
+        for k in args.ks:
+            rows.append(measure(f"folded_k{k}_{target}", FoldedEvaluator(plan, k, DSP[target]), target, work))
+            print(rows[-1])
+    period = robot.pwm_period_ticks
+    hexa = RobotCore(plan, legs=6, period=period, clock_hz=args.clock_mhz[0] * 1e6, multipliers=2, dsp=DSP["ice40"])
+    rows.append(measure("hexapod_k2_ice40", hexa, "ice40", work))
+    rows[-1]["refresh_hz_at"] = {f"{f:g} MHz": f * 1e6 / (6 * hexa.initiation_interval) for f in args.clock_mhz}
+    print(rows[-1])
+    if args.pipelined:
+        for target in ("ice40", "ecp5"):
+            rows.append(measure(f"pipelined_{target}", PlanEvaluator(plan), target, work))
+            print(rows[-1])
+
+    cap = DEVICES["ice40"][1]
+    print()
+    print(f"{'design':22} {'target':6} {'LUT':>6} {'FF':>6} {'carry':>6} {'DSP':>4} {'BRAM':>5} {'lat':>5} {'II':>5}")
+    for r in rows:
+        c = r["counts"]
+        print(f"{r['design']:22} {r['target']:6} {c['LUT']:6} {c['FF']:6} {c['carry']:6} {c['DSP']:4} {c['BRAM']:5} "
+              f"{r.get('latency', ''):>5} {r.get('initiation_interval', ''):>5}")
+    h = rows[[r["design"] for r in rows].index("hexapod_k2_ice40")]
+    print(f"\nhexapod on iCE40UP5K: {h['counts']['LUT']} LUT / {cap['LUT']}, {h['counts']['DSP']} DSP / {cap['DSP']}, "
+          f"{h['counts']['BRAM']} BRAM / {cap['BRAM']}; refresh " +
+          ", ".join(f"{v:.0f} Hz at {f}" for f, v in h["refresh_hz_at"].items()))
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"plan_nodes": len(plan.nodes), "rows": rows}, indent=1) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
