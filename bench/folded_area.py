@@ -19,6 +19,10 @@ from amaranth.back import verilog
 from ikseries.fit.fitter import fit_robot
 from ikseries.hdl.evaluator import PlanEvaluator
 from ikseries.hdl.folded import FoldedEvaluator, microcode_layout
+from ikseries.hdl.limbmul import LimbMultiplier
+from ikseries.hdl.pwm import ServoPWM
+from ikseries.hdl.pwmbank import ServoPWMBank
+from ikseries.hdl.schedule import compile_program
 from ikseries.hdl.shared import RobotCore
 from ikseries.robot import load_preset
 from ikseries.synth import DEVICES, synth_counts
@@ -30,7 +34,10 @@ def measure(name, core, target, workdir: Path) -> dict:
     d = workdir / name
     d.mkdir(parents=True, exist_ok=True)
     v = d / "top.v"
-    v.write_text(verilog.convert(core, name="top", emit_src=False))
+    ports = None
+    if isinstance(core, LimbMultiplier):   # its o.ready is a constant (always ready): list ports
+        ports = [core.i.valid, core.i.ready, core.i.payload.as_value(), core.o.valid, core.o.payload]
+    v.write_text(verilog.convert(core, name="top", emit_src=False, ports=ports))
     r = synth_counts(v, "top", [target], workdir=d / "synth")[target]
     row = {"design": name, "target": target, "counts": r["counts"], "seconds": r["seconds"]}
     for attr in ("latency", "initiation_interval", "refresh_hz"):
@@ -53,6 +60,7 @@ def main(argv=None):
     ap.add_argument("--ks", type=int, nargs="+", default=[1, 2, 4])
     ap.add_argument("--clock-mhz", type=float, nargs="+", default=[24.0, 48.0])
     ap.add_argument("--pipelined", action="store_true", help="also synthesise the pipelined PlanEvaluator")
+    ap.add_argument("--only", nargs="+", help="synthesise only these designs (names as in the table)")
     args = ap.parse_args(argv)
     work = Path(args.work).resolve()
     t0 = time.time()
@@ -60,20 +68,34 @@ def main(argv=None):
     plan = fit_robot(robot)[0]
     print(f"plan: {len(plan.nodes)} nodes, {plan.count('mul')} mul, widest node "
           f"{max(n.width for n in plan.nodes)} bits (fit {time.time() - t0:.0f} s)")
-    rows = []
+    period = robot.pwm_period_ticks
+    designs = {}
     for target in ("ice40", "ecp5"):
         for k in args.ks:
-            rows.append(measure(f"folded_k{k}_{target}", FoldedEvaluator(plan, k, DSP[target]), target, work))
-            print(rows[-1])
-    period = robot.pwm_period_ticks
-    hexa = RobotCore(plan, legs=6, period=period, clock_hz=args.clock_mhz[0] * 1e6, multipliers=2, dsp=DSP["ice40"])
-    rows.append(measure("hexapod_k2_ice40", hexa, "ice40", work))
-    rows[-1]["refresh_hz_at"] = {f"{f:g} MHz": f * 1e6 / (6 * hexa.initiation_interval) for f in args.clock_mhz}
-    print(rows[-1])
+            designs[f"folded_k{k}_{target}"] = (target, lambda k=k, t=target: FoldedEvaluator(plan, k, DSP[t]))
+    designs["hexapod_k2_ice40"] = ("ice40", lambda: RobotCore(plan, legs=6, period=period,
+                                                              clock_hz=args.clock_mhz[0] * 1e6,
+                                                              multipliers=2, dsp=DSP["ice40"]))
+    # parts of the hexapod core, to see where the area goes
+    ref = compile_program(plan, 2, DSP["ice40"])
+    width_bits = max(plan.nodes[o.node].width for o in plan.outputs)
+    designs["part_limb_multiplier_ice40"] = ("ice40", lambda: LimbMultiplier(
+        *ref.mul_widths, DSP["ice40"], ref.acc_width))
+    designs["part_pwm_bank_6x3_ice40"] = ("ice40", lambda: ServoPWMBank(period, width_bits, 6, 3))
+    designs["part_servo_pwm_x1_ice40"] = ("ice40", lambda: ServoPWM(period, width_bits))
     if args.pipelined:
         for target in ("ice40", "ecp5"):
-            rows.append(measure(f"pipelined_{target}", PlanEvaluator(plan), target, work))
-            print(rows[-1])
+            designs[f"pipelined_{target}"] = (target, lambda: PlanEvaluator(plan))
+    rows = []
+    for name, (target, make) in designs.items():
+        if args.only and name not in args.only:
+            continue
+        core = make()
+        rows.append(measure(name, core, target, work))
+        if name.startswith("hexapod"):
+            rows[-1]["refresh_hz_at"] = {f"{f:g} MHz": f * 1e6 / (6 * core.initiation_interval)
+                                         for f in args.clock_mhz}
+        print(rows[-1], flush=True)
 
     cap = DEVICES["ice40"][1]
     print()
@@ -82,10 +104,10 @@ def main(argv=None):
         c = r["counts"]
         print(f"{r['design']:22} {r['target']:6} {c['LUT']:6} {c['FF']:6} {c['carry']:6} {c['DSP']:4} {c['BRAM']:5} "
               f"{r.get('latency', ''):>5} {r.get('initiation_interval', ''):>5}")
-    h = rows[[r["design"] for r in rows].index("hexapod_k2_ice40")]
-    print(f"\nhexapod on iCE40UP5K: {h['counts']['LUT']} LUT / {cap['LUT']}, {h['counts']['DSP']} DSP / {cap['DSP']}, "
-          f"{h['counts']['BRAM']} BRAM / {cap['BRAM']}; refresh " +
-          ", ".join(f"{v:.0f} Hz at {f}" for f, v in h["refresh_hz_at"].items()))
+    for h in (r for r in rows if r["design"] == "hexapod_k2_ice40"):
+        print(f"\nhexapod on iCE40UP5K: {h['counts']['LUT']} LUT / {cap['LUT']}, {h['counts']['DSP']} DSP / {cap['DSP']}, "
+              f"{h['counts']['BRAM']} BRAM / {cap['BRAM']}; refresh " +
+              ", ".join(f"{v:.0f} Hz at {f}" for f, v in h["refresh_hz_at"].items()))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"plan_nodes": len(plan.nodes), "rows": rows}, indent=1) + "\n")
