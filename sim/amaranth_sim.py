@@ -35,7 +35,8 @@ def simulate_leg(core, targets: dict, *, ready_prob: float = 1.0, valid_prob: fl
 
     async def bench(ctx):
         cyc, k = 0, 0
-        limit = 50 * (n + core.latency + 10) + 1000
+        ii = getattr(core, "initiation_interval", 1)   # folded cores take one input per ii cycles
+        limit = 50 * (n * ii + core.latency + 10) + 1000
         while len(t_out) < n:
             if cyc > limit:
                 raise RuntimeError(f"leg core produced {len(t_out)} of {n} outputs in {cyc} cycles")

@@ -1,0 +1,198 @@
+"""Folded evaluator: the whole plan on a few shared units, driven by a microcode ROM."""
+from __future__ import annotations
+
+from amaranth.hdl import Const, Module, Mux, Signal, signed, unsigned
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from ..fit.plan import Plan
+from .evaluator import input_layout, output_layout
+from .limbmul import LimbMultiplier
+from .schedule import ALU_OPS, Program, compile_program
+
+__all__ = ["FoldedEvaluator", "microcode_layout"]
+
+
+def _bits(n: int) -> int:
+    return max(1, (n - 1).bit_length())
+
+
+def microcode_layout(prog: Program) -> data.StructLayout:
+    """Fields of one microcode word (everything the machine does in one cycle).
+
+    ``rx``/``ry``: value-memory read addresses; ``alu``: ALU operation on the data read
+    the cycle before; ``go``: one bit per multiplier, latch the data read the cycle before;
+    ``we``/``wa``: write the write-back value at address ``wa``; ``src``: write-back source
+    (0 ALU, 1..k multipliers, k+1.. input registers); ``view``: index of the write-back
+    shift ``(x >> a) << b``; ``cap``: one bit per output, capture the write-back value.
+    """
+    k = prog.multipliers
+    return data.StructLayout({
+        "rx": unsigned(_bits(prog.depth)), "ry": unsigned(_bits(prog.depth)),
+        "alu": unsigned(_bits(len(ALU_OPS))), "go": unsigned(k),
+        "we": unsigned(1), "wa": unsigned(_bits(prog.depth)),
+        "src": unsigned(_bits(1 + k + len(prog.plan.inputs))), "view": unsigned(_bits(len(prog.views))),
+        "cap": unsigned(len(prog.plan.outputs)),
+    })
+
+
+class FoldedEvaluator(wiring.Component):
+    """Evaluates every output of ``plan`` on ``multipliers`` shared multipliers and one ALU.
+
+    The plan is lowered, list-scheduled and register-allocated at construction
+    (:func:`ikseries.hdl.schedule.compile_program`); one evaluation then runs through a
+    horizontal microcode ROM, one word per cycle. Constants are pre-loaded into the value
+    memory (``Memory`` with ``init``: block RAM), which also holds the intermediates (two
+    read ports, one write port). Every stored value is the exact integer of a plan node
+    (shifts applied on the write port, floor for ``shr``), so the outputs equal
+    :func:`ikseries.sim.golden.evaluate` for every input, bit for bit. The datapath is as
+    wide as the plan needs (``program.store_width``, ``program.acc_width``), whatever plan
+    is given.
+
+    Parameters
+    ----------
+    plan : Plan
+    multipliers : int
+        Number of multiplier units (one DSP block each when ``dsp`` is given).
+    dsp : (int, int) or None
+        Signed operand widths of the DSP multiplier: ``(16, 16)`` iCE40 SB_MAC16,
+        ``(18, 18)`` ECP5 MULT18X18D, ``(25, 18)`` Xilinx DSP48E1. Wider products are
+        computed limb by limb (:class:`LimbMultiplier`). None: full-width multipliers.
+
+    Attributes
+    ----------
+    i : In(stream.Signature(input_layout(plan)))
+    o : Out(stream.Signature(output_layout(plan)))
+    program : Program
+        The schedule and microcode.
+
+    Latency
+    -------
+    ``latency`` = ``program.steps + 1`` cycles from an input transfer to ``o.valid``.
+
+    Throughput
+    ----------
+    One evaluation at a time: ``i.ready`` is high only when the machine is idle and its
+    output register is free (empty, or transferred in the same cycle), so inputs are
+    accepted every ``initiation_interval`` = ``latency`` cycles while ``o.ready`` is high.
+    A held output (``o.ready`` low) blocks the next input, never an evaluation in flight.
+    """
+
+    def __init__(self, plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None):
+        self._prog = compile_program(plan, multipliers, dsp)
+        self._plan = plan
+        super().__init__({
+            "i": In(stream.Signature(input_layout(plan))),
+            "o": Out(stream.Signature(output_layout(plan))),
+        })
+
+    @property
+    def plan(self) -> Plan:
+        return self._plan
+
+    @property
+    def program(self) -> Program:
+        return self._prog
+
+    @property
+    def multipliers(self) -> int:
+        return self._prog.multipliers
+
+    @property
+    def dsp(self):
+        return self._prog.dsp
+
+    @property
+    def latency(self) -> int:
+        return self._prog.steps + 1
+
+    @property
+    def initiation_interval(self) -> int:
+        return self._prog.steps + 1
+
+    def elaborate(self, platform):
+        m = Module()
+        prog, plan = self._prog, self._plan
+        k, steps = prog.multipliers, prog.steps
+        layout = microcode_layout(prog)
+
+        m.submodules.microcode = rom = Memory(shape=layout, depth=steps, init=prog.words)
+        m.submodules.values = mem = Memory(shape=signed(prog.store_width), depth=prog.depth,
+                                           init=prog.memory_init())
+        code = rom.read_port()
+        rx, ry = mem.read_port(), mem.read_port()
+        wr = mem.write_port()
+        w = code.data
+
+        # sequencer
+        running = Signal()
+        pc = Signal(range(steps))
+        last = pc == steps - 1
+        in_reg = Signal(input_layout(plan))
+        accept = Signal()
+        m.d.comb += [self.i.ready.eq(~running & (~self.o.valid | self.o.ready)),
+                     accept.eq(self.i.valid & self.i.ready),
+                     code.addr.eq(Mux(running & ~last, pc + 1, 0))]
+        with m.If(self.o.valid & self.o.ready):
+            m.d.sync += self.o.valid.eq(0)
+        with m.If(accept):
+            m.d.sync += [in_reg.eq(self.i.payload), running.eq(1), pc.eq(0)]
+        with m.Elif(running):
+            m.d.sync += pc.eq(pc + 1)
+            with m.If(last):
+                m.d.sync += [running.eq(0), pc.eq(0), self.o.valid.eq(1)]
+
+        m.d.comb += [rx.addr.eq(w.rx), ry.addr.eq(w.ry)]
+        x, y = rx.data, ry.data
+
+        # ALU: operates on the data read in the previous cycle
+        alu = Signal(signed(prog.store_width + 1))
+        with m.Switch(w.alu):
+            with m.Case(ALU_OPS.index("add")):
+                m.d.sync += alu.eq(x + y)
+            with m.Case(ALU_OPS.index("max")):
+                m.d.sync += alu.eq(Mux(x > y, x, y))
+            with m.Case(ALU_OPS.index("min")):
+                m.d.sync += alu.eq(Mux(x < y, x, y))
+            with m.Default():
+                m.d.sync += alu.eq(x)
+
+        # multipliers
+        wa, wb = prog.mul_widths
+        muls = []
+        for u in range(k):
+            mu = LimbMultiplier(wa, wb, prog.dsp, prog.acc_width)
+            m.submodules[f"mul{u}"] = mu
+            m.d.comb += [mu.i.valid.eq(running & w.go[u]),
+                         mu.i.payload.a.eq(x), mu.i.payload.b.eq(y)]
+            muls.append(mu)
+
+        # write-back: source, view shift, memory write and output capture
+        wbv = Signal(signed(prog.wb_width))
+        with m.Switch(w.src):
+            with m.Case(0):
+                m.d.comb += wbv.eq(alu)
+            for u, mu in enumerate(muls):
+                with m.Case(1 + u):
+                    m.d.comb += wbv.eq(mu.o.payload)
+            for j, inp in enumerate(plan.inputs):
+                with m.Case(1 + k + j):
+                    m.d.comb += wbv.eq(in_reg[inp.name])
+        value = Signal(signed(prog.store_width))
+        with m.Switch(w.view):
+            for v, (a, b) in enumerate(prog.views):
+                with m.Case(v):
+                    m.d.comb += value.eq((wbv >> a) << b)
+        m.d.comb += [wr.en.eq(running & w.we), wr.addr.eq(w.wa), wr.data.eq(value)]
+
+        outs = Signal(output_layout(plan))
+        for j, o in enumerate(plan.outputs):
+            vid = prog.outputs[o.name]
+            if vid in prog.const_value:
+                m.d.comb += self.o.payload[o.name].eq(prog.const_value[vid])
+            else:
+                with m.If(running & w.cap[j]):
+                    m.d.sync += outs[o.name].eq(value)
+                m.d.comb += self.o.payload[o.name].eq(outs[o.name])
+        return m

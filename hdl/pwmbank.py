@@ -1,0 +1,114 @@
+"""A bank of servo PWM generators sharing one period counter, loaded a group at a time."""
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Module, Signal, unsigned
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+__all__ = ["ServoPWMBank"]
+
+
+def _pos_int(name, v, least):
+    if not isinstance(v, int) or isinstance(v, bool) or v < least:
+        raise ValueError(f"{name} must be an integer >= {least}, not {v!r}")
+
+
+class ServoPWMBank(wiring.Component):
+    """``groups * per_group`` servo PWM channels with one shared period counter.
+
+    Behaves like ``groups * per_group`` :class:`ikseries.hdl.pwm.ServoPWM` generators
+    reset together (same period, same phase), for one counter instead of one per channel.
+    A transfer on ``i`` stores new widths for every channel of one group (e.g. the servos
+    of one leg); the stored widths are applied together at the next period start, so a
+    pulse is never truncated or stretched and a group never shows a mix of old and new
+    widths within one period.
+
+    Parameters
+    ----------
+    period : int
+        Period in clock cycles.
+    width_bits : int
+        Bits of a pulse width.
+    groups, per_group : int
+        Channel ``c`` is servo ``c % per_group`` of group ``c // per_group``.
+    reset_widths : list of int, optional
+        Width of every channel from reset until its first update (default 0: no pulse).
+
+    Attributes
+    ----------
+    i : In(stream.Signature(StructLayout({"group": range(groups), "widths": ArrayLayout(unsigned(width_bits), per_group)})))
+        ``i.ready`` is always high.
+    pwm : Out(groups * per_group)
+        The servo signals, registered (glitch-free); bit ``c`` is channel ``c``.
+    period_start : Out(1)
+        High for one cycle when a period starts.
+
+    Latency
+    -------
+    The outputs follow the counter by one cycle; widths stored at cycle c are applied at
+    the first period start after c (a load in the last cycle of a period is applied at once).
+
+    Throughput
+    ----------
+    One group per cycle; only the last load of a group before a period start is applied.
+    """
+
+    def __init__(self, period: int, width_bits: int, groups: int, per_group: int,
+                 reset_widths: list[int] | None = None):
+        _pos_int("period", period, 2)
+        _pos_int("width_bits", width_bits, 1)
+        _pos_int("groups", groups, 1)
+        _pos_int("per_group", per_group, 1)
+        n = groups * per_group
+        reset_widths = [0] * n if reset_widths is None else list(reset_widths)
+        if len(reset_widths) != n or not all(isinstance(w, int) and 0 <= w < 2 ** width_bits
+                                             for w in reset_widths):
+            raise ValueError(f"reset_widths must be {n} integers in [0, {2 ** width_bits - 1}], "
+                             f"not {reset_widths!r}")
+        self._period, self._width_bits = period, width_bits
+        self._groups, self._per_group, self._reset = groups, per_group, reset_widths
+        super().__init__({
+            "i": In(stream.Signature(data.StructLayout({
+                "group": range(groups), "widths": data.ArrayLayout(unsigned(width_bits), per_group)}))),
+            "pwm": Out(n),
+            "period_start": Out(1),
+        })
+
+    @property
+    def period(self) -> int:
+        return self._period
+
+    @property
+    def channels(self) -> int:
+        return self._groups * self._per_group
+
+    def elaborate(self, platform):
+        m = Module()
+        g, k = self._groups, self._per_group
+        count = Signal(range(self._period))
+        last = count == self._period - 1
+        m.d.comb += self.i.ready.eq(1)
+        with m.If(last):
+            m.d.sync += count.eq(0)
+        with m.Else():
+            m.d.sync += count.eq(count + 1)
+        bits = []
+        for grp in range(g):
+            load = self.i.valid & (self.i.payload.group == grp)
+            for s in range(k):
+                c = grp * k + s
+                pending = Signal(self._width_bits, init=self._reset[c], name=f"pending{c}")
+                active = Signal(self._width_bits, init=self._reset[c], name=f"active{c}")
+                new = self.i.payload.widths[s]
+                with m.If(load):
+                    m.d.sync += pending.eq(new)
+                with m.If(last):
+                    m.d.sync += active.eq(pending)
+                    with m.If(load):
+                        m.d.sync += active.eq(new)
+                bit = Signal(name=f"pwm{c}")
+                m.d.sync += bit.eq(count < active)
+                bits.append(bit)
+        m.d.comb += self.pwm.eq(Cat(*bits))
+        m.d.sync += self.period_start.eq(count == 0)
+        return m

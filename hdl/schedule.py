@@ -1,0 +1,354 @@
+"""Folding an evaluation plan onto a few functional units: lowering, list scheduling,
+slot allocation and horizontal microcode for :class:`ikseries.hdl.folded.FoldedEvaluator`.
+
+The machine (see ``folded.py``) has one value memory (constants pre-loaded, intermediates
+written back), two read ports, one write port, one ALU (add / max / min / pass) and ``k``
+multiplier units. Every cycle it executes one microcode word, which says what every stage
+does in that cycle; all timing lives here, in the compiler.
+
+Lowering
+--------
+Wiring nodes (``shr``, ``shl``, ``frac``) disappear into *views*: every operand of a
+registered node is ``(base >> a) << b`` of a registered node, an input or a constant
+(a chain of shifts always reduces to that form, exactly, with floor semantics). A result
+is transformed into its view on the way into the memory (one shifter on the write port,
+none on the read ports). A base with several views stores ``base >> min(a)`` and derives
+the other views with ALU ``pass`` operations; constants are folded at compile time; each
+input view is written from the input register by a ``load``; ``clamp(x, lo, hi)`` becomes
+``min(max(x, lo), hi)`` (bounds narrowed to the operand's interval, which changes no
+result).
+
+Timing (cycle = microcode step, step 0 is the cycle after the input transfer)
+----------------------------------------------------------------------------
+- an operation *issued* at ``t`` reads its operands at ``t`` (read data at ``t + 1``);
+- ALU: computes at ``t + 1``, result written at ``t + 2``;
+- multiplier: latches its operands at ``t + 1`` (``go``), feeds ``n_limbs`` limb pairs to
+  its DSP-sized product on the following cycles, result written at ``t + n_limbs + 4``;
+  a unit accepts a new ``go`` ``n_limbs`` cycles after the previous one;
+- a value written at ``w`` can be read by an operation issued at ``w + 1`` or later;
+- one issue per cycle (two read ports), one write per cycle.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..fit.plan import REGISTERED_OPS, Plan, bits_for
+from .limbmul import _check_dsp, limb_split
+
+__all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "compile_program", "resolve_view"]
+
+ALU_OPS = ("add", "max", "min", "pass")
+#: DSP multiplier sizes (signed operand bits) of common FPGA families
+DSP_SIZES = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
+ALU_LATENCY = 2        # issue -> write
+
+
+def resolve_view(plan: Plan, idx: int) -> tuple[int, int, int]:
+    """``(base, a, b)`` with node ``idx`` == ``(base >> a) << b`` and ``base`` not a wiring node."""
+    chain = []
+    nodes = plan.nodes
+    while nodes[idx].op in ("shr", "shl", "frac"):
+        chain.append((nodes[idx].op, nodes[idx].param))
+        idx = nodes[idx].args[0]
+    a = b = 0
+    for op, s in reversed(chain):
+        if op == "shr":
+            if s <= b:
+                b -= s
+            else:
+                a, b = a + s - b, 0
+        elif op == "shl":
+            b += s
+    return idx, a, b
+
+
+def _view_interval(lo: int, hi: int, view: tuple[int, int]) -> tuple[int, int]:
+    a, b = view
+    return (lo >> a) << b, (hi >> a) << b
+
+
+def _swidth(lo: int, hi: int) -> int:
+    """Signed (two's complement) width holding [lo, hi]."""
+    w, signed = bits_for(lo, hi)
+    return w if signed else w + 1
+
+
+@dataclass
+class MicroOp:
+    """One lowered operation: writes value ``out`` (view ``view`` of its raw result)."""
+    kind: str                  # "load" | "alu" | "mul"
+    args: tuple[int, ...]      # value ids read (alu: 1-2, mul: 2 with the wider first)
+    out: int                   # value id written
+    view: tuple[int, int]      # (a, b): stored = (raw >> a) << b
+    alu: str | None = None     # add | max | min | pass
+    input: str | None = None   # load: plan input name
+    raw: tuple[int, int] = (0, 0)  # interval of the raw result
+    issue: int = -1            # scheduled cycle (load: write cycle)
+    write: int = -1
+    unit: int = -1             # multiplier unit
+
+
+@dataclass
+class Program:
+    """A scheduled, allocated program and its microcode (see the module docstring)."""
+    plan: Plan
+    multipliers: int
+    dsp: tuple[int, int] | None
+    ops: list[MicroOp]
+    values: list[tuple[int, int]]          # interval of every stored value
+    const_value: dict[int, int]            # value id -> integer (constants only)
+    outputs: dict[str, int]                # output name -> value id
+    slot: dict[int, int] = field(default_factory=dict)   # value id -> memory address
+    views: list[tuple[int, int]] = field(default_factory=list)
+    # widths
+    store_width: int = 0                   # signed width of the value memory
+    mul_widths: tuple[int, int] = (2, 2)   # signed widths of multiplier operands A, B
+    limb_bits: tuple[int, int] = (1, 1)    # bits per low limb (A, B)
+    limbs: tuple[int, int] = (1, 1)        # limbs per operand (A, B)
+    acc_width: int = 1                     # signed width of the product accumulator
+    wb_width: int = 1                      # signed width of the write-back path
+    steps: int = 0                         # microcode length (cycles per evaluation)
+    depth: int = 0                         # value memory depth
+    words: list[dict] = field(default_factory=list)
+
+    @property
+    def n_limbs(self) -> int:
+        return self.limbs[0] * self.limbs[1]
+
+    @property
+    def mul_latency(self) -> int:
+        return self.n_limbs + 4
+
+    @property
+    def n_consts(self) -> int:
+        return len(self.const_value)
+
+    def count(self, kind: str) -> int:
+        return sum(1 for o in self.ops if o.kind == kind)
+
+    @property
+    def mul_busy_cycles(self) -> int:
+        """Multiplier-cycles of work (limb products) per evaluation."""
+        return self.count("mul") * self.n_limbs
+
+    def memory_init(self) -> list[int]:
+        init = [0] * self.depth
+        for v, c in self.const_value.items():
+            init[self.slot[v]] = c
+        return init
+
+
+def _check_params(multipliers, dsp):
+    if not isinstance(multipliers, int) or isinstance(multipliers, bool) or multipliers < 1:
+        raise ValueError(f"multipliers must be a positive integer, not {multipliers!r}")
+    _check_dsp(dsp)
+
+
+def _lower(plan: Plan):
+    nodes = plan.nodes
+    views: dict[int, list] = {}
+
+    def need(idx):
+        base, a, b = resolve_view(plan, idx)
+        lst = views.setdefault(base, [])
+        if (a, b) not in lst:
+            lst.append((a, b))
+        return base, (a, b)
+
+    operand = {}
+    for i, n in enumerate(nodes):
+        if n.op in REGISTERED_OPS:
+            operand[i] = [need(x) for x in n.args]
+    out_ref = {o.name: need(o.node) for o in plan.outputs}
+
+    values: list[tuple[int, int]] = []
+    const_value: dict[int, int] = {}
+    const_by_int: dict[int, int] = {}
+    ops: list[MicroOp] = []
+    value_of: dict = {}
+
+    def new_value(lo, hi):
+        values.append((lo, hi))
+        return len(values) - 1
+
+    def const(c):
+        c = int(c)
+        if c not in const_by_int:
+            v = new_value(c, c)
+            const_by_int[c] = v
+            const_value[v] = c
+        return const_by_int[c]
+
+    for base in sorted(views):
+        n, vs = nodes[base], views[base]
+        if n.op == "const":
+            for v in vs:
+                value_of[(base, v)] = const(_view_interval(n.param, n.param, v)[0])
+            continue
+        if n.op == "input":
+            for v in vs:
+                out = new_value(*_view_interval(n.lo, n.hi, v))
+                ops.append(MicroOp("load", (), out, v, input=n.param, raw=(n.lo, n.hi)))
+                value_of[(base, v)] = out
+            continue
+        prim = vs[0] if len(vs) == 1 else (min(a for a, _ in vs), 0)
+        args = [value_of[r] for r in operand[base]]
+        out = new_value(*_view_interval(n.lo, n.hi, prim))
+        if n.op == "add":
+            ops.append(MicroOp("alu", tuple(args), out, prim, alu="add", raw=(n.lo, n.hi)))
+        elif n.op == "mul":
+            w = [_swidth(*values[x]) for x in args]
+            if w[1] > w[0]:
+                args.reverse()
+            ops.append(MicroOp("mul", tuple(args), out, prim, raw=(n.lo, n.hi)))
+        else:  # clamp -> min(max(x, lo'), hi')
+            xlo, xhi = values[args[0]]
+            clo, chi = n.param
+            lo_b = max(clo, xlo)
+            t = new_value(max(xlo, lo_b), max(xhi, lo_b))
+            ops.append(MicroOp("alu", (args[0], const(lo_b)), t, (0, 0), alu="max", raw=values[t]))
+            hi_b = min(chi, values[t][1])
+            ops.append(MicroOp("alu", (t, const(hi_b)), out, prim, alu="min", raw=(n.lo, n.hi)))
+        value_of[(base, prim)] = out
+        for v in vs:
+            if v != prim:
+                dv = new_value(*_view_interval(n.lo, n.hi, v))
+                ops.append(MicroOp("alu", (out,), dv, (v[0] - prim[0], v[1]), alu="pass", raw=values[out]))
+                value_of[(base, v)] = dv
+    outputs = {name: value_of[r] for name, r in out_ref.items()}
+    return ops, values, const_value, outputs
+
+
+def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
+    producer = {o.out: k for k, o in enumerate(ops)}
+    consumers: dict[int, list[int]] = {k: [] for k in range(len(ops))}
+    for k, o in enumerate(ops):
+        for a in o.args:
+            if a in producer:
+                consumers[producer[a]].append(k)
+    lat = [0 if o.kind == "load" else ALU_LATENCY if o.kind == "alu" else mul_latency for o in ops]
+    height = [0] * len(ops)
+    for k in reversed(range(len(ops))):       # ops are in dependency order
+        height[k] = lat[k] + max([height[c] + 1 for c in consumers[k]] + [0])
+    ready_at = {}                             # value id -> first cycle it can be read
+    wport: set[int] = set()
+    unit_free = [0] * multipliers             # first cycle a unit may take a new go
+    loads = sorted((k for k, o in enumerate(ops) if o.kind == "load"), key=lambda k: -height[k])
+    waiting = [k for k, o in enumerate(ops) if o.kind != "load"]
+    t = 0
+    while loads or waiting:
+        if loads and t not in wport:
+            k = loads.pop(0)
+            ops[k].issue = ops[k].write = t
+            wport.add(t)
+            ready_at[ops[k].out] = t + 1
+        cands = [k for k in waiting
+                 if all(a not in producer or ready_at.get(a, 1 << 30) <= t for a in ops[k].args)]
+        cands.sort(key=lambda k: (-height[k], k))
+        for k in cands:
+            o = ops[k]
+            w = t + lat[k]
+            if w in wport:
+                continue
+            if o.kind == "mul":
+                free = [u for u in range(multipliers) if unit_free[u] <= t + 1]
+                if not free:
+                    continue
+                o.unit = free[0]
+                unit_free[o.unit] = t + 1 + n_limbs
+            o.issue, o.write = t, w
+            wport.add(w)
+            ready_at[o.out] = w + 1
+            waiting.remove(k)
+            break
+        t += 1
+        if t > 100 * (len(ops) + 10) * (n_limbs + 4):
+            raise RuntimeError("scheduler made no progress (internal error)")
+
+
+def _allocate(prog: Program):
+    """Memory addresses: constants first (pre-loaded), then intermediates, reusing a slot
+    once the last read of its value has been issued (strictly before the next write)."""
+    last_read: dict[int, int] = {}
+    for o in prog.ops:
+        for a in o.args:
+            last_read[a] = max(last_read.get(a, -1), o.issue)
+    for v in sorted(prog.const_value):
+        prog.slot[v] = len(prog.slot)
+    base = len(prog.slot)
+    free_after: list[int] = []                 # per intermediate slot: last read cycle
+    for o in sorted(prog.ops, key=lambda o: o.write):
+        if o.out not in last_read:             # only captured as an output: not stored
+            continue
+        for s, f in enumerate(free_after):
+            if f < o.write:
+                free_after[s] = last_read[o.out]
+                prog.slot[o.out] = base + s
+                break
+        else:
+            free_after.append(last_read[o.out])
+            prog.slot[o.out] = base + len(free_after) - 1
+    prog.depth = max(1, base + len(free_after))
+
+
+def compile_program(plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None) -> Program:
+    """Lower, schedule and allocate ``plan`` for ``multipliers`` units of DSP size ``dsp``
+    (signed operand bits, e.g. ``(16, 16)``; None: one full-width product per multiplier)."""
+    if not isinstance(plan, Plan):
+        raise TypeError(f"plan must be a Plan, not {plan!r}")
+    if not plan.outputs:
+        raise ValueError("plan must have at least one output")
+    _check_params(multipliers, dsp)
+    ops, values, const_value, outputs = _lower(plan)
+    prog = Program(plan, multipliers, dsp, ops, values, const_value, outputs)
+
+    muls = [o for o in ops if o.kind == "mul"]
+    wa = max([_swidth(*values[o.args[0]]) for o in muls] + [2])
+    wb = max([_swidth(*values[o.args[1]]) for o in muls] + [2])
+    prog.mul_widths = (wa, wb)
+    prog.limb_bits, prog.limbs, _ = limb_split(wa, wb, dsp)
+    prog.acc_width = max([_swidth(*o.raw) for o in muls] + [2])
+    prog.store_width = max(_swidth(lo, hi) for lo, hi in values)
+    in_w = max(_swidth(*i.port_range) for i in plan.inputs) if plan.inputs else 1
+    prog.wb_width = max(prog.store_width + 1, prog.acc_width, in_w)
+
+    _schedule(ops, len(values), multipliers, prog.mul_latency, prog.n_limbs)
+    _allocate(prog)
+    prog.views = sorted({o.view for o in ops})
+    writes = [o.write for o in ops]
+    prog.steps = max(writes) + 1 if writes else 1
+    _assemble(prog)
+    return prog
+
+
+def _assemble(prog: Program):
+    """One dict of microcode fields per step (see ``folded.microcode_layout``)."""
+    k = prog.multipliers
+    inputs = [i.name for i in prog.plan.inputs]
+    outs = list(prog.outputs)
+    words = [{"rx": 0, "ry": 0, "alu": 0, "go": 0, "we": 0, "wa": 0, "src": 0, "view": 0, "cap": 0}
+             for _ in range(prog.steps)]
+    vidx = {v: i for i, v in enumerate(prog.views)}
+    written = set()
+    for o in prog.ops:
+        if o.kind != "load":
+            w = words[o.issue]
+            w["rx"] = prog.slot[o.args[0]]
+            w["ry"] = prog.slot[o.args[-1]]
+            if o.kind == "alu":
+                words[o.issue + 1]["alu"] = ALU_OPS.index(o.alu)
+            else:
+                words[o.issue + 1]["go"] |= 1 << o.unit
+        if o.write in written:
+            raise RuntimeError(f"write port conflict at step {o.write} (internal error)")
+        written.add(o.write)
+        w = words[o.write]
+        w["src"] = (0 if o.kind == "alu" else 1 + o.unit if o.kind == "mul"
+                    else 1 + k + inputs.index(o.input))
+        w["view"] = vidx[o.view]
+        if o.out in prog.slot:
+            w["we"], w["wa"] = 1, prog.slot[o.out]
+        for j, name in enumerate(outs):
+            if prog.outputs[name] == o.out:
+                w["cap"] |= 1 << j
+    prog.words = words
