@@ -26,6 +26,7 @@ robot's R and Z ranges (for the cylinder-leg preset exactly the paper's grid).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -243,6 +244,7 @@ class PaperServo:
     terms: list
     poly: dict
     circle_error_pu: float      # worst circle's step-1 error (unrounded, on dense theta)
+    unrounded: dict = field(default_factory=dict)   # the same coefficients before the cut (float64)
     frac: int = 0
     bound_pu: float = 0.0
 
@@ -262,6 +264,11 @@ class PaperFit:
     robot: str
     grid: PaperGrid
     servos: list = field(default_factory=list)
+
+    def uncut(self) -> "PaperFit":
+        """The same fit with the coefficients before the cut to significant figures."""
+        return PaperFit(self.robot, self.grid, [dataclasses.replace(s, poly=dict(s.unrounded))
+                                                for s in self.servos])
 
     def counts(self) -> dict:
         """{servo: {"terms", "nonzero_terms", "multiplications"}}."""
@@ -283,9 +290,10 @@ def fit_paper(robot, theta_fit: str = "minimax") -> PaperFit:
         parity = _theta_parity(robot, k, grid)
         zdep = _depends_on_z(robot, k, grid)
         exact, circle_err = _servo_coefficients(robot, k, parity, zdep, grid)
-        poly = {e: cut_sig_figs(float(c)) for e, c in exact.items() if c != 0}
+        unrounded = {e: float(c) for e, c in exact.items() if c != 0}
+        poly = {e: cut_sig_figs(c) for e, c in unrounded.items()}
         servos.append(PaperServo(name, ["any", parity, "any" if zdep else "none"], list(exact), poly,
-                                 circle_err))
+                                 circle_err, unrounded))
     return PaperFit(robot.name, grid, servos)
 
 
