@@ -15,10 +15,11 @@ import sys
 import time
 from pathlib import Path
 
-from ikseries.accuracy import verification_points
 from ikseries.fit.comparison import compare, render_comparison
 from ikseries.fit.fitter import fit_robot
 from ikseries.fit.paper import THETA_FITS, fit_paper, paper_errors, paper_plan
+
+from ikseries.accuracy import verification_points
 from ikseries.robot import load_preset, preset_names
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from ..accuracy import measure
 from .plan import Plan
 
-__all__ = ["plan_figures", "compare", "render_comparison"]
+__all__ = ["compare", "plan_figures", "render_comparison"]
 
 
 def _shared_nodes(plan: Plan) -> set[int]:
@@ -90,9 +90,9 @@ def render_comparison(result: dict) -> str:
     """Markdown table of :func:`compare`'s result."""
     tol = result["tolerance_pu"]
     lines = [f"# {result['robot']}: ikseries vs the integer power series paper", "",
-             f"Tolerance ±{tol:g} pu. Errors are the max |emitted pulse - exact pulse| over the "
-             "same sampled workspace points; multiplications count the servo's whole cone "
-             "(shared with other servos + its own).", "",
+             (f"Tolerance ±{tol:g} pu. Errors are the max |emitted pulse - exact pulse| over the "
+              "same sampled workspace points; multiplications count the servo's whole cone "
+              "(shared with other servos + its own)."), "",
              "| servo | method | " + " | ".join(_HEADER) + " | meets tolerance |",
              "|" + "---|" * (len(_HEADER) + 3)]
     methods = result["methods"]

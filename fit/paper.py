@@ -18,11 +18,12 @@ then every coefficient is cut to 7 significant figures. For S2 that is the paper
 table of 8 x 5 x 5 = 200 coefficients, 35 of them zero (the R = 0 circle is a point,
 so its theta coefficients beyond theta**0 vanish).
 
-Deviations from the paper (see :data:`DEVIATIONS`): the eight theta points are the
-Chebyshev nodes of the theta range instead of points placed by hand until the error
-ripple looked even, the solves use exact rational arithmetic instead of 15-digit
-floating point, and the cylinders / planes are five equispaced values over the
-robot's R and Z ranges (for the cylinder-leg preset exactly the paper's grid).
+Deviations from the paper (see :func:`deviations`): the theta step is a near-minimax
+fit on each circle (the even error ripple the paper sought by placing its eight points
+by hand) or, optionally, interpolation at the eight Chebyshev points; the solves use
+exact rational arithmetic instead of 15-digit floating point; the cylinders / planes
+are five equispaced values over the robot's R and Z ranges (for the cylinder-leg preset
+exactly the paper's grid).
 """
 from __future__ import annotations
 
@@ -38,24 +39,62 @@ from .horner import horner
 from .plan import Plan, PlanBuilder, PlanOutput
 from .polyfit import fit_lawson
 
-__all__ = ["SIG_FIGS", "THETA_TERMS", "R_ORDER", "Z_ORDER", "DEVIATIONS", "PaperGrid", "PaperServo",
-           "PaperFit", "paper_grid", "fit_paper", "cut_sig_figs", "evaluate_servo", "paper_errors",
-           "horner_multiplications", "theta_powers", "input_scales", "scaled_poly", "paper_plan", "paper_meta"]
+__all__ = [
+    "R_ORDER",
+    "SIG_FIGS",
+    "THETA_FITS",
+    "THETA_TERMS",
+    "Z_ORDER",
+    "PaperFit",
+    "PaperGrid",
+    "PaperServo",
+    "cut_sig_figs",
+    "deviations",
+    "evaluate_servo",
+    "fit_paper",
+    "horner_multiplications",
+    "input_scales",
+    "paper_errors",
+    "paper_grid",
+    "paper_meta",
+    "paper_plan",
+    "scaled_poly",
+    "theta_powers",
+]
 
 SIG_FIGS = 7        # significant figures kept in every final coefficient
 THETA_TERMS = 8     # theta powers per circle (even: 0..14; odd: 1..15)
 R_ORDER = 4         # order of the series in R per Z plane
 Z_ORDER = 4         # order of the series in Z
 
-DEVIATIONS = (
-    "theta points: the 8 positive Chebyshev nodes of the symmetric theta range (a systematic "
-    "choice, as the paper's future work asks) instead of points placed by hand for an even ripple",
+THETA_FITS = ("minimax", "chebyshev")
+THETA_SAMPLES = 2001     # theta samples per circle for the minimax fit (0 .. max |theta|)
+LAWSON_ITERATIONS = 60
+
+_THETA_DEVIATION = {
+    "minimax": "theta step: on each circle the near-minimax 8-term series (Lawson's iteration on "
+               f"{THETA_SAMPLES} theta samples), the even error ripple the paper places its 8 points by hand "
+               "for (a minimax series interpolates at 8 points); not an exact 8-point solve",
+    "chebyshev": "theta step: exact interpolation at the 8 positive Chebyshev points of the theta "
+                 "range (a systematic choice, as the paper's future work asks) instead of points "
+                 "placed by hand for an even error ripple",
+}
+_DEVIATIONS = (
     "arithmetic: exact rational solves instead of Excel's 15 significant figures",
-    "S1: odd theta powers theta**1..theta**15 (8 terms, as many as S2/S3) plus its value at "
-    "theta = 0 as the theta**0 term; the paper gives neither S1's term count nor its offset",
+    ("Z step: its order is not stated; the final table of 200 = 8 x 5 x 5 coefficients implies "
+     "4th order through the five planes"),
+    ("S1: odd theta powers theta**1..theta**15 (8 terms, as many as S2/S3) plus its value at "
+     "theta = 0 as the theta**0 term; the paper gives neither S1's term count nor its offset"),
     "all servos keep 7 significant figures (the paper found 6 enough for S1 and S3)",
     "cutting to 7 significant figures rounds to nearest (the paper says 'truncated')",
 )
+
+
+def deviations(theta_fit: str) -> list[str]:
+    """How this implementation departs from the paper, for the given theta step."""
+    if theta_fit not in THETA_FITS:
+        raise ValueError(f"theta_fit must be one of {THETA_FITS}, not {theta_fit!r}")
+    return [_THETA_DEVIATION[theta_fit], *_DEVIATIONS]
 
 
 # -- exact linear algebra ------------------------------------------------------------
@@ -92,9 +131,6 @@ def cut_sig_figs(value: float, digits: int = SIG_FIGS) -> float:
 
 
 # -- grid and structure -----------------------------------------------------------------
-THETA_FITS = ("minimax", "chebyshev")
-THETA_SAMPLES = 2001     # theta samples per circle for the minimax fit (0 .. max |theta|)
-LAWSON_ITERATIONS = 60
 
 
 @dataclass(frozen=True)
@@ -145,7 +181,7 @@ def _inputs(robot):
 def _theta_parity(robot, k: int, grid: PaperGrid) -> str:
     """"even" or "odd" symmetry of servo ``k`` in theta (from the reference kinematics)."""
     rr, tt, zz = (a.ravel() for a in np.meshgrid(grid.r, grid.theta, grid.z, indexing="ij"))
-    f = lambda t: robot.pulses_pu(rr, t, zz)[k]  # noqa: E731
+    f = lambda t: robot.pulses_pu(rr, t, zz)[k]
     p, m, p0 = f(tt), f(-tt), f(0 * tt)
     eps = 1e-9 * max(1.0, float(np.ptp(p)))
     if np.max(np.abs(p - m)) <= eps:
@@ -265,7 +301,7 @@ class PaperFit:
     grid: PaperGrid
     servos: list = field(default_factory=list)
 
-    def uncut(self) -> "PaperFit":
+    def uncut(self) -> PaperFit:
         """The same fit with the coefficients before the cut to significant figures."""
         return PaperFit(self.robot, self.grid, [dataclasses.replace(s, poly=dict(s.unrounded))
                                                 for s in self.servos])
@@ -471,7 +507,7 @@ def paper_meta(robot, fit: PaperFit, scales: dict, budget) -> dict:
                    "theta_fit": g.theta_fit, "theta_terms": THETA_TERMS, "r_order": R_ORDER,
                    "z_order": Z_ORDER, "significant_figures": SIG_FIGS,
                    "r_cylinders": list(g.r), "z_planes": list(g.z), "theta_max": g.theta_max,
-                   "theta_points": len(g.theta), "deviations": list(DEVIATIONS)},
+                   "theta_points": len(g.theta), "deviations": deviations(g.theta_fit)},
         "features": {"kind": "scaled cylindrical inputs v / 2**k", "names": ["r", "theta", "z"],
                      "scales": scales, "frac_bits": None},
         "servos": [{"name": s.name, "powers": dict(zip(("r", "theta", "z"), s.allowed)),

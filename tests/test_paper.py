@@ -4,14 +4,24 @@ from decimal import Decimal
 
 import numpy as np
 import pytest
-
-from ikseries.accuracy import measure
 from ikseries.fit.comparison import compare, render_comparison
-from ikseries.fit.paper import (R_ORDER, SIG_FIGS, THETA_TERMS, Z_ORDER, cut_sig_figs, evaluate_servo,
-                                fit_paper, horner_multiplications, paper_errors, paper_plan)
+from ikseries.fit.paper import (
+    R_ORDER,
+    SIG_FIGS,
+    THETA_TERMS,
+    Z_ORDER,
+    cut_sig_figs,
+    evaluate_servo,
+    fit_paper,
+    horner_multiplications,
+    paper_errors,
+    paper_plan,
+)
 from ikseries.fit.plan import Plan
 from ikseries.sim import golden
 from ikseries.sim.targets import corner_targets, random_targets
+
+from ikseries.accuracy import measure
 
 
 @pytest.fixture(scope="module")
@@ -155,7 +165,8 @@ def test_no_node_of_the_paper_plan_leaves_its_interval(pplan):
 
 def test_plan_meta_and_json_round_trip(pfit, pplan):
     m = pplan.meta
-    assert m["method"]["name"] == "paper"
+    assert m["method"]["name"] == "paper" and m["method"]["theta_fit"] == "minimax"
+    assert m["method"]["deviations"][0].startswith("theta step: on each circle the near-minimax")
     for s, ms in zip(pfit.servos, m["servos"]):
         assert ms["terms"] == len(s.terms) and ms["accumulator_frac_bits"] == s.frac
         assert {tuple(c["exponents"]): c["value"] for c in ms["coefficients"]} == s.poly
