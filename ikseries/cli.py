@@ -1,4 +1,4 @@
-"""Command-line interface: ``ikseries presets | build | eval``."""
+"""Command-line interface: ``ikseries presets | build | fit | eval``."""
 from __future__ import annotations
 
 import argparse
@@ -80,6 +80,26 @@ def _cached_plan(robot, path):
     return plan
 
 
+def cmd_fit(args):
+    from .fitcmd import FitCommandError, default_fit_dir, run_fit
+    robot = _robot(args)
+    out = Path(args.output) if args.output else default_fit_dir(robot, args.method)
+    try:
+        rec = run_fit(robot, args.method, out, progress=_progress(args.quiet))
+    except FitCommandError as e:
+        raise CliError(str(e)) from None
+    if args.method == "ikseries":
+        worst = max(s["sampled_max_pu"] for s in rec["servos"])
+        print(f"{robot.name}: ikseries fit, max error {worst:.3f} pu (tolerance {robot.tolerance_pu:g}), "
+              f"output in {out}/")
+    elif args.method == "paper":
+        worst = {m: max(s["max_error_pu"] for s in f["servos"].values()) for m, f in rec["methods"].items()}
+        print(f"{robot.name}: paper max error {worst['paper']:.3f} pu, ikseries {worst['ikseries']:.3f} pu "
+              f"(tolerance {robot.tolerance_pu:g}), output in {out}/")
+    else:
+        print(f"{robot.name}: divided differences on {len(rec['cases'])} paths, output in {out}/")
+
+
 def cmd_eval(args):
     import numpy as np
 
@@ -129,6 +149,14 @@ def main(argv=None):
                    help="verify the exported Verilog with cocotb on these simulators: auto (every "
                         "installed one, the default), none, or a list such as icarus,verilator")
     b.add_argument("-q", "--quiet", action="store_true")
+    f = sub.add_parser("fit", help="fit only (no hardware) by one method, with a report")
+    f.add_argument("robot", nargs="?", help="robot description (TOML); default: --preset cylinder-leg")
+    f.add_argument("--preset", help="built-in robot name (see `ikseries presets`)")
+    f.add_argument("--method", choices=["ikseries", "paper", "divided-differences"], default="ikseries",
+                   help="ikseries (automatic fit), paper (the integer power series paper's procedure "
+                        "beside it) or divided-differences (planar-arm path mode)")
+    f.add_argument("-o", "--output", help="output directory (default build/<robot>/fit-<method>)")
+    f.add_argument("-q", "--quiet", action="store_true")
     e = sub.add_parser("eval", help="pulse of each servo: reference IK vs golden integer model")
     e.add_argument("--preset")
     e.add_argument("--robot", help="robot description (TOML)")
@@ -140,7 +168,7 @@ def main(argv=None):
     from .build import BuildError
     from .robot import RobotError
     try:
-        {"presets": cmd_presets, "build": cmd_build, "eval": cmd_eval}[args.cmd](args)
+        {"presets": cmd_presets, "build": cmd_build, "fit": cmd_fit, "eval": cmd_eval}[args.cmd](args)
     except (CliError, RobotError) as exc:
         print(f"ikseries: error: {exc}", file=sys.stderr)
         return 2

@@ -1,0 +1,114 @@
+"""``ikseries fit``: fit a robot by one method and report the fit alone (no hardware).
+
+Methods
+-------
+``ikseries``             the automatic fit (the one ``ikseries build`` uses): plan.json + fit.md/json
+``paper``                the integer power series paper's procedure beside the automatic fit, on
+                         the same points: paper_plan.json, plan.json, comparison.md/json
+``divided-differences``  path mode for the planar arm: Newton cubics through 4 poses on each
+                         straight tool path, checked by forward kinematics: divided.md/json
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+from .accuracy import measure
+from .fit.fitter import FitError, fit_robot, output_multipliers
+from .robot import robot_record
+
+__all__ = ["METHODS", "FitCommandError", "run_fit", "default_fit_dir"]
+
+METHODS = ("ikseries", "paper", "divided-differences")
+
+
+class FitCommandError(RuntimeError):
+    """The method cannot run on this robot, or its fit is refused."""
+
+
+def default_fit_dir(robot, method: str) -> Path:
+    return Path("build") / robot.name / f"fit-{method}"
+
+
+def _dump(obj) -> str:
+    return json.dumps(obj, indent=1, sort_keys=True) + "\n"
+
+
+def _ikseries(robot, progress) -> tuple[dict, dict]:
+    plan, fits = fit_robot(robot, progress)
+    plan.meta["robot_description"] = robot_record(robot)
+    progress("measuring the error on >= 10^6 points")
+    acc = measure(robot, plan)
+    mults = output_multipliers(plan)
+    rows = [{"servo": sf.name, "variables": sf.features.kind, "names": list(sf.features.names),
+             "degree": sf.degree, "terms": len(sf.poly), "multiplications": mults[sf.name],
+             "coefficient_frac_bits": sf.frac, "sampled_max_pu": acc["servos"][sf.name]["total"],
+             "certified_rounding_pu": sf.bound_pu} for sf in fits]
+    rec = {"robot": robot.name, "method": "ikseries", "tolerance_pu": robot.tolerance_pu,
+           "points": acc["points"], "servos": rows}
+    md = [f"# {robot.name}: ikseries fit", "", f"Tolerance ±{robot.tolerance_pu:g} pu; sampled on "
+          f"{acc['points']:,} representable points.", "",
+          "| servo | variables | degree | terms | multiplications | coefficient frac bits | "
+          "sampled max (pu) | certified rounding (pu) |", "|---|---|---|---|---|---|---|---|"]
+    md += [f"| {r['servo']} | {r['variables']} ({', '.join(r['names'])}) | {r['degree']} | {r['terms']} | "
+           f"{r['multiplications']} | {r['coefficient_frac_bits']} | {r['sampled_max_pu']:.4f} | "
+           f"{r['certified_rounding_pu']:.4f} |" for r in rows]
+    return {"plan.json": plan.dumps(), "fit.json": _dump(rec), "fit.md": "\n".join(md) + "\n"}, rec
+
+
+def _paper(robot, progress) -> tuple[dict, dict]:
+    from .accuracy import verification_points
+    from .fit.comparison import compare, render_comparison
+    from .fit.paper import fit_paper, paper_plan
+    try:
+        pfit = fit_paper(robot)
+    except ValueError as e:
+        raise FitCommandError(f"--method paper: {e}") from None
+    pplan = paper_plan(robot, pfit, progress)
+    progress("fitting the same robot with ikseries")
+    plan, _ = fit_robot(robot, progress)
+    progress("measuring both on the same >= 10^6 points")
+    res = compare(robot, plan, pplan, verification_points(robot))
+    return {"paper_plan.json": pplan.dumps(), "plan.json": plan.dumps(), "comparison.json": _dump(res),
+            "comparison.md": render_comparison(res)}, res
+
+
+def _divided(robot, progress) -> tuple[dict, dict]:
+    from .fit.divided import render_markdown, run_divided_differences
+    from .planar_arm import PlanarArm
+    if not isinstance(robot.geometry, PlanarArm):
+        raise FitCommandError(f"--method divided-differences needs a planar-arm robot, not {robot.name!r} "
+                              f"(geometry {type(robot.geometry).__name__})")
+    progress("divided differences on the three tool paths")
+    res = run_divided_differences(robot.geometry, pu_per_degree=robot.pu_per_degree,
+                                  tolerance_pu=robot.tolerance_pu)
+    return {"divided.json": _dump(res), "divided.md": render_markdown(res)}, res
+
+
+def run_fit(robot, method: str, out_dir, progress=print) -> dict:
+    """Fit ``robot`` by ``method`` and write its artifacts into ``out_dir`` (all or nothing)."""
+    if method not in METHODS:
+        raise FitCommandError(f"method must be one of {list(METHODS)}, not {method!r}")
+    run = {"ikseries": _ikseries, "paper": _paper, "divided-differences": _divided}[method]
+    try:
+        files, rec = run(robot, progress)
+    except FitError as e:
+        raise FitCommandError(str(e)) from None
+    out_dir = Path(out_dir)
+    try:
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}-", dir=out_dir.parent))
+        try:
+            for name, text in files.items():
+                (tmp / name).write_text(text)
+            out_dir.mkdir(exist_ok=True)
+            for name in files:
+                shutil.move(tmp / name, out_dir / name)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    except OSError as e:
+        raise FitCommandError(f"cannot write the fit output to {str(out_dir)!r}: {e}") from None
+    progress(f"wrote {out_dir}/: " + ", ".join(sorted(files)))
+    return rec
