@@ -207,23 +207,41 @@ def output_rounding(plan: Plan, k: int) -> tuple[float, tuple[float, float] | No
 
 
 # -- cells -------------------------------------------------------------------------------------------
-def _cell_bounds(err, names, lo, hi):
-    """Mean-value bound of |e| on cells [lo, hi] (shape (N, n)).
+def _sum_up(rows):
+    """Upward-rounded sum over the first axis."""
+    total = rows[0]
+    for r in rows[1:]:
+        total = ia._up(total + r)
+    return total
 
-    Returns (bound, contributions (N, n) sup|de/dx_k| h_k, |e(c)| enclosure, f enclosure lo/hi)."""
-    c = 0.5 * (lo + hi)
-    c = np.minimum(np.maximum(c, lo), hi)
-    h = ia._up(np.maximum(ia._up(c - lo), ia._up(hi - c)))
-    e_c, _ = err(dict(zip(names, ia.variables(c, c, derivatives=False))))
+
+def _cell_bounds(err, names, lo, hi):
+    """Bound of |e| on cells [lo, hi] (shape (N, n)): the least of the plain enclosure, the
+    mean-value form and the second-order Taylor form.
+
+    Returns (bound, per-input contributions (N, n) of the form used, e(c) enclosure, f enclosure).
+    """
+    n = len(names)
+    c = np.minimum(np.maximum(0.5 * (lo + hi), lo), hi)
+    h = ia._up(np.maximum(ia._up(c - lo), ia._up(hi - c))).T              # (n, N) half-widths
+    e_c, _ = err(dict(zip(names, ia.variables(c, c, order=1))))
     with ia.lenient():   # a cell too coarse for an enclosure gets NaN: it is split, not fatal
-        e_cell, f_cell = err(dict(zip(names, ia.variables(lo, hi))))
-    contrib = ia._up(e_cell.dmag * h.T)                       # (n, N)
-    bound = e_c.mag
-    for k in range(contrib.shape[0]):
-        bound = ia._up(bound + contrib[k])
-    bound = np.fmin(bound, e_cell.mag)                        # the plain enclosure may be tighter
-    bad = ~np.isfinite(bound)
-    bound[bad] = np.inf
+        e_cell, f_cell = err(dict(zip(names, ia.variables(lo, hi, order=2))))
+    # mean-value form: |e(c)| + sum_k sup|de/dx_k| h_k
+    c1 = ia._up(e_cell.dmag(n) * h)
+    b1 = ia._up(e_c.mag + _sum_up(c1))
+    # Taylor form: |e(c)| + sum_k |de/dx_k(c)| h_k + 1/2 sum_jk sup|d2e/dx_j dx_k| h_j h_k
+    j, k = ia.hessian_pairs(n)
+    weight = np.where(j == k, 0.5, 1.0)[:, None]                          # off-diagonal twice
+    q = ia._up(ia._up(e_cell.hmag(n) * ia._up(h[j] * h[k])) * weight)
+    c2 = ia._up(e_c.dmag(n) * h)
+    for p in range(len(j)):                                                # attribute to axes
+        c2[j[p]] = ia._up(c2[j[p]] + 0.5 * q[p])
+        c2[k[p]] = ia._up(c2[k[p]] + 0.5 * q[p])
+    b2 = ia._up(ia._up(e_c.mag + _sum_up(ia._up(e_c.dmag(n) * h))) + _sum_up(q))
+    bound = np.fmin(e_cell.mag, np.fmin(b1, b2))
+    bound = np.where(np.isfinite(bound), bound, np.inf)
+    contrib = np.where(np.isfinite(b2) & (b2 <= b1), c2, c1)
     contrib = np.where(np.isfinite(contrib), contrib, np.inf).T
     return bound, contrib, e_c, f_cell
 

@@ -1,12 +1,16 @@
 """Vectorised interval arithmetic with forward-mode derivatives, outwardly rounded.
 
 An :class:`Interval` holds, for each of N cells, an interval ``[lo, hi]`` enclosing a real
-function's value and, optionally, intervals ``[dlo, dhi]`` (shape ``(n, N)``) enclosing its
-partial derivatives with respect to ``n`` inputs. Every operation returns enclosures that
-contain the exact real result for every point of the input cells:
+function's value and, up to its ``order``, enclosures of its partial derivatives with respect
+to ``n`` inputs: the gradient ``d = (dlo, dhi)`` of shape ``(n, N)`` and the Hessian
+``h = (hlo, hhi)`` of shape ``(n (n + 1) / 2, N)`` (upper triangle, in the order of
+:func:`hessian_pairs`). ``d`` or ``h`` is ``None`` when it is exactly zero (a constant).
+Every operation returns enclosures that contain the exact real result for every point of the
+input cells:
 
-- ``+ - * /`` and ``sqrt`` are correctly rounded in IEEE 754, so each bound is moved outwards by
-  one unit in the last place (``np.nextafter``);
+- ``+ - * /`` and ``sqrt`` are correctly rounded in IEEE 754 (round to nearest), so each bound
+  is moved outwards past the neighbouring float by Rump's ``x +- (2**-52 |x| + 2**-1073)``
+  (cheaper than ``np.nextafter`` and at least as wide);
 - ``cos sin acos asin atan2`` come from numpy's libm-style routines, which are not correctly
   rounded; their bounds are moved outwards by :data:`LIBM_ULPS` units in the last place
   (numpy documents at most 4 ULP for its SIMD float64 routines, glibc at most 2).
@@ -16,7 +20,8 @@ Floats and numpy arrays mix in as exact constants. :data:`MATH` has the same nam
 rigorously over cells when given :class:`Interval` inputs from :func:`variables`.
 
 Errors (a division by an interval containing 0, a square root of a negative interval, ``acos``
-outside [-1, 1], ``atan2`` over a box touching the branch cut) name the first offending cell.
+outside [-1, 1], ``atan2`` over a box touching the branch cut) name the first offending cell;
+within :func:`lenient` the offending cells get NaN bounds instead.
 """
 from __future__ import annotations
 
@@ -26,14 +31,15 @@ from types import SimpleNamespace
 
 import numpy as np
 
-__all__ = ["Interval", "variables", "point", "clamp", "ldexp", "lenient", "MATH", "LIBM_ULPS",
-           "IntervalDomainError"]
+__all__ = ["Interval", "variables", "point", "clamp", "ldexp", "lenient", "hessian_pairs", "MATH",
+           "LIBM_ULPS", "MAX_ORDER", "IntervalDomainError"]
 
 #: Outward widening, in units in the last place, of numpy's transcendental functions.
 LIBM_ULPS = 8
+#: Highest derivative order carried (gradient 1, Hessian 2).
+MAX_ORDER = 2
 
-_PI_LO = np.nextafter(np.pi, 0.0)          # float pi lies within one ulp of the real pi
-_TWO_PI_LO = 2.0 * _PI_LO                   # used only to locate extrema conservatively
+_TWO_PI_LO = 2.0 * np.nextafter(np.pi, 0.0)   # used only to locate extrema conservatively
 
 
 class IntervalDomainError(ValueError):
@@ -54,29 +60,19 @@ def lenient():
         _LENIENT.reset(token)
 
 
-def _domain(bad, exc, message, *xs):
-    """Raise ``exc(message())`` if any cell is ``bad``; in :func:`lenient` mode, return the
-    operands with NaN in the bad cells instead."""
-    if not np.any(bad):
-        return xs
-    if not _LENIENT.get():
-        raise exc(message())
-    return tuple(_nan_cells(x, bad) for x in xs)
-
-
-def _nan_cells(x: "Interval", bad) -> "Interval":
-    lo, hi = np.where(bad, np.nan, x.lo), np.where(bad, np.nan, x.hi)
-    if x.dlo is None:
-        return Interval(lo, hi)
-    return Interval(lo, hi, np.where(bad, np.nan, x.dlo), np.where(bad, np.nan, x.dhi))
+# -- outward-rounded bounds on plain arrays ------------------------------------------------------
+_PHI = 2.0 ** -52      # >= one ulp of |x| relative to |x|
+_ETA = 2.0 ** -1073    # >= the spacing of subnormals
 
 
 def _down(x):
-    return np.nextafter(x, -np.inf)
+    """A float <= the float below ``x`` (the exact result of the operation that rounded to x)."""
+    return x - (np.abs(x) * _PHI + _ETA)
 
 
 def _up(x):
-    return np.nextafter(x, np.inf)
+    """A float >= the float above ``x``."""
+    return x + (np.abs(x) * _PHI + _ETA)
 
 
 def _widen(lo, hi, ulps):
@@ -100,6 +96,45 @@ def _sqr_bounds(lo, hi):
     return np.maximum(low, 0.0), _up(np.maximum(a, b))
 
 
+def _add_pairs(parts):
+    """Sum of (lo, hi) bound pairs, None entries being zero; None if all are zero."""
+    parts = [p for p in parts if p is not None]
+    if not parts:
+        return None
+    lo, hi = parts[0]
+    for plo, phi in parts[1:]:
+        lo, hi = _down(lo + plo), _up(hi + phi)
+    return lo, hi
+
+
+def _scale(g, p):
+    """g * p for a value pair g (shape (N,)) and a derivative pair p (shape (m, N)), or None."""
+    return None if p is None else _mul_bounds(g[0], g[1], p[0], p[1])
+
+
+def hessian_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column of each stored Hessian entry (the upper triangle, row-major)."""
+    return np.triu_indices(n)
+
+
+def _outer_self(d):
+    """Entries d_j d_k of the upper triangle (squares on the diagonal)."""
+    lo, hi = d
+    j, k = hessian_pairs(lo.shape[0])
+    olo, ohi = _mul_bounds(lo[j], hi[j], lo[k], hi[k])
+    diag = j == k
+    slo, shi = _sqr_bounds(lo[j[diag]], hi[j[diag]])
+    olo[diag], ohi[diag] = slo, shi
+    return olo, ohi
+
+
+def _outer_cross(a, b):
+    """Entries a_j b_k + a_k b_j of the upper triangle."""
+    j, k = hessian_pairs(a[0].shape[0])
+    return _add_pairs([_mul_bounds(a[0][j], a[1][j], b[0][k], b[1][k]),
+                       _mul_bounds(a[0][k], a[1][k], b[0][j], b[1][j])])
+
+
 def _first(mask) -> int:
     return int(np.flatnonzero(np.ravel(mask))[0])
 
@@ -109,28 +144,52 @@ def _fmt(lo, hi, mask) -> str:
     return f"[{np.ravel(lo)[i]:.17g}, {np.ravel(hi)[i]:.17g}] (cell {i})"
 
 
+def _domain(bad, exc, message, *xs):
+    """Raise ``exc(message())`` if any cell is ``bad``; in :func:`lenient` mode, return the
+    operands with NaN in the bad cells instead."""
+    if not np.any(bad):
+        return xs
+    if not _LENIENT.get():
+        raise exc(message())
+    return tuple(_nan_cells(x, bad) for x in xs)
+
+
+def _nan_pair(p, bad):
+    return None if p is None else (np.where(bad, np.nan, p[0]), np.where(bad, np.nan, p[1]))
+
+
+def _nan_cells(x: "Interval", bad) -> "Interval":
+    return Interval(np.where(bad, np.nan, x.lo), np.where(bad, np.nan, x.hi),
+                    _nan_pair(x.d, bad), _nan_pair(x.h, bad), x.order)
+
+
 class Interval:
-    """Interval value and interval partial derivatives of a real function, per cell.
+    """Interval value and interval derivatives of a real function, per cell.
 
     Parameters
     ----------
     lo, hi : array_like
         Bounds of the value, broadcastable to one shape ``(N,)`` (or scalars).
-    dlo, dhi : ndarray or None
-        Bounds of the partial derivatives, shape ``(n, N)`` (or ``(n, 1)``); ``None`` when the
-        function does not depend on the inputs (all partials are exactly 0).
+    d : tuple of ndarray or None
+        ``(dlo, dhi)``, bounds of the partial derivatives, shape ``(n, N)``; None if all are 0.
+    h : tuple of ndarray or None
+        ``(hlo, hhi)``, bounds of the second partial derivatives, shape ``(n (n + 1) / 2, N)``
+        in the order of :func:`hessian_pairs`; None if all are 0.
+    order : int
+        Highest derivative order enclosed (0: value only, 1: gradient, 2: Hessian).
     """
 
-    __slots__ = ("lo", "hi", "dlo", "dhi")
+    __slots__ = ("lo", "hi", "d", "h", "order")
     __array_ufunc__ = None  # make numpy defer to the reflected operators (2.0 * x, arr + x)
 
-    def __init__(self, lo, hi, dlo=None, dhi=None):
+    def __init__(self, lo, hi, d=None, h=None, order=MAX_ORDER):
         self.lo = np.asarray(lo, dtype=np.float64)
         self.hi = np.asarray(hi, dtype=np.float64)
-        if (dlo is None) != (dhi is None):
-            raise ValueError("dlo and dhi must both be given or both be None")
-        self.dlo = None if dlo is None else np.asarray(dlo, dtype=np.float64)
-        self.dhi = None if dhi is None else np.asarray(dhi, dtype=np.float64)
+        if order not in range(MAX_ORDER + 1):
+            raise ValueError(f"order must be 0, 1 or 2, not {order!r}")
+        self.order = order
+        self.d = None if d is None or order < 1 else d
+        self.h = None if h is None or order < 2 else h
 
     # -- views -------------------------------------------------------------------------
     @property
@@ -139,12 +198,36 @@ class Interval:
         return np.maximum(np.abs(self.lo), np.abs(self.hi))
 
     @property
-    def dmag(self) -> np.ndarray | None:
-        """Upper bound of |partial derivative| per input and cell (shape (n, N)), or None."""
-        return None if self.dlo is None else np.maximum(np.abs(self.dlo), np.abs(self.dhi))
+    def dlo(self):
+        return None if self.d is None else self.d[0]
+
+    @property
+    def dhi(self):
+        return None if self.d is None else self.d[1]
+
+    def dmag(self, n: int) -> np.ndarray:
+        """Upper bound of |partial derivative| per input and cell, shape (n, N)."""
+        if self.order < 1:
+            raise ValueError(f"the gradient needs order >= 1, not {self.order}")
+        if self.d is None:
+            return np.zeros((n, self.lo.size))
+        return np.broadcast_to(np.maximum(np.abs(self.d[0]), np.abs(self.d[1])), (n, self.lo.size))
+
+    def hmag(self, n: int) -> np.ndarray:
+        """Upper bound of |second partial derivative| per stored pair and cell."""
+        if self.order < 2:
+            raise ValueError(f"the Hessian needs order 2, not {self.order}")
+        m = n * (n + 1) // 2
+        if self.h is None:
+            return np.zeros((m, self.lo.size))
+        return np.broadcast_to(np.maximum(np.abs(self.h[0]), np.abs(self.h[1])), (m, self.lo.size))
+
+    def value(self) -> "Interval":
+        """The value alone, as a constant (no derivatives)."""
+        return Interval(self.lo, self.hi)
 
     def __repr__(self) -> str:
-        return f"Interval(lo={self.lo!r}, hi={self.hi!r}, dlo={self.dlo!r}, dhi={self.dhi!r})"
+        return f"Interval(lo={self.lo!r}, hi={self.hi!r}, d={self.d!r}, h={self.h!r}, order={self.order})"
 
     # -- helpers ---------------------------------------------------------------------------
     @staticmethod
@@ -157,32 +240,29 @@ class Interval:
         v = np.asarray(x, dtype=np.float64)
         return Interval(v, v)
 
-    def _chain(self, glo, ghi, lo, hi) -> "Interval":
-        """Result with value [lo, hi] and derivative g'(self) * d(self), g' in [glo, ghi]."""
-        if self.dlo is None:
-            return Interval(lo, hi)
-        dlo, dhi = _mul_bounds(glo, ghi, self.dlo, self.dhi)
-        return Interval(lo, hi, dlo, dhi)
+    def _chain(self, lo, hi, g1, g2) -> "Interval":
+        """g(self) with value [lo, hi], g' in the pair ``g1`` and g'' in the pair ``g2()``:
+        gradient g' d, Hessian g' h + g'' d d^T."""
+        if self.d is None:
+            return Interval(lo, hi, order=self.order)
+        d = _scale(g1, self.d)
+        h = None
+        if self.order >= 2:
+            h = _add_pairs([_scale(g1, self.h), _scale(g2(), _outer_self(self.d))])
+        return Interval(lo, hi, d, h, self.order)
 
     # -- arithmetic --------------------------------------------------------------------------
     def __neg__(self):
-        if self.dlo is None:
-            return Interval(-self.hi, -self.lo)
-        return Interval(-self.hi, -self.lo, -self.dhi, -self.dlo)
+        neg = (lambda p: None if p is None else (-p[1], -p[0]))
+        return Interval(-self.hi, -self.lo, neg(self.d), neg(self.h), self.order)
 
     def __pos__(self):
         return self
 
     def __add__(self, other):
         o = self._lift(other)
-        lo, hi = _down(self.lo + o.lo), _up(self.hi + o.hi)
-        if self.dlo is None and o.dlo is None:
-            return Interval(lo, hi)
-        if o.dlo is None:
-            return Interval(lo, hi, self.dlo, self.dhi)
-        if self.dlo is None:
-            return Interval(lo, hi, o.dlo, o.dhi)
-        return Interval(lo, hi, _down(self.dlo + o.dlo), _up(self.dhi + o.dhi))
+        return Interval(_down(self.lo + o.lo), _up(self.hi + o.hi), _add_pairs([self.d, o.d]),
+                        _add_pairs([self.h, o.h]), min(self.order, o.order))
 
     __radd__ = __add__
 
@@ -196,25 +276,23 @@ class Interval:
         if other is self:
             return self.sqr()
         o = self._lift(other)
-        lo, hi = _mul_bounds(self.lo, self.hi, o.lo, o.hi)
-        parts = []
-        if o.dlo is not None:
-            parts.append(_mul_bounds(self.lo, self.hi, o.dlo, o.dhi))
-        if self.dlo is not None:
-            parts.append(_mul_bounds(o.lo, o.hi, self.dlo, self.dhi))
-        if not parts:
-            return Interval(lo, hi)
-        if len(parts) == 1:
-            return Interval(lo, hi, *parts[0])
-        (alo, ahi), (blo, bhi) = parts
-        return Interval(lo, hi, _down(alo + blo), _up(ahi + bhi))
+        order = min(self.order, o.order)
+        a, b = (self.lo, self.hi), (o.lo, o.hi)
+        lo, hi = _mul_bounds(*a, *b)
+        d = _add_pairs([_scale(a, o.d), _scale(b, self.d)]) if order >= 1 else None
+        h = None
+        if order >= 2:
+            cross = _outer_cross(self.d, o.d) if self.d is not None and o.d is not None else None
+            h = _add_pairs([_scale(a, o.h), _scale(b, self.h), cross])
+        return Interval(lo, hi, d, h, order)
 
     __rmul__ = __mul__
 
     def sqr(self) -> "Interval":
         """x**2 with the tight (non-negative) enclosure."""
         lo, hi = _sqr_bounds(self.lo, self.hi)
-        return self._chain(2.0 * self.lo, 2.0 * self.hi, lo, hi)  # doubling is exact
+        two = np.full_like(self.lo, 2.0)
+        return self._chain(lo, hi, (2.0 * self.lo, 2.0 * self.hi), lambda: (two, two))  # exact
 
     def reciprocal(self) -> "Interval":
         """1 / x; the interval must not contain 0."""
@@ -222,22 +300,20 @@ class Interval:
         self, = _domain(bad, ZeroDivisionError, lambda: f"interval division: the divisor must not "
                         f"contain 0, not {_fmt(self.lo, self.hi, bad)}", self)
         lo, hi = _down(1.0 / self.hi), _up(1.0 / self.lo)
-        if self.dlo is None:
-            return Interval(lo, hi)
-        # d(1/x) = -dx / x**2
-        slo, shi = _sqr_bounds(self.lo, self.hi)
-        glo, ghi = _down(-1.0 / slo), _up(-1.0 / shi)
-        return self._chain(glo, ghi, lo, hi)
+        if self.d is None:
+            return Interval(lo, hi, order=self.order)
+        r = Interval(lo, hi)
+        g1 = -(r * r)                      # -1/x**2
+        return self._chain(lo, hi, (g1.lo, g1.hi), lambda: _pair(2.0 * (r * r * r)))  # 2/x**3
 
     def __truediv__(self, other):
         o = self._lift(other)
-        if o.dlo is None and np.all((o.lo == o.hi) & (o.lo != 0)):
+        if o.d is None and np.all((o.lo == o.hi) & (o.lo != 0)):
             # exact divisor: one rounding per bound (tighter than multiplying by 1/o)
-            qlo, qhi = _div_point(self.lo, self.hi, o.lo)
-            if self.dlo is None:
-                return Interval(qlo, qhi)
-            dlo, dhi = _div_point(self.dlo, self.dhi, o.lo)
-            return Interval(qlo, qhi, dlo, dhi)
+            c = o.lo
+            div = (lambda p: None if p is None else _div_point(p[0], p[1], c))
+            qlo, qhi = _div_point(self.lo, self.hi, c)
+            return Interval(qlo, qhi, div(self.d), div(self.h), min(self.order, o.order))
         return self * o.reciprocal()
 
     def __rtruediv__(self, other):
@@ -250,15 +326,19 @@ class Interval:
         if k < 0:
             return (self ** -k).reciprocal()
         if k == 0:
-            return Interval(np.ones_like(self.lo), np.ones_like(self.hi))
+            return Interval(np.ones_like(self.lo), np.ones_like(self.hi), order=self.order)
         if k == 1:
             return self
         lo, hi = _pow_bounds(self.lo, self.hi, k)
-        if self.dlo is None:
-            return Interval(lo, hi)
-        plo, phi = _pow_bounds(self.lo, self.hi, k - 1)
-        glo, ghi = _mul_bounds(float(k), float(k), plo, phi)
-        return self._chain(glo, ghi, lo, hi)
+        g1 = _mul_bounds(float(k), float(k), *_pow_bounds(self.lo, self.hi, k - 1))
+        c2 = float(k * (k - 1))
+        g2 = (lambda: _mul_bounds(c2, c2, *_pow_bounds(self.lo, self.hi, k - 2))
+              if k > 2 else (np.full_like(self.lo, c2), np.full_like(self.lo, c2)))
+        return self._chain(lo, hi, g1, g2)
+
+
+def _pair(x: Interval):
+    return x.lo, x.hi
 
 
 def _div_point(lo, hi, c):
@@ -298,20 +378,15 @@ def sqrt(x: Interval) -> Interval:
     x, = _domain(bad, IntervalDomainError,
                  lambda: f"sqrt: the argument must be >= 0, not {_fmt(x.lo, x.hi, bad)}", x)
     lo, hi = np.maximum(_down(np.sqrt(x.lo)), 0.0), _up(np.sqrt(x.hi))
-    if x.dlo is None:
-        return Interval(lo, hi)
+    if x.d is None:
+        return Interval(lo, hi, order=x.order)
     bad = x.lo <= 0
     x, = _domain(bad, IntervalDomainError, lambda: f"sqrt: the derivative is unbounded at 0; the "
                  f"argument must be > 0, not {_fmt(x.lo, x.hi, bad)}", x)
     lo, hi = np.where(bad, np.nan, lo), np.where(bad, np.nan, hi)
-    glo, ghi = _down(0.5 / hi), _up(0.5 / lo)  # 1 / (2 sqrt(x)), decreasing
-    return x._chain(glo, ghi, lo, hi)
-
-
-def _one_minus_sqr_sqrt(x: Interval):
-    """Enclosure of sqrt(1 - x**2) over x's value interval (for the acos/asin derivative)."""
-    slo, shi = _sqr_bounds(x.lo, x.hi)
-    return np.sqrt(np.maximum(_down(1.0 - shi), 0.0)), np.sqrt(_up(1.0 - slo))
+    s = Interval(lo, hi)
+    g1 = 0.5 / s                                       # 1 / (2 sqrt x)
+    return x._chain(lo, hi, _pair(g1), lambda: _pair(-0.5 * g1 / x.value()))  # -1 / (4 x sqrt x)
 
 
 def _inverse_trig(x: Interval, name: str, f, sign: float) -> Interval:
@@ -321,19 +396,19 @@ def _inverse_trig(x: Interval, name: str, f, sign: float) -> Interval:
                  f"not {_fmt(x.lo, x.hi, bad)}", x)
     a, b = f(x.lo), f(x.hi)
     lo, hi = _widen(np.minimum(a, b), np.maximum(a, b), LIBM_ULPS)
-    if x.dlo is None:
-        return Interval(lo, hi)
+    if x.d is None:
+        return Interval(lo, hi, order=x.order)
     bad = (x.lo <= -1) | (x.hi >= 1)
     x, = _domain(bad, IntervalDomainError, lambda: f"{name}: the derivative is unbounded at -1 and "
                  f"1; the argument must lie within (-1, 1), not {_fmt(x.lo, x.hi, bad)}", x)
-    rlo, rhi = _one_minus_sqr_sqrt(x)
-    rlo, rhi = _down(rlo), _up(rhi)         # sqrt rounding
-    bad = rlo <= 0
+    v = x.value()
+    one_minus = 1.0 - v.sqr()
+    bad = one_minus.lo <= 0
     x, = _domain(bad, IntervalDomainError, lambda: f"{name}: the argument is too close to -1 or 1 "
                  f"for a finite derivative bound: {_fmt(x.lo, x.hi, bad)}", x)
     lo, hi = np.where(np.isnan(x.lo), np.nan, lo), np.where(np.isnan(x.lo), np.nan, hi)
-    g = (_down(sign / rhi), _up(sign / rlo)) if sign > 0 else (_down(sign / rlo), _up(sign / rhi))
-    return x._chain(*g, lo, hi)
+    g1 = sign / sqrt(_nan_cells(one_minus, bad))       # +-1 / sqrt(1 - x**2)
+    return x._chain(lo, hi, _pair(g1), lambda: _pair(g1 * v / one_minus))  # +-x / (1 - x**2)**1.5
 
 
 def acos(x: Interval) -> Interval:
@@ -363,24 +438,29 @@ def _trig_bounds(lo, hi, f, max_phase, min_phase):
     return np.maximum(vlo, -1.0), np.minimum(vhi, 1.0)
 
 
+def _sin_bounds(lo, hi):
+    return _trig_bounds(lo, hi, np.sin, 0.5 * np.pi, -0.5 * np.pi)
+
+
+def _cos_bounds(lo, hi):
+    return _trig_bounds(lo, hi, np.cos, 0.0, np.pi)
+
+
 def sin(x: Interval) -> Interval:
     """Sine (radians); maxima at pi/2 + 2 pi k and minima at -pi/2 + 2 pi k are included."""
     x = Interval._lift(x)
-    lo, hi = _trig_bounds(x.lo, x.hi, np.sin, 0.5 * np.pi, -0.5 * np.pi)
-    if x.dlo is None:
-        return Interval(lo, hi)
-    glo, ghi = _trig_bounds(x.lo, x.hi, np.cos, 0.0, np.pi)
-    return x._chain(glo, ghi, lo, hi)
+    lo, hi = _sin_bounds(x.lo, x.hi)
+    return x._chain(lo, hi, _cos_bounds(x.lo, x.hi), lambda: (-hi, -lo))
 
 
 def cos(x: Interval) -> Interval:
     """Cosine (radians); maxima at 2 pi k and minima at pi + 2 pi k are included."""
     x = Interval._lift(x)
-    lo, hi = _trig_bounds(x.lo, x.hi, np.cos, 0.0, np.pi)
-    if x.dlo is None:
-        return Interval(lo, hi)
-    slo, shi = _trig_bounds(x.lo, x.hi, np.sin, 0.5 * np.pi, -0.5 * np.pi)
-    return x._chain(-shi, -slo, lo, hi)
+    lo, hi = _cos_bounds(x.lo, x.hi)
+    if x.d is None:
+        return Interval(lo, hi, order=x.order)
+    slo, shi = _sin_bounds(x.lo, x.hi)
+    return x._chain(lo, hi, (-shi, -slo), lambda: (-hi, -lo))
 
 
 def atan2(y: Interval, x: Interval) -> Interval:
@@ -402,43 +482,62 @@ def atan2(y: Interval, x: Interval) -> Interval:
     lo, hi = _widen(np.minimum.reduce(corners), np.maximum.reduce(corners), LIBM_ULPS)
     lo = np.maximum(lo, -np.pi - 1e-15)
     hi = np.minimum(hi, np.pi + 1e-15)
-    if x.dlo is None and y.dlo is None:
-        return Interval(lo, hi)
-    # d atan2(y, x) = (x dy - y dx) / (x**2 + y**2)
-    r2 = x.sqr() + y.sqr()
-    num = _strip(x) * y - _strip(y) * x
-    d = num * _strip(r2).reciprocal()
-    return Interval(lo, hi, d.dlo, d.dhi)
+    order = min(x.order, y.order)
+    if x.d is None and y.d is None:
+        return Interval(lo, hi, order=order)
+    # gradient (x dy - y dx) / r2; Hessian: first partials times the operands' Hessians plus
+    # second partials atan_xx = 2xy / r2**2 = -atan_yy, atan_xy = (y**2 - x**2) / r2**2
+    xv, yv = x.value(), y.value()
+    inv = (xv.sqr() + yv.sqr()).reciprocal()
+    gx, gy = -yv * inv, xv * inv
+    d = _add_pairs([_scale(_pair(gx), x.d), _scale(_pair(gy), y.d)])
+    h = None
+    if order >= 2:
+        inv2 = inv.sqr()
+        gxx, gxy = 2.0 * (xv * yv) * inv2, (yv.sqr() - xv.sqr()) * inv2
+        parts = [_scale(_pair(gx), x.h), _scale(_pair(gy), y.h)]
+        if x.d is not None:
+            parts.append(_scale(_pair(gxx), _outer_self(x.d)))
+        if y.d is not None:
+            parts.append(_scale(_pair(-gxx), _outer_self(y.d)))
+        if x.d is not None and y.d is not None:
+            parts.append(_scale(_pair(gxy), _outer_cross(x.d, y.d)))
+        h = _add_pairs(parts)
+    return Interval(lo, hi, d, h, order)
 
 
 def clamp(x: Interval, lo: float, hi: float) -> Interval:
-    """min(max(x, lo), hi). The derivative passes through where the value interval lies inside
-    [lo, hi], is 0 where it lies outside, and is the hull with 0 otherwise (a bound on the
-    generalized gradient of the Lipschitz clamp, valid in the mean-value theorem)."""
+    """min(max(x, lo), hi).
+
+    Where the value interval lies inside [lo, hi] the derivatives pass through; where it lies
+    outside they are 0; otherwise the gradient is the hull with 0 (a bound on the generalized
+    gradient of the Lipschitz clamp, valid in the mean-value theorem) and the Hessian is NaN
+    (the clamp is not twice differentiable there: no second-order bound exists).
+    """
     x = Interval._lift(x)
     vlo, vhi = np.clip(x.lo, lo, hi), np.clip(x.hi, lo, hi)
-    if x.dlo is None:
-        return Interval(vlo, vhi)
     inside = (x.lo >= lo) & (x.hi <= hi)
-    if np.all(inside):
-        return Interval(vlo, vhi, x.dlo, x.dhi)
+    if x.d is None or np.all(inside):
+        return Interval(vlo, vhi, x.d, x.h, x.order)
     outside = (x.hi <= lo) | (x.lo >= hi)
     dlo = np.where(inside, x.dlo, np.where(outside, 0.0, np.minimum(x.dlo, 0.0)))
     dhi = np.where(inside, x.dhi, np.where(outside, 0.0, np.maximum(x.dhi, 0.0)))
-    return Interval(vlo, vhi, dlo, dhi)
+    h = None
+    if x.order >= 2:
+        m = x.lo.size
+        n = x.dlo.shape[0]
+        hlo, hhi = (np.zeros((n * (n + 1) // 2, m)),) * 2 if x.h is None else x.h
+        kink = ~inside & ~outside
+        h = (np.where(inside, hlo, np.where(kink, np.nan, 0.0)),
+             np.where(inside, hhi, np.where(kink, np.nan, 0.0)))
+    return Interval(vlo, vhi, (dlo, dhi), h, x.order)
 
 
 def ldexp(x: Interval, k: int) -> Interval:
     """x * 2**k, exact (barring overflow and underflow)."""
     x = Interval._lift(x)
-    if x.dlo is None:
-        return Interval(np.ldexp(x.lo, k), np.ldexp(x.hi, k))
-    return Interval(np.ldexp(x.lo, k), np.ldexp(x.hi, k), np.ldexp(x.dlo, k), np.ldexp(x.dhi, k))
-
-
-def _strip(v: Interval) -> Interval:
-    """The value of ``v`` without its derivative (a constant factor in a product rule)."""
-    return Interval(v.lo, v.hi)
+    sc = (lambda p: None if p is None else (np.ldexp(p[0], k), np.ldexp(p[1], k)))
+    return Interval(np.ldexp(x.lo, k), np.ldexp(x.hi, k), sc(x.d), sc(x.h), x.order)
 
 
 # -- constructors -------------------------------------------------------------------------------
@@ -447,27 +546,27 @@ def point(x) -> Interval:
     return Interval._lift(x)
 
 
-def variables(lo, hi, derivatives: bool = True) -> list[Interval]:
+def variables(lo, hi, order: int = 1) -> list[Interval]:
     """The n input variables over cells ``[lo, hi]`` (arrays of shape (N, n)).
 
-    Variable k has value interval ``[lo[:, k], hi[:, k]]`` and, if ``derivatives``, the unit
-    partial derivative with respect to input k.
+    Variable k has value interval ``[lo[:, k], hi[:, k]]``, the unit gradient along input k if
+    ``order >= 1`` and a zero Hessian if ``order == 2``.
     """
+    if order not in range(MAX_ORDER + 1):
+        raise ValueError(f"order must be 0, 1 or 2, not {order!r}")
     lo, hi = np.atleast_2d(np.asarray(lo, dtype=np.float64)), np.atleast_2d(np.asarray(hi, dtype=np.float64))
     if lo.shape != hi.shape:
         raise ValueError(f"lo and hi must have one shape, not {lo.shape} and {hi.shape}")
     bad = ~(lo <= hi)
     if np.any(bad):
         raise ValueError(f"cell bounds must satisfy lo <= hi, not {_fmt(lo, hi, bad)}")
-    n, cells = lo.shape[1], lo.shape[0]
+    cells, n = lo.shape
     out = []
     for k in range(n):
-        if derivatives:
-            d = np.zeros((n, 1))
-            d[k] = 1.0
-            out.append(Interval(lo[:, k], hi[:, k], np.broadcast_to(d, (n, cells)), np.broadcast_to(d, (n, cells))))
-        else:
-            out.append(Interval(lo[:, k], hi[:, k]))
+        unit = np.zeros((n, 1))
+        unit[k] = 1.0
+        d = (np.broadcast_to(unit, (n, cells)),) * 2 if order >= 1 else None
+        out.append(Interval(lo[:, k], hi[:, k], d, None, order))
     return out
 
 
