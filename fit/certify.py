@@ -6,12 +6,17 @@ whole real input box, not only at sample points:
 - ``P`` is the plan's ideal function (:func:`ikseries.sim.golden.evaluate_ideal`: unrounded
   constants, exact shifts), ``f`` the reference pulse width,
   ``calibration(geometry.angles(xp, *inputs)) * ticks_per_pu``;
-- the box is covered by cells; on a cell with centre ``c`` and half-widths ``h`` the mean-value
-  form gives ``|e(x)| <= |e(c)| + sum_k sup|de/dx_k (cell)| h_k``, with ``e(c)`` enclosed by
-  interval arithmetic at the point and the partials enclosed over the cell by interval
-  forward-mode differentiation of both ``P`` and ``f`` (:mod:`ikseries.fit.interval`);
-- cells whose bound exceeds the target are bisected along the input with the largest
-  ``sup|de/dx_k| h_k``, until every cell meets the target or the cell budget is spent.
+- the box is covered by cells; on a cell with centre ``c`` and half-widths ``h`` the bound is
+  the least of the plain interval enclosure of ``e``, the mean-value form
+  ``|e(c)| + sum_k sup|de/dx_k (cell)| h_k`` and the second-order Taylor form
+  ``|e(c)| + sum_k |de/dx_k (c)| h_k + 1/2 sum_jk sup|d2e/dx_j dx_k (cell)| h_j h_k``, with
+  ``e(c)`` and its gradient enclosed by interval arithmetic at the point and the derivatives
+  enclosed over the cell by interval forward-mode differentiation of both ``P`` and ``f``
+  (:mod:`ikseries.fit.interval`). Where a clamp may switch inside the cell, ``e`` is not twice
+  differentiable and only the first two apply;
+- cells whose bound exceeds the target are bisected along the input contributing most to the
+  bound, until every cell meets the target or the cell budget is spent (the bound is then
+  still certified, only above the target).
 
 The certified total error per servo adds the certified quantization bound of the integer
 accumulator (:meth:`Plan.rounding_bounds`), the rounding from the accumulator to the output
@@ -404,11 +409,13 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
             {"lo": dict(zip(names, best["lo"].tolist())), "hi": dict(zip(names, best["hi"].tolist())),
              "bound_pu": best["bound"] / tpp},
             time.perf_counter() - t0))
-        progress(servos[-1].name + ": " + Certificate(tuple(servos[-1:]), {}, "").lines()[0].split(": ", 1)[1])
+        progress(Certificate((servos[-1],), {}, METHOD).lines()[0])
     box = {n: (float(a), float(b)) for n, a, b in zip(names, box_lo, box_hi)}
     return Certificate(tuple(servos), box, METHOD)
 
 
-METHOD = ("mean-value form |e(c)| + sum_k sup|de/dx_k| h_k on adaptively bisected cells; interval "
-          "arithmetic with outward rounding and forward-mode derivatives for the plan's ideal "
-          "function and the reference IK; box = plan input ranges [lo, hi] * 2**-frac")
+METHOD = ("per cell the least of the plain interval enclosure, the mean-value form |e(c)| + "
+          "sum_k sup|de/dx_k| h_k and the second-order Taylor form, on adaptively bisected cells; "
+          "interval arithmetic with outward rounding and forward-mode first and second derivatives "
+          "of the plan's ideal function and of the reference IK; box = plan input ranges "
+          "[lo, hi] * 2**-frac")
