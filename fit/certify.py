@@ -405,7 +405,7 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
         clamp = 0.0 if clamp_rng is None else max(0.0, clamp_rng[0] - f_lo, f_hi - clamp_rng[1])
         servos.append(ServoCertificate(
             o.name, best["bound"] / tpp, sampled / tpp, rounding_pu, out_pu, clamp / tpp, target,
-            best["bound"] <= target * tpp, cells, evaluated,
+            bool(best["bound"] <= target * tpp), cells, evaluated,
             {"lo": dict(zip(names, best["lo"].tolist())), "hi": dict(zip(names, best["hi"].tolist())),
              "bound_pu": best["bound"] / tpp},
             time.perf_counter() - t0))
