@@ -1,0 +1,421 @@
+"""Certified bound of a plan's error over the continuous workspace box.
+
+Per servo, the approximation error ``e(x) = P(x) - f(x)`` (PWM ticks) is bounded over the
+whole real input box, not only at sample points:
+
+- ``P`` is the plan's ideal function (:func:`ikseries.sim.golden.evaluate_ideal`: unrounded
+  constants, exact shifts), ``f`` the reference pulse width,
+  ``calibration(geometry.angles(xp, *inputs)) * ticks_per_pu``;
+- the box is covered by cells; on a cell with centre ``c`` and half-widths ``h`` the bound is
+  the least of the plain interval enclosure of ``e``, the mean-value form
+  ``|e(c)| + sum_k sup|de/dx_k (cell)| h_k`` and the second-order Taylor form
+  ``|e(c)| + sum_k |de/dx_k (c)| h_k + 1/2 sum_jk sup|d2e/dx_j dx_k (cell)| h_j h_k``, with
+  ``e(c)`` and its gradient enclosed by interval arithmetic at the point and the derivatives
+  enclosed over the cell by interval forward-mode differentiation of both ``P`` and ``f``
+  (:mod:`ikseries.fit.interval`). Where a clamp may switch inside the cell, ``e`` is not twice
+  differentiable and only the first two apply;
+- cells whose bound exceeds the target are bisected along the input contributing most to the
+  bound, until every cell meets the target or the cell budget is spent (the bound is then
+  still certified, only above the target).
+
+The certified total error per servo adds the certified quantization bound of the integer
+accumulator (:meth:`Plan.rounding_bounds`), the rounding from the accumulator to the output
+integer (half a tick for round-half-up) and, if the output is clamped, the largest distance of
+``f`` from the clamp range (0 when the reference stays inside it).
+
+The box is ``[lo, hi] * 2**-frac`` of every plan input: the inputs are clamped to that range,
+so it covers every value the hardware can see.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from . import interval as ia
+from .plan import Plan
+
+__all__ = ["CertificationError", "ServoCertificate", "Certificate", "certify", "output_rounding",
+           "DEFAULT_MAX_CELLS"]
+
+#: Default budget of evaluated cells per servo.
+DEFAULT_MAX_CELLS = 400_000
+_CHUNK = 8192
+
+
+class CertificationError(ValueError):
+    """A plan whose certified error exceeds the tolerance."""
+
+
+@dataclass(frozen=True)
+class ServoCertificate:
+    """Certified error of one servo (all figures in pulse units unless stated)."""
+
+    name: str
+    approximation_pu: float   # certified sup |P - f| over the box
+    sampled_pu: float         # max |P - f| enclosure at the evaluated cell centres (lower bound)
+    rounding_pu: float        # certified |integer accumulator - P|
+    output_rounding_pu: float  # accumulator -> output integer (half a tick for round-half-up)
+    clamp_pu: float           # largest distance of f from the output clamp range (0 if inside)
+    target_pu: float          # refinement target for approximation_pu
+    converged: bool           # every cell met the target
+    cells: int                # cells in the final cover of the box
+    evaluated: int            # cells evaluated during refinement
+    worst: dict               # the cell with the largest bound: lo, hi per input, bound_pu
+    seconds: float
+
+    @property
+    def total_pu(self) -> float:
+        """Certified bound of |emitted pulse - reference pulse| over the box."""
+        return self.approximation_pu + self.rounding_pu + self.output_rounding_pu + self.clamp_pu
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """Certified error bounds of every servo of a plan over the workspace box."""
+
+    servos: tuple[ServoCertificate, ...]
+    box: dict                 # input name -> (lo, hi) real values certified over
+    method: str
+
+    def check(self, tolerance: float) -> None:
+        """Raise :class:`CertificationError` if any servo's certified total exceeds ``tolerance``.
+
+        Raises
+        ------
+        CertificationError
+            Naming the first failing servo, its certified total and the tolerance.
+        """
+        if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not tolerance > 0:
+            raise ValueError(f"tolerance must be a number > 0 pu, not {tolerance!r}")
+        for s in self.servos:
+            if not s.total_pu <= tolerance:
+                raise CertificationError(
+                    f"servo {s.name}: certified error {s.total_pu:.4f} pu exceeds the tolerance "
+                    f"{tolerance:g} pu (approximation {s.approximation_pu:.4f}"
+                    f"{'' if s.converged else ' (cell budget spent)'} + quantization "
+                    f"{s.rounding_pu:.4f} + output rounding {s.output_rounding_pu:.4f}"
+                    f"{f' + clamp {s.clamp_pu:.4f}' if s.clamp_pu else ''} pu)")
+
+    def to_json(self) -> dict:
+        return {"method": self.method, "box": {k: list(v) for k, v in self.box.items()},
+                "servos": [{**asdict(s), "total_pu": s.total_pu} for s in self.servos]}
+
+    def lines(self) -> list[str]:
+        """Human-readable summary, one line per servo."""
+        return [f"{s.name}: certified <= {s.total_pu:.4f} pu (approximation {s.approximation_pu:.4f}, "
+                f"sampled {s.sampled_pu:.4f}; quantization {s.rounding_pu:.4f}; output rounding "
+                f"{s.output_rounding_pu:.4f}{f'; clamp {s.clamp_pu:.4f}' if s.clamp_pu else ''}) "
+                f"over {s.cells} cells, {s.seconds:.1f} s" + ("" if s.converged else " [budget spent]")
+                for s in self.servos]
+
+
+# -- the plan's ideal function over intervals ----------------------------------------------------
+def _plan_function(plan: Plan, node: int):
+    """``values -> Interval`` of the ideal real value of ``node`` for input Intervals by name."""
+    order = sorted(plan.cone(node))
+    last = {}
+    for i in order:
+        for a in plan.nodes[i].args:
+            last[a] = i
+    nodes = plan.nodes
+
+    def run(values: dict) -> ia.Interval:
+        vals: dict = {}
+        for i in order:
+            n = nodes[i]
+            vals[i] = _node_value(n, nodes, vals, values)
+            for a in set(n.args):
+                if last.get(a) == i and a != node:
+                    del vals[a]
+        return vals[node]
+    return run
+
+
+def _node_value(n, nodes, vals, values) -> ia.Interval:
+    op = n.op
+    if op == "input":
+        return values[n.param]
+    if op == "const":
+        return ia.point(n.ideal if n.ideal is not None else np.ldexp(float(n.param), -n.frac))
+    a = vals[n.args[0]]
+    if op == "add":
+        return a + vals[n.args[1]]
+    if op == "mul":
+        return a.sqr() if n.args[0] == n.args[1] else a * vals[n.args[1]]
+    if op == "clamp":
+        return ia.clamp(a, np.ldexp(float(n.param[0]), -n.frac), np.ldexp(float(n.param[1]), -n.frac))
+    if op == "frac":
+        return ia.ldexp(a, nodes[n.args[0]].frac - n.frac)
+    if op in ("shr", "shl"):
+        return a  # exact in the ideal arithmetic
+    raise ValueError(f"plan node operation must be one of input, const, add, mul, clamp, frac, "
+                     f"shr, shl, not {op!r}")
+
+
+# -- the reference --------------------------------------------------------------------------------
+def _reference_function(robot, servo: int, ticks_per_pu: float):
+    """``values -> Interval`` of the reference pulse width of ``servo`` in ticks."""
+    cal = robot.calibration
+    names = [i.name for i in robot.inputs]
+    slope = cal.directions[servo] * cal.pu_per_degree
+    neutral = cal.neutral_angles[servo]
+
+    def run(values: dict) -> ia.Interval:
+        angle = robot.geometry.angles(ia.MATH, *(values[k] for k in names))[servo]
+        return (cal.neutral_pulse_pu + slope * (angle - neutral)) * ticks_per_pu
+    return run
+
+
+# -- output stage -----------------------------------------------------------------------------------
+def output_rounding(plan: Plan, k: int) -> tuple[float, tuple[float, float] | None]:
+    """Bound on |output integer - accumulator| (before any clamp) and the clamp range, in ticks.
+
+    The path from ``outputs[k].node`` down to ``outputs[k].preround`` may be an optional clamp
+    over additions of constants and shifts (round half up: ``shr(add(acc, half))`` gives half a
+    tick).
+
+    Raises
+    ------
+    ValueError
+        If the path holds any other operation.
+    """
+    o = plan.outputs[k]
+    i, rng = o.node, None
+    n = plan.nodes[i]
+    if n.op == "clamp":
+        rng = (np.ldexp(float(n.param[0]), -n.frac), np.ldexp(float(n.param[1]), -n.frac))
+        i = n.args[0]
+    chain = []
+    while i != o.preround:
+        n = plan.nodes[i]
+        if n.op in ("shr", "shl"):
+            chain.append(n)
+            i = n.args[0]
+        elif n.op == "add" and any(plan.nodes[a].op == "const" for a in n.args):
+            j = 1 if plan.nodes[n.args[1]].op == "const" else 0
+            chain.append(n)
+            i = n.args[1 - j]
+        else:
+            raise ValueError(f"output {o.name}: the path from node {o.node} to the accumulator "
+                             f"{o.preround} must be a clamp over constant additions and shifts, "
+                             f"not a {n.op!r} node ({i})")
+    lo = hi = 0.0      # range of (value - accumulator value), real
+    for n in reversed(chain):
+        if n.op == "add":
+            c = next(plan.nodes[a] for a in n.args if plan.nodes[a].op == "const")
+            lo, hi = lo + np.ldexp(float(c.param), -c.frac), hi + np.ldexp(float(c.param), -c.frac)
+        elif n.op == "shr":   # floor to frac(n) bits: lowers the value by < 2**-frac(n)
+            lo -= np.ldexp(1.0 - 2.0 ** -n.param, -n.frac)
+    return max(abs(lo), abs(hi)), rng
+
+
+# -- cells -------------------------------------------------------------------------------------------
+def _sum_up(rows):
+    """Upward-rounded sum over the first axis."""
+    total = rows[0]
+    for r in rows[1:]:
+        total = ia._up(total + r)
+    return total
+
+
+def _cell_bounds(err, names, lo, hi):
+    """Bound of |e| on cells [lo, hi] (shape (N, n)): the least of the plain enclosure, the
+    mean-value form and the second-order Taylor form.
+
+    Returns (bound, per-input contributions (N, n) of the form used, e(c) enclosure, f enclosure).
+    """
+    n = len(names)
+    c = np.minimum(np.maximum(0.5 * (lo + hi), lo), hi)
+    h = ia._up(np.maximum(ia._up(c - lo), ia._up(hi - c))).T              # (n, N) half-widths
+    e_c, _ = err(dict(zip(names, ia.variables(c, c, order=1))))
+    with ia.lenient():   # a cell too coarse for an enclosure gets NaN: it is split, not fatal
+        e_cell, f_cell = err(dict(zip(names, ia.variables(lo, hi, order=2))))
+    # mean-value form: |e(c)| + sum_k sup|de/dx_k| h_k
+    c1 = ia._up(e_cell.dmag(n) * h)
+    b1 = ia._up(e_c.mag + _sum_up(c1))
+    # Taylor form: |e(c)| + sum_k |de/dx_k(c)| h_k + 1/2 sum_jk sup|d2e/dx_j dx_k| h_j h_k
+    j, k = ia.hessian_pairs(n)
+    weight = np.where(j == k, 0.5, 1.0)[:, None]                          # off-diagonal twice
+    q = ia._up(ia._up(e_cell.hmag(n) * ia._up(h[j] * h[k])) * weight)
+    c2 = ia._up(e_c.dmag(n) * h)
+    for p in range(len(j)):                                                # attribute to axes
+        c2[j[p]] = ia._up(c2[j[p]] + 0.5 * q[p])
+        c2[k[p]] = ia._up(c2[k[p]] + 0.5 * q[p])
+    b2 = ia._up(ia._up(e_c.mag + _sum_up(ia._up(e_c.dmag(n) * h))) + _sum_up(q))
+    bound = np.fmin(e_cell.mag, np.fmin(b1, b2))
+    bound = np.where(np.isfinite(bound), bound, np.inf)
+    contrib = np.where(np.isfinite(b2) & (b2 <= b1), c2, c1)
+    contrib = np.where(np.isfinite(contrib), contrib, np.inf).T
+    return bound, contrib, e_c, f_cell
+
+
+def _initial_cells(box_lo, box_hi, per_axis):
+    axes = [np.linspace(a, b, m + 1) for a, b, m in zip(box_lo, box_hi, per_axis)]
+    for ax, a, b in zip(axes, box_lo, box_hi):
+        ax[0], ax[-1] = a, b                                   # exact box ends
+    edges_lo = np.meshgrid(*(ax[:-1] for ax in axes), indexing="ij")
+    edges_hi = np.meshgrid(*(ax[1:] for ax in axes), indexing="ij")
+    lo = np.stack([g.ravel() for g in edges_lo], 1)
+    hi = np.stack([g.ravel() for g in edges_hi], 1)
+    return lo, hi
+
+
+def _split(lo, hi, axis):
+    """Bisect every cell along its ``axis``; cells too narrow to split are returned apart."""
+    rows = np.arange(len(lo))
+    mid = 0.5 * (lo[rows, axis] + hi[rows, axis])
+    ok = (mid > lo[rows, axis]) & (mid < hi[rows, axis])
+    lo, hi, mid, axis, rows = lo[ok], hi[ok], mid[ok], axis[ok], rows[ok]
+    r = np.arange(len(lo))
+    lo2, hi1 = lo.copy(), hi.copy()
+    hi1[r, axis] = mid
+    lo2[r, axis] = mid
+    return np.concatenate([lo, lo2]), np.concatenate([hi1, hi]), ~ok
+
+
+def _split_axis(contrib, lo, hi, box_width):
+    """The input with the largest contribution sup|de/dx_k| h_k; the relatively widest side
+    where the contributions are not all finite."""
+    axis = np.argmax(contrib, axis=1)
+    wild = ~np.all(np.isfinite(contrib), axis=1)
+    axis[wild] = np.argmax((hi[wild] - lo[wild]) / box_width, axis=1)
+    return axis
+
+
+def _refine(err, names, box_lo, box_hi, target, per_axis, max_cells, progress, label):
+    """Adaptive cover of the box; returns the summary of the final cells."""
+    lo, hi = _initial_cells(box_lo, box_hi, per_axis)
+    evaluated, cells = 0, 0
+    best = {"bound": -np.inf, "lo": None, "hi": None}
+    sampled = 0.0
+    f_lo, f_hi = np.inf, -np.inf
+
+    def leaf(b, l, h, fl, fh):
+        nonlocal cells, f_lo, f_hi
+        cells += len(b)
+        if len(b):
+            j = int(np.argmax(b))
+            if b[j] > best["bound"]:
+                best.update(bound=float(b[j]), lo=l[j].copy(), hi=h[j].copy())
+            f_lo, f_hi = min(f_lo, float(fl.min())), max(f_hi, float(fh.max()))
+
+    rnd = 0
+    while len(lo):
+        parts = [_cell_bounds(err, names, lo[s:s + _CHUNK], hi[s:s + _CHUNK])
+                 for s in range(0, len(lo), _CHUNK)]
+        bound = np.concatenate([p[0] for p in parts])
+        contrib = np.concatenate([p[1] for p in parts])
+        sampled = max(sampled, max(float(np.max(p[2].mag)) for p in parts))
+        flo = np.concatenate([p[3].lo * np.ones(len(p[0])) for p in parts])
+        fhi = np.concatenate([p[3].hi * np.ones(len(p[0])) for p in parts])
+        evaluated += len(lo)
+        rnd += 1
+        done = bound <= target
+        leaf(bound[done], lo[done], hi[done], flo[done], fhi[done])
+        todo = np.flatnonzero(~done)
+        room = max(0, (max_cells - evaluated) // 2)
+        if len(todo) > room:                      # split the worst cells the budget allows
+            order = todo[np.argsort(bound[todo])[::-1]]
+            keep, todo = order[room:], order[:room]
+            leaf(bound[keep], lo[keep], hi[keep], flo[keep], fhi[keep])
+        progress(f"  {label}: round {rnd}: {len(lo)} cells, max bound {bound.max():.4g} ticks, "
+                 f"{len(todo)} to split")
+        if not len(todo):
+            break
+        sel_lo, sel_hi = lo[todo], hi[todo]
+        lo, hi, stuck = _split(sel_lo, sel_hi, _split_axis(contrib[todo], sel_lo, sel_hi, box_hi - box_lo))
+        t = todo[stuck]
+        leaf(bound[t], sel_lo[stuck], sel_hi[stuck], flo[t], fhi[t])
+    return best, sampled, cells, evaluated, (f_lo, f_hi)
+
+
+def _error_function(plan: Plan, robot, k: int):
+    """``values -> (e, f)`` Intervals: e = P - f and f for output k, in ticks."""
+    o = plan.outputs[k]
+    if o.name not in robot.servos:
+        raise ValueError(f"plan output must be one of the robot's servos {list(robot.servos)}, "
+                         f"not {o.name!r}")
+    p_fn = _plan_function(plan, o.preround)
+    f_fn = _reference_function(robot, robot.servos.index(o.name), o.ticks_per_pu)
+
+    def run(values):
+        f = f_fn(values)
+        return p_fn(values) - f, f
+    return run
+
+
+def _box(robot, plan: Plan) -> tuple[list[str], np.ndarray, np.ndarray]:
+    names = [i.name for i in robot.inputs]
+    if sorted(names) != sorted(i.name for i in plan.inputs):
+        raise ValueError(f"plan inputs must be the robot's inputs {names}, "
+                         f"not {[i.name for i in plan.inputs]}")
+    spec = {i.name: i for i in plan.inputs}
+    lo = np.array([np.ldexp(float(spec[n].lo), -spec[n].frac) for n in names])
+    hi = np.array([np.ldexp(float(spec[n].hi), -spec[n].frac) for n in names])
+    return names, lo, hi
+
+
+def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int = DEFAULT_MAX_CELLS,
+            initial: int = 4, progress=lambda msg: None) -> Certificate:
+    """Certified bound of every servo's error over the continuous workspace box.
+
+    Parameters
+    ----------
+    robot : Robot
+        Gives the reference: ``geometry.angles`` and the calibration.
+    plan : Plan
+        The fitted evaluation plan.
+    target_pu : float, optional
+        Refinement target for the approximation bound of every servo, in pu. Default: per
+        servo, what the robot's tolerance leaves after the quantization and output rounding
+        bounds (so that :meth:`Certificate.check` passes if the plan is good enough).
+    max_cells : int
+        Budget of evaluated cells per servo; when spent, the bound is still certified, only
+        above the target.
+    initial : int
+        Cells per input of the starting grid.
+    progress : callable
+        Receives one progress message per refinement round.
+
+    Returns
+    -------
+    Certificate
+    """
+    if isinstance(max_cells, bool) or not isinstance(max_cells, int) or max_cells < 1:
+        raise ValueError(f"max_cells must be a positive integer, not {max_cells!r}")
+    if isinstance(initial, bool) or not isinstance(initial, int) or initial < 1:
+        raise ValueError(f"initial must be a positive integer, not {initial!r}")
+    if target_pu is not None and (isinstance(target_pu, bool) or not isinstance(target_pu, (int, float))
+                                  or not target_pu > 0):
+        raise ValueError(f"target_pu must be a number > 0 pu or None, not {target_pu!r}")
+    names, box_lo, box_hi = _box(robot, plan)
+    quant = plan.rounding_bounds()
+    servos = []
+    for k, o in enumerate(plan.outputs):
+        t0 = time.perf_counter()
+        tpp = o.ticks_per_pu
+        out_round, clamp_rng = output_rounding(plan, k)
+        rounding_pu, out_pu = quant[o.preround] / tpp, out_round / tpp
+        target = robot.tolerance_pu - rounding_pu - out_pu if target_pu is None else float(target_pu)
+        err = _error_function(plan, robot, k)
+        best, sampled, cells, evaluated, (f_lo, f_hi) = _refine(
+            err, names, box_lo, box_hi, target * tpp, [initial] * len(names), max_cells, progress, o.name)
+        clamp = 0.0 if clamp_rng is None else max(0.0, clamp_rng[0] - f_lo, f_hi - clamp_rng[1])
+        servos.append(ServoCertificate(
+            o.name, best["bound"] / tpp, sampled / tpp, rounding_pu, out_pu, clamp / tpp, target,
+            bool(best["bound"] <= target * tpp), cells, evaluated,
+            {"lo": dict(zip(names, best["lo"].tolist())), "hi": dict(zip(names, best["hi"].tolist())),
+             "bound_pu": best["bound"] / tpp},
+            time.perf_counter() - t0))
+        progress(Certificate((servos[-1],), {}, METHOD).lines()[0])
+    box = {n: (float(a), float(b)) for n, a, b in zip(names, box_lo, box_hi)}
+    return Certificate(tuple(servos), box, METHOD)
+
+
+METHOD = ("per cell the least of the plain interval enclosure, the mean-value form |e(c)| + "
+          "sum_k sup|de/dx_k| h_k and the second-order Taylor form, on adaptively bisected cells; "
+          "interval arithmetic with outward rounding and forward-mode first and second derivatives "
+          "of the plan's ideal function and of the reference IK; box = plan input ranges "
+          "[lo, hi] * 2**-frac")
