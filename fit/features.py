@@ -177,7 +177,7 @@ class CylindricalStage(_Stage):
         # the servo polynomials would raise to the 8th power. Clamping to the true range
         # (plus the series error, so the clamp never moves a value away from the ideal)
         # keeps every later width tight.
-        lim = int(np.ceil((1.0 + 1.5 * self.trig.max_error) * 2 ** fc))
+        lim = int(np.ceil((1.0 + max(1.5 * self.trig.max_error, 2.0 ** -10)) * 2 ** fc))
         cos, sin = (b.clamp(v, -lim, lim) for v in (cos, sin))
         self._rcos = b.mul(rn, cos)
         rsin = b.mul(rn, sin)
