@@ -38,13 +38,13 @@ import numpy as np
 from ..fit.plan import Plan
 from .runner import _verilator_make_fixes, _verilator_path, simulator_available
 
-__all__ = ["Testbench", "write_vectors", "testbench_cpp", "build_testbench", "run_testbench"]
+__all__ = ["VerilatorTestbench", "write_vectors", "testbench_cpp", "build_testbench", "run_testbench"]
 
 MAX_REPORTED = 10   # mismatches / latency errors listed individually
 
 
 @dataclasses.dataclass(frozen=True)
-class Testbench:
+class VerilatorTestbench:
     """A built Verilator testbench for one plan's exported core."""
     binary: Path
     inputs: tuple[str, ...]
@@ -197,7 +197,7 @@ int main(int argc, char** argv) {{
 
 
 def build_testbench(plan: Plan, verilog: str, top: str, workdir, *, cxx_opt: str = "-O2",
-                    jobs: int = 2) -> Testbench:
+                    jobs: int = 2) -> VerilatorTestbench:
     """Verilate ``verilog`` (module ``top``) with the testbench into ``workdir/obj/V<top>``.
 
     Raises ``RuntimeError`` if Verilator is unavailable or the build fails (quoting its output).
@@ -228,10 +228,10 @@ def build_testbench(plan: Plan, verilog: str, top: str, workdir, *, cxx_opt: str
     if proc.returncode != 0 or not binary.is_file():
         tail = "\n".join((proc.stdout + proc.stderr).rstrip().splitlines()[-25:])
         raise RuntimeError(f"Verilator build of {top} failed (status {proc.returncode}):\n{tail}")
-    return Testbench(binary, tuple(n for n, _ in ins), tuple(n for n, _ in outs), build_s)
+    return VerilatorTestbench(binary, tuple(n for n, _ in ins), tuple(n for n, _ in outs), build_s)
 
 
-def run_testbench(tb: Testbench, vectors, latency: int, *, stall: float = 0.0, bubble: float = 0.0,
+def run_testbench(tb: VerilatorTestbench, vectors, latency: int, *, stall: float = 0.0, bubble: float = 0.0,
                   seed: int = 1, max_cycles: int | None = None) -> dict:
     """Run the testbench on a vectors file; returns its JSON result plus rates and wall time.
 
