@@ -32,11 +32,11 @@ wrapped in a generated module, :data:`HARNESS_TOP`, with five pins: ``clk``, ``r
 passed to the core), ``din``, ``load`` and ``dout``. While ``load`` is low, ``din`` shifts into
 a register chain whose bits drive every core input (stream payloads and the valid/ready handshake
 included) and a second chain shifts the captured outputs out on ``dout``; while ``load`` is high
-the inputs hold and every core output is captured into the second chain. Every core input therefore comes from a register and every output ends in
-one, nothing can be optimised away, and nextpnr reports the core's own register-to-register
-paths (the harness adds only one-LUT paths). The harness costs one FF per core input bit and one
-FF plus about one LUT per output bit, included in the reported utilisation
-(:attr:`PnrResult.harness_ffs`).
+the inputs hold and every core output is captured into the second chain. Every core input
+therefore comes from a register and every output ends in one, nothing can be optimised away, and
+nextpnr reports the core's own register-to-register paths (the harness adds only one-LUT paths).
+The harness costs one FF per core input bit and one FF plus about one LUT per output bit, included
+in the reported utilisation (:attr:`PnrResult.harness_ffs`).
 
 Does-not-fit
 ------------
@@ -223,8 +223,8 @@ def harness_verilog(ports: list[Port], top: str, clock: str = "clk", reset: str 
              f"module {HARNESS_TOP}(clk, rst, din, load, dout);",
              "  input clk;", "  input rst;", "  input din;", "  input load;", "  output dout;"]
     if ni:
-        lines += [f"  reg [{ni - 1}:0] in_sr = {ni}'d0;",
-                  f"  always @(posedge clk) if (!load) in_sr <= " + ("din;" if ni == 1 else f"{{in_sr[{ni - 2}:0], din}};")]
+        shift = "din" if ni == 1 else f"{{in_sr[{ni - 2}:0], din}}"
+        lines += [f"  reg [{ni - 1}:0] in_sr = {ni}'d0;", f"  always @(posedge clk) if (!load) in_sr <= {shift};"]
     lines += [f"  wire [{no - 1}:0] core_out;", f"  reg [{no - 1}:0] out_sr = {no}'d0;",
               "  always @(posedge clk)", "    if (load) out_sr <= core_out;",
               "    else out_sr <= " + ("1'b0;" if no == 1 else f"{{out_sr[{no - 2}:0], 1'b0}};"),

@@ -77,7 +77,9 @@ def testbench_cpp(plan: Plan, top: str) -> str:
     """C++ source of the testbench for ``V<top>`` (see the module docstring)."""
     ins, outs = _fields(plan)
     nin, nout = len(ins), len(outs)
-    mask = lambda w: "~0ULL" if w == 64 else f"0x{(1 << w) - 1:x}ULL"   # noqa: E731
+
+    def mask(w: int) -> str:
+        return "~0ULL" if w == 64 else f"0x{(1 << w) - 1:x}ULL"
     drive = "\n".join(f"        t->i_{n} = (uint64_t)rec[{k}] & {mask(w)};" for k, (n, w) in enumerate(ins))
     check = "\n".join(
         f"            {{ uint64_t got = (uint64_t)t->o_{n}, exp = (uint64_t)rec[{nin + k}] & {mask(w)};\n"
@@ -126,7 +128,10 @@ int main(int argc, char** argv) {{
     fseek(f, 0, SEEK_END);
     long bytes = ftell(f);
     fseek(f, 0, SEEK_SET);
-    if (bytes < 0 || bytes % (REC * 8)) {{ fprintf(stderr, "%s: size is not a multiple of %d\\n", path, REC * 8); return 2; }}
+    if (bytes < 0 || bytes % (REC * 8)) {{
+        fprintf(stderr, "%s: size is not a multiple of %d\\n", path, REC * 8);
+        return 2;
+    }}
     const uint64_t n = bytes / (REC * 8);
     std::vector<int64_t> data(n * REC);
     if (fread(data.data(), 8, n * REC, f) != n * REC) {{ fprintf(stderr, "short read\\n"); return 2; }}
