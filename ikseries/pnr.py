@@ -48,6 +48,7 @@ own "Device utilisation" is parsed if it still fails to place. Either way
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import json
 import os
 import re
@@ -336,6 +337,9 @@ def place_and_route(verilog: str, top: str, device: str, clock_hz: int, workdir:
     """
     _check_args(verilog, top, device, clock_hz, workdir, harness, seed)
     dev = PNR_DEVICES[device]
+    if not os.environ.get(f"IKSERIES_NEXTPNR_{dev.family.upper()}") \
+            and importlib.util.find_spec(f"yowasp_nextpnr_{dev.family}") is None:
+        raise PnrError(f"nextpnr for {device} is not installed (pip install yowasp-nextpnr-{dev.family})")
     ports = verilog_ports(verilog, top)
     if not any(p.name == clock for p in ports):
         raise ValueError(f"clock must be a port of module {top!r} {[p.name for p in ports]}, not {clock!r}")
