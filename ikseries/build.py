@@ -31,7 +31,9 @@ __all__ = ["BuildError", "build", "default_output_dir"]
 
 
 #: files a build writes only with some options; an earlier build's copies are removed
-OPTIONAL_ARTIFACTS = ("sim.vcd", *(f"cocotb_{sim}.log" for sim in SIMULATORS))
+# written only with some options (or by `ikseries report --pnr` on the build directory): a
+# rebuild removes them so they never describe older Verilog
+OPTIONAL_ARTIFACTS = ("sim.vcd", "pnr.json", *(f"cocotb_{sim}.log" for sim in SIMULATORS))
 
 
 def default_output_dir(robot) -> Path:

