@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kinematics import UnreachableError
+from .certify import certify
 from .features import Normaliser, coordinate_stage
 from .horner import horner, parity_split
 from .plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for
@@ -393,8 +394,13 @@ def _choose_formats(robot, inputs, stage, fits, budget: Budget, progress) -> int
                    f"{budget.quantization:g} pu in 63-bit intermediates")
 
 
-def fit_robot(robot, progress=lambda msg: None) -> tuple[Plan, list[ServoFit]]:
-    """Fit every servo of ``robot`` and return the evaluation plan and the fits."""
+def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tuple[Plan, list[ServoFit]]:
+    """Fit every servo of ``robot`` and return the evaluation plan and the fits.
+
+    With ``certified`` the error over the continuous workspace box is then bounded
+    rigorously (:func:`ikseries.fit.certify.certify`); the certificate is stored in
+    ``plan.meta["certificate"]``.
+    """
     tpp = robot.ticks_per_pu
     budget = Budget.split(robot.tolerance_pu, tpp)
     inputs = plan_inputs(robot)
@@ -438,4 +444,13 @@ def fit_robot(robot, progress=lambda msg: None) -> tuple[Plan, list[ServoFit]]:
                     "coefficients": [{"exponents": list(e), "value": c} for e, c in sf.poly.items()]}
                    for sf in fits],
     }
+    if certified:
+        progress("certifying the error bound over the continuous workspace")
+        cert = certify(robot, plan)
+        for line in cert.lines():
+            progress("  " + line)
+        rec = cert.to_json()    # without run times: the plan must be byte-identical on a rerun
+        for c in rec["servos"]:
+            c.pop("seconds", None)
+        plan.meta["certificate"] = rec
     return plan, fits

@@ -15,17 +15,18 @@ from .sim import golden
 __all__ = ["verification_points", "measure"]
 
 
-def verification_points(robot, n_points: int = 1_000_000, n_face: int = 10_000, seed: int = 1) -> dict:
+def verification_points(robot, n_points: int = 1_000_000, n_face: int = 10_000, seed: int = 1,
+                        grid_points: int = 640_000) -> dict:
     """Port integers: a dense grid + every face of the workspace box + random points, at
     least ``n_points`` in all (or every representable point if there are fewer).
 
-    The grid has about 640,000 points spread evenly over the axes (never finer than the
-    port grid), e.g. 86 x 86 x 86 for a 3-input robot.
+    The grid has about ``grid_points`` points spread evenly over the axes (never finer than
+    the port grid), e.g. 86 x 86 x 86 for a 3-input robot.
     """
     specs = robot.inputs
     rng = np.random.default_rng(seed)
     every = int(np.prod([i.hi - i.lo + 1 for i in specs], dtype=np.float64)) <= n_points
-    per_axis = round(640_000 ** (1 / len(specs)))
+    per_axis = max(2, round(grid_points ** (1 / len(specs))))
     axes = []
     for i in specs:
         step = 1 if every else max(1, round((i.hi - i.lo) / (per_axis - 1)))

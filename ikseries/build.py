@@ -233,6 +233,8 @@ def make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, t
                              for e, c in sf.poly.items()],
             "error_pu": acc["servos"][sf.name],
             "certified_rounding_bound_pu": sf.bound_pu,
+            "certificate": next((c for c in plan.meta.get("certificate", {}).get("servos", [])
+                                 if c["name"] == sf.name), None),
         })
     return {
         "robot": robot.name,

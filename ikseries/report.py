@@ -8,6 +8,14 @@ def _row(cells) -> str:
     return "| " + " | ".join(str(c) for c in cells) + " |"
 
 
+def _certified(c) -> str:
+    if c is None:
+        return "not run"
+    if c["converged"]:
+        return f"**certified ≤ {c['total_pu']:.4f}**"
+    return f"not certified: bound {c['total_pu']:.4f} (cell budget spent)"
+
+
 def render_markdown(r: dict) -> str:
     out = [f"# ikseries report: {r['robot']}", "",
            f"ikseries {r['ikseries_version']}; Verilog module `{r['module']}` in `{r['verilog']}`; "
@@ -17,17 +25,19 @@ def render_markdown(r: dict) -> str:
            f"{r['accuracy_points']:,} representable workspace points (dense grid, random, every face). "
            "approximation: the fitted series in exact arithmetic vs the reference IK; quantization: "
            "integer arithmetic vs exact; rounding: the emitted PWM tick count vs the value before "
-           "rounding; total: emitted pulse vs exact pulse. The certified bound is a proof, for every "
-           "in-range input, on quantization + rounding inside the datapath before the last rounding.", "",
+           "rounding; total: emitted pulse vs exact pulse. The certified rounding bound is a proof, for "
+           "every in-range input, on quantization + rounding inside the datapath before the last "
+           "rounding; the certified total bounds |emitted - exact pulse| over the whole continuous "
+           "workspace box (interval arithmetic with derivatives on adaptive cells).", "",
            _row(["servo", "approximation", "quantization", "rounding", "total", "worst at",
-                 "certified rounding bound"]),
-           _row(["---"] * 7)]
+                 "certified rounding bound", "certified total"]),
+           _row(["---"] * 8)]
     for s in r["servos"]:
         e = s["error_pu"]
         at = ", ".join(f"{k}={v:g}" for k, v in (e.get("at") or {}).items())
         out.append(_row([s["name"], f"{e['approximation']:.4f}", f"{e['quantization']:.4f}",
                          f"{e['rounding']:.4f}", f"**{e['total']:.4f}**", at,
-                         f"{s['certified_rounding_bound_pu']:.4f}"]))
+                         f"{s['certified_rounding_bound_pu']:.4f}", _certified(s.get("certificate"))]))
     if r.get("error_map"):
         g = r["error_map"]["grid"]
         out += ["", "Where the error lies: total error on a " + " x ".join(f"{v} ({k})" for k, v in g.items())

@@ -1,0 +1,89 @@
+"""Benchmark: fit every preset and report, per servo, what the fit costs and achieves.
+
+Per preset and servo: variables, total degree, terms, multiplications per evaluation
+(coordinate stage included), coefficient bits, sampled max total error (pu) on >= 10**6
+representable points, certified bound (pu), and the preset's fit time (wall and CPU, certification included).
+
+    python bench/fit_benchmark.py [PRESET ...] [--json build/bench/fit_benchmark.json]
+
+Targets (issue 3) for cylinder-leg at +-0.5 pu: <= 100 multiply-adds per servo, certified,
+whole leg fitted in <= 30 s on 2 cores.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from ikseries.accuracy import measure
+from ikseries.fit.fitter import FitError, fit_robot, output_multipliers
+from ikseries.fit.plan import bits_for, quantize
+from ikseries.robot import load_preset, preset_names
+
+
+def bench_preset(name: str) -> dict:
+    robot = load_preset(name)
+    t0, c0 = time.perf_counter(), time.process_time()
+    try:
+        plan, fits = fit_robot(robot)
+    except FitError as e:
+        return {"preset": name, "error": str(e)}
+    fit_s, fit_cpu = time.perf_counter() - t0, time.process_time() - c0
+    cert = {c["name"]: c for c in plan.meta["certificate"]["servos"]}
+    acc = measure(robot, plan)
+    mults = output_multipliers(plan)
+    servos = []
+    for sf in fits:
+        coef_bits = max(bits_for(min(0, q), max(0, q))[0] for q in (quantize(c, sf.frac) for c in sf.poly.values()))
+        cs = cert[sf.name]
+        servos.append({"servo": sf.name, "variables": sf.features.kind, "names": list(sf.features.names),
+                       "degree": sf.degree, "terms": len(sf.poly), "multiplications": mults[sf.name],
+                       "coefficient_bits": coef_bits, "coefficient_frac_bits": sf.frac,
+                       "sampled_max_pu": acc["servos"][sf.name]["total"],
+                       "certified_max_pu": cs["total_pu"], "certified": cs["converged"]})
+    return {"preset": name, "tolerance_pu": robot.tolerance_pu, "fit_s": fit_s, "fit_cpu_s": fit_cpu,
+            "points": acc["points"], "plan_multipliers": plan.count("mul"),
+            "servos": servos}
+
+
+def table(results: list) -> str:
+    head = ("preset", "servo", "vars", "deg", "terms", "mults", "coef bits", "sampled pu", "certified pu",
+            "fit s (cpu)")
+    rows = [head]
+    for r in results:
+        if "error" in r:
+            rows.append((r["preset"], "-", "fit refused: " + r["error"], *[""] * 7))
+            continue
+        for s in r["servos"]:
+            rows.append((r["preset"], s["servo"], s["variables"], s["degree"], s["terms"], s["multiplications"],
+                         s["coefficient_bits"], f"{s['sampled_max_pu']:.3f}",
+                         f"{s['certified_max_pu']:.3f}" + ("" if s["certified"] else " (budget spent)"),
+                         f"{r['fit_s']:.1f} ({r['fit_cpu_s']:.1f})"))
+    w = [max(len(str(row[i])) for row in rows) for i in range(len(head))]
+    return "\n".join("  ".join(str(c).ljust(w[i]) for i, c in enumerate(row)) for row in rows)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("presets", nargs="*", help=f"default: all ({', '.join(preset_names())})")
+    ap.add_argument("--json", default="build/bench/fit_benchmark.json")
+    args = ap.parse_args(argv)
+    names = args.presets or preset_names()
+    bad = [n for n in names if n not in preset_names()]
+    if bad:
+        sys.exit(f"preset must be one of {preset_names()}, not {bad[0]!r}")
+    results = []
+    for n in names:
+        print(f"fitting {n} ...", flush=True)
+        results.append(bench_preset(n))
+    print(table(results))
+    out = Path(args.json)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"results": results}, indent=1) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
