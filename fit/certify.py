@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from . import centred as cn
 from . import interval as ia
 from .plan import Plan
 
@@ -140,14 +141,17 @@ def _node_value(n, nodes, vals, values) -> ia.Interval:
     if op == "const":
         return ia.point(n.ideal if n.ideal is not None else np.ldexp(float(n.param), -n.frac))
     a = vals[n.args[0]]
-    if op == "add":
-        return a + vals[n.args[1]]
-    if op == "mul":
-        return a.sqr() if n.args[0] == n.args[1] else a * vals[n.args[1]]
+    if op in ("add", "mul"):
+        if n.args[0] == n.args[1] and op == "mul":
+            return a.sqr()
+        b = vals[n.args[1]]
+        if isinstance(b, cn.Centred) and not isinstance(a, cn.Centred):
+            a, b = b, a                    # a constant Interval first does not take a Centred
+        return a + b if op == "add" else a * b
     if op == "clamp":
-        return ia.clamp(a, np.ldexp(float(n.param[0]), -n.frac), np.ldexp(float(n.param[1]), -n.frac))
+        return cn.clamp(a, np.ldexp(float(n.param[0]), -n.frac), np.ldexp(float(n.param[1]), -n.frac))
     if op == "frac":
-        return ia.ldexp(a, nodes[n.args[0]].frac - n.frac)
+        return cn.ldexp(a, nodes[n.args[0]].frac - n.frac)
     if op in ("shr", "shl"):
         return a  # exact in the ideal arithmetic
     raise ValueError(f"plan node operation must be one of input, const, add, mul, clamp, frac, "
@@ -163,7 +167,8 @@ def _reference_function(robot, servo: int, ticks_per_pu: float):
     neutral = cal.neutral_angles[servo]
 
     def run(values: dict) -> ia.Interval:
-        angle = robot.geometry.angles(ia.MATH, *(values[k] for k in names))[servo]
+        xp = cn.MATH if isinstance(values[names[0]], cn.Centred) else ia.MATH
+        angle = robot.geometry.angles(xp, *(values[k] for k in names))[servo]
         return (cal.neutral_pulse_pu + slope * (angle - neutral)) * ticks_per_pu
     return run
 
@@ -227,11 +232,16 @@ def _cell_bounds(err, names, lo, hi):
     Returns (bound, per-input contributions (N, n) of the form used, e(c) enclosure, f enclosure).
     """
     n = len(names)
-    c = np.minimum(np.maximum(0.5 * (lo + hi), lo), hi)
-    h = ia._up(np.maximum(ia._up(c - lo), ia._up(hi - c))).T              # (n, N) half-widths
-    e_c, _ = err(dict(zip(names, ia.variables(c, c, order=1))))
+    cvars = cn.variables(lo, hi)
+    h = cvars[0].h                                                        # (n, N) half-widths
     with ia.lenient():   # a cell too coarse for an enclosure gets NaN: it is split, not fatal
-        e_cell, f_cell = err(dict(zip(names, ia.variables(lo, hi, order=2))))
+        e, f = err(dict(zip(names, cvars)))
+    e_c, e_cell, f_cell = e.c, e.x, f.x
+    bad = np.isnan(e_c.lo) | np.isnan(e_c.hi)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ia.IntervalDomainError(f"the plan and the reference must be defined at every cell "
+                                     f"centre, not at {dict(zip(names, (0.5 * (lo[i] + hi[i])).tolist()))}")
     # mean-value form: |e(c)| + sum_k sup|de/dx_k| h_k
     c1 = ia._up(e_cell.dmag(n) * h)
     b1 = ia._up(e_c.mag + _sum_up(c1))

@@ -101,7 +101,7 @@ def test_inputs_must_match_the_robot():
 def test_real_plan_bound_is_at_least_the_sampled_error(robot, plan):
     """With a small cell budget the bound is loose, but never below the sampled error."""
     cert = certify(robot, plan, max_cells=6000)
-    pts = verification_points(robot, n_random=20_000, n_face=1000)
+    pts = verification_points(robot, n_points=20_000, n_face=1000)
     sampled = measure(robot, plan, pts)["servos"]
     assert [s.name for s in cert.servos] == list(robot.servos)
     bounds = plan.rounding_bounds()
