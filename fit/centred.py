@@ -83,8 +83,10 @@ class Centred:
             return other.c, other.x
         return other, other           # a constant: the same for both evaluations
 
-    def _new(self, c, x) -> "Centred":
-        return Centred(c, x, self.h)
+    def _new(self, c, x, other=None) -> "Centred":
+        # an affine map of one centred value (a constant operand) keeps its tightness: only
+        # operations combining two varying operands, or nonlinear ones, are re-tightened
+        return Centred(c, x, self.h, tighten=other is None or isinstance(other, Centred))
 
     @property
     def mag(self) -> np.ndarray:
@@ -100,31 +102,31 @@ class Centred:
 
     def __add__(self, other):
         oc, ox = self._parts(other)
-        return self._new(self.c + oc, self.x + ox)
+        return self._new(self.c + oc, self.x + ox, other)
 
     def __radd__(self, other):
         return self.__add__(other)
 
     def __sub__(self, other):
         oc, ox = self._parts(other)
-        return self._new(self.c - oc, self.x - ox)
+        return self._new(self.c - oc, self.x - ox, other)
 
     def __rsub__(self, other):
         oc, ox = self._parts(other)
-        return self._new(oc - self.c, ox - self.x)
+        return self._new(oc - self.c, ox - self.x, other)
 
     def __mul__(self, other):
         if other is self:
             return self.sqr()
         oc, ox = self._parts(other)
-        return self._new(self.c * oc, self.x * ox)
+        return self._new(self.c * oc, self.x * ox, other)
 
     def __rmul__(self, other):
         return self.__mul__(other)
 
     def __truediv__(self, other):
         oc, ox = self._parts(other)
-        return self._new(self.c / oc, self.x / ox)
+        return self._new(self.c / oc, self.x / ox, other)
 
     def __rtruediv__(self, other):
         oc, ox = self._parts(other)
