@@ -4,6 +4,7 @@ import pytest
 
 from ikseries.accuracy import measure
 from ikseries.build import build
+from ikseries.fit.certify import certify
 from ikseries.fit.fitter import fit_robot, output_multipliers
 from ikseries.hdl.evaluator import PlanEvaluator
 from ikseries.robot import load_preset
@@ -23,6 +24,10 @@ def test_preset_fits_within_tolerance_and_simulates_bit_exact(name):
     assert acc["points"] >= min(1_000_000, np.prod([i.hi - i.lo + 1 for i in robot.inputs]))
     for s, e in acc["servos"].items():
         assert e["total"] <= robot.tolerance_pu, (s, e)
+    cert = certify(robot, plan)            # over the continuous box, at the default budget
+    cert.check(robot.tolerance_pu)
+    for s in cert.servos:
+        assert s.converged and s.approximation_pu >= acc["servos"][s.name]["approximation"], s
     assert all(m <= 100 for m in output_multipliers(plan).values())
     t = {k: np.concatenate([c, r]) for (k, c), r in
          zip(corner_targets(plan, port_extremes=True).items(), random_targets(plan, 200, 7).values())}
