@@ -72,6 +72,7 @@ class Centred:
 
     __slots__ = ("c", "x", "h")
     __array_ufunc__ = None  # make numpy defer to the reflected operators
+    _interval_defers = True  # and Interval too
 
     def __init__(self, c: ia.Interval, x: ia.Interval, h: np.ndarray, tighten: bool = True):
         self.c, self.h = c, h

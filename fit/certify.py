@@ -145,8 +145,6 @@ def _node_value(n, nodes, vals, values) -> ia.Interval:
         if n.args[0] == n.args[1] and op == "mul":
             return a.sqr()
         b = vals[n.args[1]]
-        if isinstance(b, cn.Centred) and not isinstance(a, cn.Centred):
-            a, b = b, a                    # a constant Interval first does not take a Centred
         return a + b if op == "add" else a * b
     if op == "clamp":
         return cn.clamp(a, np.ldexp(float(n.param[0]), -n.frac), np.ldexp(float(n.param[1]), -n.frac))

@@ -104,3 +104,12 @@ def test_domain_errors_pass_through_and_lenient_marks_cells():
     with ia.lenient():
         v = cn.MATH.acos(x)
     assert np.isfinite(v.x.lo[0]) and np.isnan(v.x.lo[1]) and np.isnan(v.x.h[0][0, 1])
+
+
+def test_an_interval_constant_on_the_left_defers_to_centred():
+    """A constant plan output minus a centred reference (quadruped-fore's fixed servo)."""
+    (x,) = cn.variables(np.array([[1.0]]), np.array([[2.0]]))
+    for v in (ia.point(3.0) - x, ia.point(3.0) + x, ia.point(3.0) * x, ia.point(3.0) / x):
+        assert isinstance(v, cn.Centred) and v.c.d is not None
+    v = ia.point(3.0) - x
+    assert v.x.lo[0] <= 1.0 and v.x.hi[0] >= 2.0 and v.c.lo[0] <= 1.5 <= v.c.hi[0]
