@@ -12,8 +12,12 @@ whole real input box, not only at sample points:
   ``|e(c)| + sum_k |de/dx_k (c)| h_k + 1/2 sum_jk sup|d2e/dx_j dx_k (cell)| h_j h_k``, with
   ``e(c)`` and its gradient enclosed by interval arithmetic at the point and the derivatives
   enclosed over the cell by interval forward-mode differentiation of both ``P`` and ``f``
-  (:mod:`ikseries.fit.interval`). Where a clamp may switch inside the cell, ``e`` is not twice
-  differentiable and only the first two apply;
+  (:mod:`ikseries.fit.interval`). Every intermediate value of ``P`` and ``f`` is evaluated in
+  centred form (:mod:`ikseries.fit.centred`): its cell enclosure is intersected with its own
+  mean-value and Taylor forms about the centre, so a Horner chain stays tight and a clamp whose
+  argument provably stays inside its range over the cell passes the Hessian through. Where a
+  clamp may switch inside the cell, ``e`` is not twice differentiable and only the first two
+  forms apply;
 - cells whose bound exceeds the target are bisected along the input contributing most to the
   bound, until every cell meets the target or the cell budget is spent (the bound is then
   still certified, only above the target).
@@ -425,5 +429,6 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
 METHOD = ("per cell the least of the plain interval enclosure, the mean-value form |e(c)| + "
           "sum_k sup|de/dx_k| h_k and the second-order Taylor form, on adaptively bisected cells; "
           "interval arithmetic with outward rounding and forward-mode first and second derivatives "
-          "of the plan's ideal function and of the reference IK; box = plan input ranges "
+          "of the plan's ideal function and of the reference IK, every intermediate value in "
+          "centred (mean-value / Taylor about the cell centre) form; box = plan input ranges "
           "[lo, hi] * 2**-frac")
