@@ -12,8 +12,12 @@ whole real input box, not only at sample points:
   ``|e(c)| + sum_k |de/dx_k (c)| h_k + 1/2 sum_jk sup|d2e/dx_j dx_k (cell)| h_j h_k``, with
   ``e(c)`` and its gradient enclosed by interval arithmetic at the point and the derivatives
   enclosed over the cell by interval forward-mode differentiation of both ``P`` and ``f``
-  (:mod:`ikseries.fit.interval`). Where a clamp may switch inside the cell, ``e`` is not twice
-  differentiable and only the first two apply;
+  (:mod:`ikseries.fit.interval`). Every intermediate value of ``P`` and ``f`` is evaluated in
+  centred form (:mod:`ikseries.fit.centred`): its cell enclosure is intersected with its own
+  mean-value and Taylor forms about the centre, so a Horner chain stays tight and a clamp whose
+  argument provably stays inside its range over the cell passes the Hessian through. Where a
+  clamp may switch inside the cell, ``e`` is not twice differentiable and only the first two
+  forms apply;
 - cells whose bound exceeds the target are bisected along the input contributing most to the
   bound, until every cell meets the target or the cell budget is spent (the bound is then
   still certified, only above the target).
@@ -33,6 +37,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from . import centred as cn
 from . import interval as ia
 from .plan import Plan
 
@@ -140,14 +145,15 @@ def _node_value(n, nodes, vals, values) -> ia.Interval:
     if op == "const":
         return ia.point(n.ideal if n.ideal is not None else np.ldexp(float(n.param), -n.frac))
     a = vals[n.args[0]]
-    if op == "add":
-        return a + vals[n.args[1]]
-    if op == "mul":
-        return a.sqr() if n.args[0] == n.args[1] else a * vals[n.args[1]]
+    if op in ("add", "mul"):
+        if n.args[0] == n.args[1] and op == "mul":
+            return a.sqr()
+        b = vals[n.args[1]]
+        return a + b if op == "add" else a * b
     if op == "clamp":
-        return ia.clamp(a, np.ldexp(float(n.param[0]), -n.frac), np.ldexp(float(n.param[1]), -n.frac))
+        return cn.clamp(a, np.ldexp(float(n.param[0]), -n.frac), np.ldexp(float(n.param[1]), -n.frac))
     if op == "frac":
-        return ia.ldexp(a, nodes[n.args[0]].frac - n.frac)
+        return cn.ldexp(a, nodes[n.args[0]].frac - n.frac)
     if op in ("shr", "shl"):
         return a  # exact in the ideal arithmetic
     raise ValueError(f"plan node operation must be one of input, const, add, mul, clamp, frac, "
@@ -163,7 +169,8 @@ def _reference_function(robot, servo: int, ticks_per_pu: float):
     neutral = cal.neutral_angles[servo]
 
     def run(values: dict) -> ia.Interval:
-        angle = robot.geometry.angles(ia.MATH, *(values[k] for k in names))[servo]
+        xp = cn.MATH if isinstance(values[names[0]], cn.Centred) else ia.MATH
+        angle = robot.geometry.angles(xp, *(values[k] for k in names))[servo]
         return (cal.neutral_pulse_pu + slope * (angle - neutral)) * ticks_per_pu
     return run
 
@@ -227,11 +234,16 @@ def _cell_bounds(err, names, lo, hi):
     Returns (bound, per-input contributions (N, n) of the form used, e(c) enclosure, f enclosure).
     """
     n = len(names)
-    c = np.minimum(np.maximum(0.5 * (lo + hi), lo), hi)
-    h = ia._up(np.maximum(ia._up(c - lo), ia._up(hi - c))).T              # (n, N) half-widths
-    e_c, _ = err(dict(zip(names, ia.variables(c, c, order=1))))
+    cvars = cn.variables(lo, hi)
+    h = cvars[0].h                                                        # (n, N) half-widths
     with ia.lenient():   # a cell too coarse for an enclosure gets NaN: it is split, not fatal
-        e_cell, f_cell = err(dict(zip(names, ia.variables(lo, hi, order=2))))
+        e, f = err(dict(zip(names, cvars)))
+    e_c, e_cell, f_cell = e.c, e.x, f.x
+    bad = np.isnan(e_c.lo) | np.isnan(e_c.hi)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ia.IntervalDomainError(f"the plan and the reference must be defined at every cell "
+                                     f"centre, not at {dict(zip(names, (0.5 * (lo[i] + hi[i])).tolist()))}")
     # mean-value form: |e(c)| + sum_k sup|de/dx_k| h_k
     c1 = ia._up(e_cell.dmag(n) * h)
     b1 = ia._up(e_c.mag + _sum_up(c1))
@@ -417,5 +429,6 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
 METHOD = ("per cell the least of the plain interval enclosure, the mean-value form |e(c)| + "
           "sum_k sup|de/dx_k| h_k and the second-order Taylor form, on adaptively bisected cells; "
           "interval arithmetic with outward rounding and forward-mode first and second derivatives "
-          "of the plan's ideal function and of the reference IK; box = plan input ranges "
+          "of the plan's ideal function and of the reference IK, every intermediate value in "
+          "centred (mean-value / Taylor about the cell centre) form; box = plan input ranges "
           "[lo, hi] * 2**-frac")

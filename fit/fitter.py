@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kinematics import UnreachableError
-from .certify import certify
+from .certify import CertificationError, certify
 from .features import Normaliser, coordinate_stage
 from .horner import horner, parity_split
 from .plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for
@@ -27,6 +27,7 @@ __all__ = ["FitError", "ServoFit", "FeatureSet", "fit_robot", "plan_inputs", "wo
            "output_multipliers"]
 
 MAX_DEGREE = 12
+CERTIFY_ATTEMPTS = 3   # fits (the first + refits with tighter budgets) before refusing
 PRUNE_REJECTS = 3
 FIT_SEED = 20261124
 FIT_SAMPLES = (30000, 3000)      # random interior points, points per face
@@ -394,12 +395,41 @@ def _choose_formats(robot, inputs, stage, fits, budget: Budget, progress) -> int
                    f"{budget.quantization:g} pu in 63-bit intermediates")
 
 
+def _lower(robot, inputs, stage, fits, budget, progress) -> Plan:
+    """Choose the formats and build the plan of every servo, with its meta data."""
+    tpp = robot.ticks_per_pu
+    fv = _choose_formats(robot, inputs, stage, fits, budget, progress)
+    plan = _build(robot, inputs, stage, fits, fv)
+    bounds = plan.rounding_bounds()
+    for sf, o in zip(fits, plan.outputs):
+        sf.bound_pu = bounds[o.preround] / tpp
+    mults = output_multipliers(plan)
+    plan.meta = {
+        "robot": robot.name,
+        "budget_pu": vars(budget),
+        "method": {"fit": "Lawson near-minimax + exchange on a check set; per servo the variable set "
+                          "and total degree with the fewest multipliers, then pruned",
+                   "seed": FIT_SEED, "fit_samples": FIT_SAMPLES, "check_samples": CHECK_SAMPLES,
+                   "max_degree": MAX_DEGREE},
+        "features": {**stage.meta(), "frac_bits": fv},
+        "servos": [{"name": sf.name, "variables": sf.features.kind, "names": list(sf.features.names),
+                    "powers": dict(zip(sf.features.names, sf.features.allowed)), "total_degree": sf.degree,
+                    "terms": len(sf.poly), "multipliers": mults[sf.name], "accumulator_frac_bits": sf.frac,
+                    "fit_error_pu": sf.fit_error_ticks / tpp, "certified_rounding_pu": sf.bound_pu,
+                    "coefficients": [{"exponents": list(e), "value": c} for e, c in sf.poly.items()]}
+                   for sf in fits],
+    }
+    return plan
+
+
 def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tuple[Plan, list[ServoFit]]:
     """Fit every servo of ``robot`` and return the evaluation plan and the fits.
 
-    With ``certified`` the error over the continuous workspace box is then bounded
-    rigorously (:func:`ikseries.fit.certify.certify`); the certificate is stored in
-    ``plan.meta["certificate"]``.
+    With ``certified`` (the default) the error over the continuous workspace box is then
+    bounded rigorously (:func:`ikseries.fit.certify.certify`) and stored in
+    ``plan.meta["certificate"]``. A servo whose certified total exceeds the tolerance is
+    refitted with a 15 % tighter approximation budget; after ``CERTIFY_ATTEMPTS`` fits the
+    plan is refused (:class:`FitError`).
     """
     tpp = robot.ticks_per_pu
     budget = Budget.split(robot.tolerance_pu, tpp)
@@ -412,39 +442,25 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tu
     check_pts = workspace_samples(robot, *CHECK_SAMPLES, FIT_SEED + 1, edges=True)
     targets = [robot.pulses_pu(*p) for p in (fit_pts, check_pts)]
     feats: dict = {}
-    fits = []
-    for k, name in enumerate(robot.servos):
-        candidates = _feature_sets(robot, stage, k)
-        for fs in candidates:
-            if fs.kind not in feats:
-                feats[fs.kind] = [_features(robot, stage, fs.kind, p) for p in (fit_pts, check_pts)]
-        sets = {fs.kind: tuple((f, t[k] * tpp) for f, t in zip(feats[fs.kind], targets)) for fs in candidates}
-        progress(f"fitting {name}: candidates " + "; ".join(
-            f"{fs.kind} ({', '.join(f'{v} {a}' for v, a in zip(fs.names, fs.allowed))})" for fs in candidates))
-        fits.append(_fit_servo(robot, inputs, stage, name, candidates, sets, budget.approximation * tpp,
-                               progress))
-    fv = _choose_formats(robot, inputs, stage, fits, budget, progress)
-    plan = _build(robot, inputs, stage, fits, fv)
-    bounds = plan.rounding_bounds()
-    for sf, o in zip(fits, plan.outputs):
-        sf.bound_pu = bounds[o.preround] / tpp
-    mults = output_multipliers(plan)
-    plan.meta = {
-        "robot": robot.name,
-        "budget_pu": vars(budget),
-        "method": {"fit": "Lawson near-minimax + exchange on a check set; per servo the variable set "
-                          "and total degree with the fewest multipliers",
-                   "seed": FIT_SEED, "fit_samples": FIT_SAMPLES, "check_samples": CHECK_SAMPLES,
-                   "max_degree": MAX_DEGREE},
-        "features": {**stage.meta(), "frac_bits": fv},
-        "servos": [{"name": sf.name, "variables": sf.features.kind, "names": list(sf.features.names),
-                    "powers": dict(zip(sf.features.names, sf.features.allowed)), "total_degree": sf.degree,
-                    "terms": len(sf.poly), "multipliers": mults[sf.name], "accumulator_frac_bits": sf.frac,
-                    "fit_error_pu": sf.fit_error_ticks / tpp, "certified_rounding_pu": sf.bound_pu,
-                    "coefficients": [{"exponents": list(e), "value": c} for e, c in sf.poly.items()]}
-                   for sf in fits],
-    }
-    if certified:
+    approx = [budget.approximation * tpp] * len(robot.servos)
+    fits: list = [None] * len(robot.servos)
+    for _ in range(CERTIFY_ATTEMPTS):
+        for k, name in enumerate(robot.servos):
+            if fits[k] is not None:
+                continue
+            candidates = _feature_sets(robot, stage, k)
+            for fs in candidates:
+                if fs.kind not in feats:
+                    feats[fs.kind] = [_features(robot, stage, fs.kind, p) for p in (fit_pts, check_pts)]
+            sets = {fs.kind: tuple((f, t[k] * tpp) for f, t in zip(feats[fs.kind], targets))
+                    for fs in candidates}
+            progress(f"fitting {name}: candidates " + "; ".join(
+                f"{fs.kind} ({', '.join(f'{v} {a}' for v, a in zip(fs.names, fs.allowed))})"
+                for fs in candidates))
+            fits[k] = _fit_servo(robot, inputs, stage, name, candidates, sets, approx[k], progress)
+        plan = _lower(robot, inputs, stage, fits, budget, progress)
+        if not certified:
+            return plan, fits
         progress("certifying the error bound over the continuous workspace")
         cert = certify(robot, plan)
         for line in cert.lines():
@@ -453,4 +469,17 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tu
         for c in rec["servos"]:
             c.pop("seconds", None)
         plan.meta["certificate"] = rec
-    return plan, fits
+        failed = [k for k, c in enumerate(cert.servos)
+                  if not (c.converged and c.total_pu <= robot.tolerance_pu)]
+        if not failed:
+            return plan, fits
+        for k in failed:
+            approx[k] *= 0.85
+            fits[k] = None
+        progress(f"certified bound above the tolerance for {', '.join(robot.servos[k] for k in failed)}: "
+                 "refitting with a 15 % tighter approximation budget")
+    try:
+        cert.check(robot.tolerance_pu)
+    except CertificationError as e:
+        raise FitError(f"fit refused: {e}") from None
+    raise FitError("fit refused: certification failed")  # check() raises whenever a servo failed

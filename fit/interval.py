@@ -163,6 +163,18 @@ def _nan_cells(x: "Interval", bad) -> "Interval":
                     _nan_pair(x.d, bad), _nan_pair(x.h, bad), x.order)
 
 
+def _defers(op):
+    """A binary operator that returns NotImplemented for an operand marked
+    ``_interval_defers = True`` (a richer number built on Intervals, such as
+    :class:`ikseries.fit.centred.Centred`), so Python calls that operand's reflected method."""
+    def run(self, other):
+        if getattr(other, "_interval_defers", False):
+            return NotImplemented
+        return op(self, other)
+    run.__name__, run.__doc__ = op.__name__, op.__doc__
+    return run
+
+
 class Interval:
     """Interval value and interval derivatives of a real function, per cell.
 
@@ -259,6 +271,7 @@ class Interval:
     def __pos__(self):
         return self
 
+    @_defers
     def __add__(self, other):
         o = self._lift(other)
         return Interval(_down(self.lo + o.lo), _up(self.hi + o.hi), _add_pairs([self.d, o.d]),
@@ -266,12 +279,15 @@ class Interval:
 
     __radd__ = __add__
 
+    @_defers
     def __sub__(self, other):
         return self + (-self._lift(other))
 
+    @_defers
     def __rsub__(self, other):
         return self._lift(other) + (-self)
 
+    @_defers
     def __mul__(self, other):
         if other is self:
             return self.sqr()
@@ -306,6 +322,7 @@ class Interval:
         g1 = -(r * r)                      # -1/x**2
         return self._chain(lo, hi, (g1.lo, g1.hi), lambda: _pair(2.0 * (r * r * r)))  # 2/x**3
 
+    @_defers
     def __truediv__(self, other):
         o = self._lift(other)
         if o.d is None and np.all((o.lo == o.hi) & (o.lo != 0)):
@@ -316,6 +333,7 @@ class Interval:
             return Interval(qlo, qhi, div(self.d), div(self.h), min(self.order, o.order))
         return self * o.reciprocal()
 
+    @_defers
     def __rtruediv__(self, other):
         return self._lift(other) * self.reciprocal()
 

@@ -6,8 +6,10 @@ import pytest
 
 from ikseries.accuracy import measure, verification_points
 from ikseries.fit.certify import CertificationError, certify, output_rounding
+from ikseries.fit.fitter import fit_robot
 from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
 from ikseries.kinematics import Calibration
+from ikseries.robot import load_preset
 
 SIN1 = 1.0 - np.sin(1.0)   # sup over a in [0, 1] of |a - sin(a)|
 
@@ -111,3 +113,24 @@ def test_real_plan_bound_is_at_least_the_sampled_error(robot, plan):
         assert s.approximation_pu >= s.sampled_pu > 0.5 * sampled[s.name]["approximation"]
         assert s.output_rounding_pu == 0.5 / robot.ticks_per_pu
     assert cert.box["theta"] == (-180.0, 180.0)
+
+
+def _certified_within_tolerance(robot, plan):
+    cert = certify(robot, plan)                       # the default budget
+    cert.check(robot.tolerance_pu)
+    sampled = measure(robot, plan)["servos"]          # >= 10**6 points
+    for s in cert.servos:
+        assert s.converged and s.total_pu <= robot.tolerance_pu, s
+        assert s.approximation_pu >= sampled[s.name]["approximation"], s
+        assert s.total_pu >= sampled[s.name]["total"], s
+
+
+def test_default_plan_is_certified_within_tolerance(robot, plan):
+    """Every servo of the cylinder leg, whose cos series is clamped near theta = +-180 deg
+    (the clamp never acts in exact arithmetic: the centred evaluation must see that)."""
+    _certified_within_tolerance(robot, plan)
+
+
+def test_planar_arm_plan_is_certified_within_tolerance():
+    robot = load_preset("planar-arm")
+    _certified_within_tolerance(robot, fit_robot(robot)[0])

@@ -114,3 +114,30 @@ def test_no_node_of_the_real_plan_leaves_its_interval(plan):
         assert n.lo <= v.min() and v.max() <= n.hi, (k, n.op, n.lo, n.hi, v.min(), v.max())
         if n.op != "const":
             assert n.width <= 62
+
+
+def test_a_plan_that_fails_certification_is_refitted_then_refused(small_robot, monkeypatch):
+    """The fitter tightens the failing servo's budget and refits; if the certified bound still
+    exceeds the tolerance, the fit is refused with the certifier's message."""
+    import ikseries.fit.fitter as fitter
+    real = fitter.certify
+    budgets = []
+
+    def failing(robot, plan, **kw):
+        cert = real(robot, plan, **kw)
+        budgets.append(plan.meta["budget_pu"]["approximation"])
+        s = dataclasses.replace(cert.servos[1], approximation_pu=robot.tolerance_pu)   # s2 fails
+        return dataclasses.replace(cert, servos=(cert.servos[0], s, *cert.servos[2:]))
+
+    refits = []
+    orig_fit = fitter._fit_servo
+    monkeypatch.setattr(fitter, "certify", failing)
+    monkeypatch.setattr(fitter, "_fit_servo",
+                        lambda *a: refits.append((a[3], a[6])) or orig_fit(*a))
+    with pytest.raises(FitError, match=r"^fit refused: servo s2: certified error [0-9.]+ pu exceeds "
+                                       r"the tolerance 4 pu"):
+        fit_robot(small_robot)
+    assert len(budgets) == fitter.CERTIFY_ATTEMPTS
+    s2 = [b for name, b in refits if name == "s2"]
+    assert len(s2) == fitter.CERTIFY_ATTEMPTS and s2[1] == pytest.approx(0.85 * s2[0])
+    assert [name for name, _ in refits].count("s1") == 1      # passing servos are kept

@@ -23,6 +23,10 @@ def test_preset_fits_within_tolerance_and_simulates_bit_exact(name):
     assert acc["points"] >= min(1_000_000, np.prod([i.hi - i.lo + 1 for i in robot.inputs]))
     for s, e in acc["servos"].items():
         assert e["total"] <= robot.tolerance_pu, (s, e)
+    # the fit certifies the error over the continuous box (and refuses a plan that fails)
+    for s in plan.meta["certificate"]["servos"]:
+        assert s["converged"] and s["total_pu"] <= robot.tolerance_pu, s
+        assert s["approximation_pu"] >= acc["servos"][s["name"]]["approximation"], s
     assert all(m <= 100 for m in output_multipliers(plan).values())
     t = {k: np.concatenate([c, r]) for (k, c), r in
          zip(corner_targets(plan, port_extremes=True).items(), random_targets(plan, 200, 7).values())}
