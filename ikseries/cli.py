@@ -59,7 +59,11 @@ def _hardware_overrides(robot, args):
             raise CliError(f"--dsp must be one of {', '.join(DSP_CHOICES)}, not {args.dsp!r}")
         opts["dsp"] = args.dsp
     labels = {"architecture": "--architecture", "multipliers": "--multipliers", "dsp": "--dsp"}
-    return with_hardware(robot, {k: v for k, v in labels.items() if k in opts}, **opts) if opts else robot
+    new = with_hardware(robot, {k: v for k, v in labels.items() if k in opts}, **opts) if opts else robot
+    if "multipliers" in opts and new.architecture != "folded":
+        raise CliError(f"--architecture must be folded when --multipliers is given "
+                       f"(auto picks 1 or 2 multipliers itself), not {new.architecture!r}")
+    return new
 
 
 def cmd_build(args):
@@ -156,7 +160,8 @@ def main(argv=None):
     b.add_argument("--architecture", metavar="ARCH",
                    help="override hardware.architecture: auto (smallest that meets hardware.min_refresh_hz), "
                         "pipelined or folded")
-    b.add_argument("--multipliers", metavar="K", help="override hardware.multipliers (folded evaluator)")
+    b.add_argument("--multipliers", metavar="K", help="override hardware.multipliers: multipliers of the folded evaluator (needs architecture "
+                        "folded; auto picks 1 or 2 itself)")
     b.add_argument("--dsp", metavar="FAMILY",
                    help="override hardware.dsp: ice40, ecp5, xc7 (DSP multiplier size) or none (full width)")
     b.add_argument("-q", "--quiet", action="store_true")

@@ -227,6 +227,9 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
                   multipliers=hw.get("multipliers", 1), dsp=hw.get("dsp", "ice40"),
                   min_refresh_hz=hw.get("min_refresh_hz", 1000.0))
     _check_hardware(robot)
+    if "multipliers" in hw and robot.architecture != "folded":
+        raise RobotError(f"hardware.architecture must be folded when hardware.multipliers is given "
+                         f"(auto picks 1 or 2 multipliers itself), not {robot.architecture!r}")
     robot = dataclasses.replace(robot, min_refresh_hz=float(robot.min_refresh_hz))
     if robot.ticks_per_pu < 1:
         raise RobotError(f"hardware.clock_hz must give at least one PWM tick per pulse unit "

@@ -42,6 +42,8 @@ def test_defaults_and_hexapod_preset():
     ({"legs": True}, {}, "legs must be an integer >= 1, not True"),
     ({}, {"architecture": "systolic"}, "hardware.architecture must be one of auto, pipelined, folded, not 'systolic'"),
     ({}, {"multipliers": 0}, "hardware.multipliers must be an integer >= 1, not 0"),
+    ({}, {"multipliers": 2}, "hardware.architecture must be folded when hardware.multipliers is given "
+                             "(auto picks 1 or 2 multipliers itself), not 'auto'"),
     ({}, {"dsp": "gowin"}, "hardware.dsp must be one of ice40, ecp5, xc7, none, not 'gowin'"),
     ({}, {"min_refresh_hz": 0}, "hardware.min_refresh_hz must be a number > 0, not 0"),
     ({}, {"min_refresh_hz": "fast"}, "hardware.min_refresh_hz must be a number > 0, not 'fast'"),
@@ -185,6 +187,8 @@ def test_flat_robot_top_ports_match_the_manifest(small_robot, small_plan):
 @pytest.mark.parametrize("argv, message", [
     (["--architecture", "systolic"], "--architecture must be one of auto, pipelined, folded, not 'systolic'"),
     (["--multipliers", "0"], "--multipliers must be an integer >= 1, not '0'"),
+    (["--multipliers", "2"], "--architecture must be folded when --multipliers is given "
+                             "(auto picks 1 or 2 multipliers itself), not 'auto'"),
     (["--multipliers", "two"], "--multipliers must be an integer >= 1, not 'two'"),
     (["--dsp", "gowin"], "--dsp must be one of ice40, ecp5, xc7, none, not 'gowin'"),
     (["--preset", "hexapod", "--architecture", "pipelined"],

@@ -23,7 +23,9 @@ def test_presets(capsys):
 def small_toml(tmp_path_factory):
     p = tmp_path_factory.mktemp("robot") / "small-leg.toml"
     p.write_text(preset_text("cylinder-leg").replace('name = "cylinder-leg"', 'name = "small-leg"')
-                 .replace("tolerance_pu = 0.5 ", "tolerance_pu = 4.0 "))
+                 .replace("tolerance_pu = 0.5 ", "tolerance_pu = 4.0 ")
+                 # the pipelined leg (auto would pick a folded one), so cocotb runs on it
+                 .replace("pwm_period_us = 20000.0", 'pwm_period_us = 20000.0\narchitecture = "pipelined"'))
     return p
 
 
