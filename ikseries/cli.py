@@ -38,10 +38,38 @@ def cmd_presets(args):
         print(f"{n}\t{load_preset(n).description}")
 
 
+def _hardware_overrides(robot, args):
+    """``robot`` with the build's --architecture / --multipliers / --dsp applied (validated)."""
+    from .robot import ARCHITECTURES, DSP_CHOICES, with_hardware
+    opts = {}
+    if args.architecture is not None:
+        if args.architecture not in ARCHITECTURES:
+            raise CliError(f"--architecture must be one of {', '.join(ARCHITECTURES)}, not {args.architecture!r}")
+        opts["architecture"] = args.architecture
+    if args.multipliers is not None:
+        try:
+            k = int(args.multipliers)
+        except ValueError:
+            k = None
+        if k is None or k < 1:
+            raise CliError(f"--multipliers must be an integer >= 1, not {args.multipliers!r}")
+        opts["multipliers"] = k
+    if args.dsp is not None:
+        if args.dsp not in DSP_CHOICES:
+            raise CliError(f"--dsp must be one of {', '.join(DSP_CHOICES)}, not {args.dsp!r}")
+        opts["dsp"] = args.dsp
+    labels = {"architecture": "--architecture", "multipliers": "--multipliers", "dsp": "--dsp"}
+    new = with_hardware(robot, {k: v for k, v in labels.items() if k in opts}, **opts) if opts else robot
+    if "multipliers" in opts and new.architecture != "folded":
+        raise CliError(f"--architecture must be folded when --multipliers is given "
+                       f"(auto picks 1 or 2 multipliers itself), not {new.architecture!r}")
+    return new
+
+
 def cmd_build(args):
     from .build import build, default_output_dir
     from .sim.runner import SIMULATORS
-    robot = _robot(args)
+    robot = _hardware_overrides(_robot(args), args)
     out = Path(args.output) if args.output else default_output_dir(robot)
     if args.cocotb == "auto":
         sims = "auto"
@@ -53,7 +81,8 @@ def cmd_build(args):
     rep = build(robot, out, synth=not args.no_synth, vcd=args.vcd, cocotb=sims, progress=_progress(args.quiet))
     worst = max(s["error_pu"]["total"] for s in rep["servos"])
     print(f"{robot.name}: max error {worst:.3f} pu (tolerance {robot.tolerance_pu:g}), "
-          f"latency {rep['latency_cycles']} cycles, output in {out}/")
+          f"latency {rep['latency_cycles']} cycles, {rep['architecture']['description']}, "
+          f"every leg refreshed {rep['refresh_hz']:,.0f} times/s, output in {out}/")
 
 
 def _cached_plan(robot, path):
@@ -171,6 +200,13 @@ def main(argv=None):
     b.add_argument("--cocotb", metavar="SIMS", default="auto",
                    help="verify the exported Verilog with cocotb on these simulators: auto (every "
                         "installed one, the default), none, or a list such as icarus,verilator")
+    b.add_argument("--architecture", metavar="ARCH",
+                   help="override hardware.architecture: auto (smallest that meets hardware.min_refresh_hz), "
+                        "pipelined or folded")
+    b.add_argument("--multipliers", metavar="K", help="override hardware.multipliers: multipliers of the folded evaluator (needs architecture "
+                        "folded; auto picks 1 or 2 itself)")
+    b.add_argument("--dsp", metavar="FAMILY",
+                   help="override hardware.dsp: ice40, ecp5, xc7 (DSP multiplier size) or none (full width)")
     b.add_argument("-q", "--quiet", action="store_true")
     f = sub.add_parser("fit", help="fit only (no hardware) by one method, with a report")
     f.add_argument("robot", nargs="?", help="robot description (TOML); default: --preset cylinder-leg")

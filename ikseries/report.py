@@ -16,6 +16,30 @@ def _certified(c) -> str:
     return f"not certified: bound {c['total_pu']:.4f} (cell budget spent)"
 
 
+def _throughput_lines(r: dict) -> list[str]:
+    ii = r.get("initiation_interval", 1)
+    legs = r.get("legs", 1)
+    if ii == 1:
+        lines = [f"- Throughput: one target per cycle = {r['throughput_targets_per_s']:,.0f} leg solutions/s "
+                 "at the configured clock."]
+    else:
+        lines = [f"- Throughput: one target every {ii} cycles (initiation interval"
+                 + (f", measured: {r['simulation'].get('initiation_interval_measured')}"
+                    if r['simulation'].get('initiation_interval_measured') else "")
+                 + f") = {r['throughput_targets_per_s']:,.0f} leg solutions/s at the configured clock."]
+    if "refresh_hz" in r:
+        lines.append(f"- Refresh rate: every leg's servos re-evaluated **{r['refresh_hz']:,.0f} times per second** "
+                     + (f"({legs} legs addressed round-robin) " if legs > 1 else "")
+                     + f"(required: {r['min_refresh_hz']:g})." )
+    a = r.get("architecture")
+    if a:
+        lines.append(f"- Architecture: **{a['description']}**. Why: {a['reason']}.")
+        if len(a["tried"]) > 1:
+            lines.append("  Tried: " + "; ".join(f"{t['description']}: II {t['initiation_interval']}, "
+                                                  f"{t['refresh_hz']:,.0f} Hz" for t in a["tried"]) + ".")
+    return lines
+
+
 def render_markdown(r: dict) -> str:
     out = [f"# ikseries report: {r['robot']}", "",
            f"ikseries {r['ikseries_version']}; Verilog module `{r['module']}` in `{r['verilog']}`; "
@@ -67,8 +91,8 @@ def render_markdown(r: dict) -> str:
             *[f"- cocotb on {sim} (exported Verilog): {', '.join(c['tests'])} passed, latency "
               f"{c['latency_cycles_measured']} cycles (build {c['build_s']} s, simulation {c['test_s']} s)."
               for sim, c in (r.get("cocotb") or {}).items()],
-            f"- Throughput: one target per cycle = {r['throughput_targets_per_s']:,.0f} leg solutions/s "
-            "at the configured clock.", ""]
+            *([f"- {r['cocotb_note']}."] if r.get("cocotb_note") else []),
+            *_throughput_lines(r), ""]
     res = r.get("resources")
     out += ["## FPGA resources (Yosys, before place-and-route)", ""]
     if res:
@@ -83,8 +107,11 @@ def render_markdown(r: dict) -> str:
                     "no: " + ", ".join(f"{k} {u}/{a}" for k, (u, a) in over.items())))
             out.append(_row([tgt, *(c.get(k, 0) for k in cats), fits, d.get("seconds", "")]))
         out += ["", "Cell counts after synthesis, before place-and-route; carry cells are 1 bit (iCE40), "
-                "2 bits (ECP5) or 4 bits (xc7) each. This fully pipelined, one-target-per-cycle design "
-                "is sized for throughput, not area."]
+                "2 bits (ECP5) or 4 bits (xc7) each. "
+                + ("This fully pipelined, one-target-per-cycle design is sized for throughput, not area."
+                   if r.get("initiation_interval", 1) == 1 else
+                   "This folded design trades throughput for area: the multipliers are shared over "
+                   "every operation" + (" and every leg." if r.get("legs", 1) > 1 else "."))]
     else:
         out.append("Synthesis was skipped (--no-synth).")
     out += ["", "## Coefficients", "",

@@ -16,7 +16,14 @@ from .planar_arm import PlanarArm
 from .quadruped import QuadrupedFore, QuadrupedHind
 
 __all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot",
-           "robot_record", "robot_from_record"]
+           "robot_record", "robot_from_record", "with_hardware", "ARCHITECTURES", "DSP_CHOICES"]
+
+#: hardware.architecture values: "auto" picks the smallest that meets hardware.min_refresh_hz.
+#: Default: "pipelined" (one target per clock, verified by cocotb too) for one leg, "auto" for more.
+ARCHITECTURES = ("auto", "pipelined", "folded")
+#: hardware.dsp values: the FPGA family whose DSP multiplier size the folded evaluator uses
+#: (see ikseries.hdl.schedule.DSP_SIZES), or "none" for full-width products
+DSP_CHOICES = ("ice40", "ecp5", "xc7", "none")
 
 
 class RobotError(ValueError):
@@ -64,6 +71,12 @@ class Robot:
     tolerance_pu: float
     clock_hz: int
     pwm_period_us: float
+    # hardware architecture (defaults keep records written before these fields loadable)
+    legs: int = 1                   # identical legs sharing one fitted plan
+    architecture: str = "pipelined"  # one of ARCHITECTURES
+    multipliers: int = 1            # multiplier units of a folded evaluator
+    dsp: str = "ice40"              # one of DSP_CHOICES
+    min_refresh_hz: float = 1000.0  # every leg's servos re-evaluated at least this often
 
     @property
     def servos(self) -> tuple[str, ...]:
@@ -131,7 +144,7 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
     """Validate a parsed TOML table and build a :class:`Robot`."""
     if not isinstance(data, dict):
         raise RobotError(f"{source}: a robot description must be a table")
-    _no_extra(data, {"name", "description", "geometry", "workspace", "calibration", "fit", "hardware"}, "")
+    _no_extra(data, {"name", "description", "legs", "geometry", "workspace", "calibration", "fit", "hardware"}, "")
     name = data.get("name")
     if not isinstance(name, str) or not name or not all(c.isalnum() or c in "-_" for c in name):
         raise RobotError(f"name must be a non-empty string of letters, digits, '-' and '_', not {name!r}")
@@ -199,7 +212,8 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
         raise RobotError(f"fit.tolerance_pu must be > 0 pu, not {tol!r}")
 
     hw = _table(data, "hardware", "", required=False)
-    _no_extra(hw, ["clock_hz", "pwm_period_us"], "hardware.")
+    _no_extra(hw, ["clock_hz", "pwm_period_us", "architecture", "multipliers", "dsp", "min_refresh_hz"],
+              "hardware.")
     clk = _number(hw, "clock_hz", "hardware.", default=48_000_000, positive=True, integer=True)
     period = float(_number(hw, "pwm_period_us", "hardware.", default=20000.0, positive=True))
     if period <= pmax:
@@ -209,12 +223,57 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
                   float(_number(cal, "pulse_unit_us", p, positive=True)),
                   float(_number(cal, "neutral_pulse_pu", p, positive=True)),
                   float(_number(cal, "pu_per_degree", p, positive=True)),
-                  tuple(dirs), pmin, pmax, float(tol), int(clk), period)
+                  tuple(dirs), pmin, pmax, float(tol), int(clk), period,
+                  legs=data.get("legs", 1),
+                  architecture=hw.get("architecture", "auto" if data.get("legs", 1) != 1 else "pipelined"),
+                  multipliers=hw.get("multipliers", 1), dsp=hw.get("dsp", "ice40"),
+                  min_refresh_hz=hw.get("min_refresh_hz", 1000.0))
+    _check_hardware(robot)
+    if "multipliers" in hw and robot.architecture != "folded":
+        raise RobotError(f"hardware.architecture must be folded when hardware.multipliers is given "
+                         f"(auto picks 1 or 2 multipliers itself), not {robot.architecture!r}")
+    robot = dataclasses.replace(robot, min_refresh_hz=float(robot.min_refresh_hz))
     if robot.ticks_per_pu < 1:
         raise RobotError(f"hardware.clock_hz must give at least one PWM tick per pulse unit "
                          f"(>= {1 / (robot.pulse_unit_us * 1e-6):g} Hz), not {clk!r}")
     _check_reachable(robot)
     return robot
+
+
+#: option -> how errors name it (TOML field names; the CLI passes its option names)
+HARDWARE_LABELS = {"legs": "legs", "architecture": "hardware.architecture",
+                   "multipliers": "hardware.multipliers", "dsp": "hardware.dsp",
+                   "min_refresh_hz": "hardware.min_refresh_hz"}
+
+
+def _check_hardware(robot: Robot, labels: dict | None = None) -> None:
+    """Validate the architecture options of ``robot``; errors name the field via ``labels``."""
+    lab = {**HARDWARE_LABELS, **(labels or {})}
+
+    def pos_int(key):
+        v = getattr(robot, key)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise RobotError(f"{lab[key]} must be an integer >= 1, not {v!r}")
+    pos_int("legs")
+    pos_int("multipliers")
+    for key, choices in (("architecture", ARCHITECTURES), ("dsp", DSP_CHOICES)):
+        v = getattr(robot, key)
+        if v not in choices:
+            raise RobotError(f"{lab[key]} must be one of {', '.join(choices)}, not {v!r}")
+    r = robot.min_refresh_hz
+    if isinstance(r, bool) or not isinstance(r, (int, float)) or not np.isfinite(r) or r <= 0:
+        raise RobotError(f"{lab['min_refresh_hz']} must be a number > 0, not {r!r}")
+    if robot.legs > 1 and robot.architecture == "pipelined":
+        raise RobotError(f"{lab['architecture']} must be auto or folded for {lab['legs']} = {robot.legs} "
+                         f"(the legs share one folded evaluator), not 'pipelined'")
+
+
+def with_hardware(robot: Robot, labels: dict | None = None, **options) -> Robot:
+    """``robot`` with some architecture options replaced (``architecture``, ``multipliers``,
+    ``dsp``, ...), validated; ``labels`` maps an option to the name errors use for it."""
+    new = dataclasses.replace(robot, **options)
+    _check_hardware(new, labels)
+    return new
 
 
 def _check_reachable(robot: Robot) -> None:
@@ -250,6 +309,7 @@ def robot_from_record(d: dict) -> Robot:
         robot = Robot(geometry=cls(**geo), inputs=tuple(InputSpec(**i) for i in d["inputs"]), **fields)
     except (KeyError, TypeError, ValueError) as e:
         raise RobotError(f"not a robot record: {e}") from None
+    _check_hardware(robot)   # records written before the architecture fields get their defaults
     _check_reachable(robot)
     return robot
 

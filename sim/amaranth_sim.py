@@ -1,4 +1,4 @@
-"""Drive targets through the leg core in the Amaranth simulator."""
+"""Drive targets through the leg or robot core in the Amaranth simulator."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 from amaranth.sim import Simulator
 
-__all__ = ["LegSimResult", "simulate_leg"]
+__all__ = ["LegSimResult", "RobotSimResult", "simulate_leg", "simulate_robot"]
 
 
 @dataclass
@@ -14,6 +14,7 @@ class LegSimResult:
     outputs: dict          # servo -> int64 array, in output order
     latencies: np.ndarray  # cycles from each input transfer to its output transfer
     cycles: int
+    input_cycles: np.ndarray | None = None   # cycle of each input transfer
 
 
 def simulate_leg(core, targets: dict, *, ready_prob: float = 1.0, valid_prob: float = 1.0,
@@ -65,4 +66,70 @@ def simulate_leg(core, targets: dict, *, ready_prob: float = 1.0, valid_prob: fl
     else:
         sim.run()
     return LegSimResult({s: np.array(v, dtype=np.int64) for s, v in got.items()},
-                        np.array(t_out) - np.array(t_in), state["cycles"])
+                        np.array(t_out) - np.array(t_in), state["cycles"], np.array(t_in))
+
+
+@dataclass
+class RobotSimResult:
+    legs: np.ndarray       # o.payload.leg of each output transfer, in order
+    outputs: dict          # servo -> int64 array, in output order
+    latencies: np.ndarray  # cycles from each input transfer to its output transfer
+    input_cycles: np.ndarray   # cycle of each input transfer
+    cycles: int
+
+
+def simulate_robot(core, legs, targets: dict, *, ready_prob: float = 1.0, seed: int = 0,
+                   vcd: str | None = None) -> RobotSimResult:
+    """Stream ``targets`` (port integers) addressed to ``legs`` (one leg index per target)
+    through a :class:`RobotCore`; collect each output's leg and widths, and latencies.
+
+    Targets are offered back to back (``i.valid`` always high until all are accepted);
+    ``ready_prob`` < 1 applies random backpressure on ``o``.
+    """
+    names = list(targets)
+    legs = np.asarray(legs, dtype=np.int64)
+    n = len(legs)
+    if any(len(targets[f]) != n for f in names):
+        raise ValueError(f"targets must have one value per leg index ({n}), not "
+                         f"{[len(targets[f]) for f in names]}")
+    rng = np.random.default_rng(seed)
+    servos = core.servos
+    got = {s: [] for s in servos}
+    got_legs, t_in, t_out = [], [], []
+    state = {"cycles": 0}
+
+    async def bench(ctx):
+        cyc, k = 0, 0
+        limit = 50 * (n * core.initiation_interval + core.latency + 10) + 1000
+        while len(t_out) < n:
+            if cyc > limit:
+                raise RuntimeError(f"robot core produced {len(t_out)} of {n} outputs in {cyc} cycles")
+            offer = k < n
+            ctx.set(core.i.valid, int(offer))
+            if offer:
+                ctx.set(core.i.payload, {"leg": int(legs[k]),
+                                         "target": {f: int(targets[f][k]) for f in names}})
+            ctx.set(core.o.ready, int(rng.random() < ready_prob))
+            if offer and ctx.get(core.i.ready):
+                t_in.append(cyc)
+                k += 1
+            if ctx.get(core.o.valid) and ctx.get(core.o.ready):
+                got_legs.append(ctx.get(core.o.payload.leg))
+                for s in servos:
+                    got[s].append(ctx.get(core.o.payload.widths[s]))
+                t_out.append(cyc)
+            await ctx.tick()
+            cyc += 1
+        state["cycles"] = cyc
+
+    sim = Simulator(core)
+    sim.add_clock(1e-6)
+    sim.add_testbench(bench)
+    if vcd:
+        with sim.write_vcd(vcd):
+            sim.run()
+    else:
+        sim.run()
+    return RobotSimResult(np.array(got_legs, dtype=np.int64),
+                          {s: np.array(v, dtype=np.int64) for s, v in got.items()},
+                          np.array(t_out) - np.array(t_in), np.array(t_in), state["cycles"])

@@ -23,7 +23,9 @@ def test_presets(capsys):
 def small_toml(tmp_path_factory):
     p = tmp_path_factory.mktemp("robot") / "small-leg.toml"
     p.write_text(preset_text("cylinder-leg").replace('name = "cylinder-leg"', 'name = "small-leg"')
-                 .replace("tolerance_pu = 0.5 ", "tolerance_pu = 4.0 "))
+                 .replace("tolerance_pu = 0.5 ", "tolerance_pu = 4.0 ")
+                 # the pipelined leg (auto would pick a folded one), so cocotb runs on it
+                 .replace("pwm_period_us = 20000.0", 'pwm_period_us = 20000.0\narchitecture = "pipelined"'))
     return p
 
 
@@ -91,7 +93,7 @@ def test_eval_with_plan(capsys, built, small_toml):
     (["eval", "--preset", "planar-arm", "1", "2", "3"],
      "ikseries: error: eval needs 2 values (x, y) for planar-arm, not 3\n"),
     (["eval", "--preset", "nope", "1", "1", "1"],
-     "ikseries: error: preset must be one of ['cylinder-leg', 'hexapod-leg', 'planar-arm', 'quadruped-fore', 'quadruped-hind'], not 'nope'\n"),
+     "ikseries: error: preset must be one of ['cylinder-leg', 'hexapod', 'hexapod-leg', 'planar-arm', 'quadruped-fore', 'quadruped-hind'], not 'nope'\n"),
     (["build", "--preset", "cylinder-leg", "also.toml"],
      "ikseries: error: give either a robot description file or --preset, not both\n"),
     (["build", "--cocotb", "modelsim"],

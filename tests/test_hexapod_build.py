@@ -1,0 +1,83 @@
+"""`ikseries build` end to end on the six-legged robot (shared core) and on a folded single leg."""
+import json
+import re
+
+import pytest
+
+from ikseries.cli import main
+from ikseries.hdl.shared import RobotCore
+from ikseries.robot import load_preset, preset_text
+
+
+def _ports(verilog, module):
+    top = re.search(rf"^module {module}\(.*?^endmodule", verilog, re.M | re.S).group(0)
+    return {name: int(w) + 1 if w else 1 for w, name in
+            re.findall(r"^\s*(?:input|output)\s+(?:\[(\d+):0\]\s+)?(\w+);", top, re.M)}
+
+
+@pytest.fixture(scope="module")
+def hexapod(tmp_path_factory):
+    out = tmp_path_factory.mktemp("hexapod") / "build"
+    # cocotb is asked for: the build must skip it for the robot top and say so
+    assert main(["build", "--preset", "hexapod", "--no-synth", "--cocotb", "icarus", "-q", "-o", str(out)]) == 0
+    return out
+
+
+def test_hexapod_build_report_and_ports(hexapod):
+    rep = json.loads((hexapod / "report.json").read_text())
+    man = json.loads((hexapod / "manifest.json").read_text())
+    robot = load_preset("hexapod")
+    assert sorted(p.name for p in hexapod.iterdir()) == [
+        "error_map.png", "hexapod_core.sdc", "hexapod_core.v", "manifest.json", "plan.json",
+        "report.json", "report.md"]
+    a = rep["architecture"]
+    assert (a["architecture"], a["multipliers"], a["dsp"], a["legs"]) == ("shared", 1, "ice40", 6)
+    # the rate comes from the core's initiation interval, which the simulation measured
+    ii = rep["initiation_interval"]
+    assert rep["simulation"]["initiation_interval_measured"] == ii == man["initiation_interval"]
+    assert rep["simulation"]["latency_cycles_measured"] == rep["latency_cycles"] == man["latency_cycles"]
+    assert rep["refresh_hz"] == man["refresh_hz"] == robot.clock_hz / (6 * ii) >= 1000
+    assert rep["simulation"]["mismatches"] == rep["simulation"]["leg_mismatches"] == 0
+    assert rep["simulation"]["legs_addressed"] == [0, 1, 2, 3, 4, 5]
+    assert rep["cocotb"] == {} and rep["cocotb_note"].startswith("cocotb skipped")
+    assert all(s["error_pu"]["total"] <= 0.5 for s in rep["servos"])
+    ports = _ports((hexapod / "hexapod_core.v").read_text(), "hexapod_core")
+    pwm = sorted(p for p in ports if p.startswith("pwm_"))
+    assert len(pwm) == 18 and "pwm_l0_s1" in pwm and "pwm_l5_s3" in pwm
+    assert sorted(p["port"] for p in man["pwm"]) == pwm
+    for f in man["inputs"]["fields"] + man["outputs"]["fields"]:
+        assert ports[f["port"]] == f["width"], f
+    assert ports["i_leg"] == ports["o_leg"] == 3
+    md = (hexapod / "report.md").read_text()
+    assert "cocotb skipped" in md and "Refresh rate" in md and "folded evaluator shared by 6 legs" in md
+    assert "create_clock -name clk -period 20.8333 [get_ports {clk}]" in (hexapod / "hexapod_core.sdc").read_text()
+
+
+def test_hexapod_core_rate_matches_a_rebuilt_core(hexapod):
+    """The report's figures are those of the component built from plan.json (not a formula)."""
+    from ikseries.fit.plan import Plan
+    rep = json.loads((hexapod / "report.json").read_text())
+    plan = Plan.from_json(json.loads((hexapod / "plan.json").read_text()))
+    robot = load_preset("hexapod")
+    core = RobotCore(plan, 6, robot.pwm_period_ticks, robot.clock_hz, multipliers=1, dsp=(16, 16))
+    assert (core.latency, core.initiation_interval, core.refresh_hz) == (
+        rep["latency_cycles"], rep["initiation_interval"], rep["refresh_hz"])
+
+
+def test_single_leg_folded_build_from_the_command_line(tmp_path, capsys):
+    toml = tmp_path / "small-leg.toml"
+    toml.write_text(preset_text("cylinder-leg").replace('name = "cylinder-leg"', 'name = "small-leg"')
+                    .replace("tolerance_pu = 0.5 ", "tolerance_pu = 4.0 "))
+    out = tmp_path / "out"
+    assert main(["build", str(toml), "--architecture", "folded", "--multipliers", "2", "--dsp", "none",
+                 "--no-synth", "--cocotb", "none", "-q", "-o", str(out)]) == 0
+    assert "2 multipliers (full-width)" in capsys.readouterr().out
+    rep = json.loads((out / "report.json").read_text())
+    a = rep["architecture"]
+    assert (a["architecture"], a["multipliers"], a["dsp"], a["legs"]) == ("folded", 2, "none", 1)
+    assert a["reason"].startswith("hardware.architecture = folded")
+    ii = rep["initiation_interval"]
+    assert ii > 1 and rep["simulation"]["initiation_interval_measured"] == ii
+    assert rep["refresh_hz"] == 48e6 / ii and rep["cocotb_note"] is None
+    ports = _ports((out / "small_leg_core.v").read_text(), "small_leg_core")
+    assert {"pwm_s1", "pwm_s2", "pwm_s3", "i_r", "o_s1"} <= set(ports) and "i_leg" not in ports
