@@ -200,6 +200,13 @@ class IntervalOps:
         t = self.lt(a, b)
         return Iv(1 - t.hi, 1 - t.lo)
 
+    def not_(self, a):
+        return Iv(1 - a.hi, 1 - a.lo)
+
+    def addsub(self, a, b, sub):
+        """a - b if sub else a + b."""
+        return self.mux(sub, self.sub(a, b), self.add(a, b))
+
     def or_(self, a, b):
         if a.exact == 1 or b.exact == 1:
             return Iv(1, 1)
@@ -264,11 +271,12 @@ def _rotate(ops, live, n, table, cordics, tag):
         new, hints = dict(live), {}
         for xn, yn, an in cordics:
             x, y, a = live[xn], live[yn], live[an]
-            neg = ops.lt(a, ops.c(0))
+            neg = ops.lt(a, ops.c(0))       # a < 0: rotate clockwise
+            pos = ops.not_(neg)
             dx, dy, t = ops.shr(y, i), ops.shr(x, i), ops.c(table[i])
-            new[xn] = ops.mux(neg, ops.add(x, dx), ops.sub(x, dx))
-            new[yn] = ops.mux(neg, ops.sub(y, dy), ops.add(y, dy))
-            new[an] = ops.mux(neg, ops.add(a, t), ops.sub(a, t))
+            new[xn] = ops.addsub(x, dx, pos)
+            new[yn] = ops.addsub(y, dy, neg)
+            new[an] = ops.addsub(a, t, pos)
             if ops.analysis:
                 b = bounds[xn][i]
                 hints[xn] = hints[yn] = (-b, b)
@@ -298,11 +306,12 @@ def _vectoring(ops, live, n, table, cordics, tag):
         new, hints = dict(live), {}
         for xn, yn, an in cordics:
             x, y, a = live[xn], live[yn], live[an]
-            pos = ops.ge(y, ops.c(0))
+            neg = ops.lt(y, ops.c(0))       # y >= 0: rotate clockwise
+            pos = ops.not_(neg)
             dx, dy, t = ops.shr(y, i), ops.shr(x, i), ops.c(table[i])
-            new[xn] = ops.mux(pos, ops.add(x, dx), ops.sub(x, dx))
-            new[yn] = ops.mux(pos, ops.sub(y, dy), ops.add(y, dy))
-            new[an] = ops.mux(pos, ops.add(a, t), ops.sub(a, t))
+            new[xn] = ops.addsub(x, dx, neg)
+            new[yn] = ops.addsub(y, dy, pos)
+            new[an] = ops.addsub(a, t, neg)
             if ops.analysis:
                 x0lo, b = bounds[xn][0], bounds[xn][1][i]
                 hints[xn], hints[yn] = (max(0, x0lo), b), (-b, b)

@@ -69,6 +69,17 @@ class AmaranthOps:
     def ge(self, a, b):
         return a >= b
 
+    def not_(self, a):
+        return ~a
+
+    def addsub(self, a, b, sub):
+        """a - b if sub else a + b, as ONE adder: a + (b ^ -sub) + sub (a conditional
+        inversion and a carry-in; Yosys maps it to a single carry chain)."""
+        b = Value.cast(b)
+        if not b.shape().signed:
+            b = Cat(b, Const(0, 1)).as_signed()
+        return a + Mux(sub, ~b, b) + sub
+
     def or_(self, a, b):
         return a | b
 

@@ -60,6 +60,12 @@ class NumpyOps:
     def ge(self, a, b):
         return a >= b
 
+    def not_(self, a):
+        return ~a
+
+    def addsub(self, a, b, sub):
+        return np.where(sub, a - b, a + b)
+
     def or_(self, a, b):
         return a | b
 

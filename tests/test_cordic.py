@@ -256,3 +256,16 @@ def test_stage_may_only_read_previous_stage():
     s2 = ops.stage("two", {"x": s1["x"], "y": s1["x"]})
     with pytest.raises(AssertionError, match=r"stage 3 \(three\.z\) reads s1_one_x from stage 1"):
         ops.stage("three", {"z": ops.add(s2["y"], s1["x"])})
+
+
+def test_flat_verilog_top_ports(robot):
+    """The exported CORDIC top has one port per stream field, like the polynomial core's."""
+    from ikseries.hdl.flat import FlatStreamTop, stream_verilog
+    small = dataclasses.replace(SIZED, rot_iters=2, xy_iters=2, uv_iters=2, law_iters=2)
+    text = stream_verilog(CordicLegSolver(robot, small), "cordic_solver")
+    assert "module cordic_solver(" in text
+    for port in ("input [8:0] i_r", "input [11:0] i_theta", "input [8:0] i_z", "output [16:0] o_s1",
+                 "output [16:0] o_s3", "input i_valid", "output i_ready", "output o_valid", "input o_ready"):
+        assert port in text, port
+    with pytest.raises(TypeError, match=r"^core must be a stream component with i, o and latency, not 3$"):
+        FlatStreamTop(3)
