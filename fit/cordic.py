@@ -34,6 +34,10 @@ maps to the angle format by a shift and no angle needs a constant multiply):
 6. pulse scaling ``ticks = round(c1 * angle + c0)`` (constant multiply, add, shift) and the
    clamp to the pulse limits, exactly as the polynomial core's outputs.
 
+Constant multiplies (``ops.mulc``) whose constant has at most :data:`SHIFT_ADD_DIGITS`
+canonical signed digits become shift-adds in the RTL (e.g. 480 ticks/degree = 2**9 - 2**5);
+the others are ``*`` by a constant, mapped by Yosys (to DSP blocks on all three targets).
+
 Every vectoring CORDIC pre-rotates by +-90 deg when ``x < 0`` so any quadrant converges.
 """
 from __future__ import annotations
@@ -44,7 +48,7 @@ from dataclasses import dataclass, fields
 from .plan import PlanInput, bits_for
 
 __all__ = ["CordicDesign", "CordicPlan", "IntervalOps", "Iv", "datapath", "cordic_gain",
-           "DEFAULT_DESIGN", "ITERATION_FIELDS", "WIDTH_FIELDS"]
+           "DEFAULT_DESIGN", "ITERATION_FIELDS", "WIDTH_FIELDS", "csd", "SHIFT_ADD_DIGITS"]
 
 ITERATION_FIELDS = ("rot_iters", "xy_iters", "uv_iters", "law_iters")
 WIDTH_FIELDS = ("len_frac", "area_frac", "angle_frac", "gain_frac", "scale_frac")
@@ -123,6 +127,25 @@ def _cordic_bounds(m: float, n: int) -> list[int]:
     return out
 
 
+def csd(c: int) -> list[tuple[int, int]]:
+    """Canonical signed-digit form of ``c``: [(sign, shift)] with c = sum(sign * 2**shift)
+    and no two adjacent non-zero digits (the fewest adders for a shift-add multiply)."""
+    out, k = [], 0
+    while c:
+        if c & 1:
+            d = 2 - (c & 3)      # +1 if c = 1 mod 4, -1 if c = 3 mod 4
+            out.append((d, k))
+            c -= d
+        c >>= 1
+        k += 1
+    return out
+
+
+#: constant multiplies with at most this many CSD digits are built as shift-adds in the RTL;
+#: longer constants are written as ``*`` and left to Yosys (a DSP block where there is one)
+SHIFT_ADD_DIGITS = 3
+
+
 # -- interval analysis back end -------------------------------------------------------------
 @dataclass(frozen=True)
 class Iv:
@@ -182,6 +205,10 @@ class IntervalOps:
             return _iv(lo, max(a.lo ** 2, a.hi ** 2), "square")
         p = [x * y for x in (a.lo, a.hi) for y in (b.lo, b.hi)]
         return _iv(min(p), max(p), "mul")
+
+    def mulc(self, a, c: int):
+        """a * c for an integer constant c."""
+        return self.mul(a, self.c(c))
 
     def shr(self, a, k):
         return Iv(a.lo >> k, a.hi >> k)
@@ -359,7 +386,7 @@ def datapath(ops, cp: "CordicPlan") -> dict:
     above, below = ops.lt(th90, th), ops.lt(th, ops.neg(th90))
     a = ops.shl(th, A - ith.frac)
     a = ops.mux(above, ops.sub(a, ops.c(k["deg180"])), ops.mux(below, ops.add(a, ops.c(k["deg180"])), a))
-    live = ops.stage("prep", {"rk": ops.mul(live["r"], ops.c(k["kr"])), "zk": ops.mul(live["z"], ops.c(k["kv"])),
+    live = ops.stage("prep", {"rk": ops.mulc(live["r"], k["kr"]), "zk": ops.mulc(live["z"], k["kv"]),
                               "flip": ops.or_(above, below), "a": a})
     # stage: CORDIC start vector (R / K_rot, 0), negated when theta was turned by 180 deg
     rr = _round_shift(ops, live["rk"], G + ir.frac - L)
@@ -377,7 +404,7 @@ def datapath(ops, cp: "CordicPlan") -> dict:
     live = _vectoring(ops, live, d.uv_iters, k["atan"], [("x", "y", "a")], "uv")
     s1, auv = live["s1"], live["a"]
     # d: gain compensation, square, area format
-    live = ops.stage("d_mul", {"s1": s1, "auv": auv, "dk": ops.mul(live["x"], ops.c(k["kd"]))})
+    live = ops.stage("d_mul", {"s1": s1, "auv": auv, "dk": ops.mulc(live["x"], k["kd"])})
     live = ops.stage("d", {"s1": live["s1"], "auv": live["auv"], "d": _round_shift(ops, live["dk"], G)})
     dd = live["d"]
     live = ops.stage("d_sq", {"s1": live["s1"], "auv": live["auv"], "sq": ops.mul(dd, dd)})
@@ -404,7 +431,7 @@ def datapath(ops, cp: "CordicPlan") -> dict:
     angles = {"s1": live["s1"], "s2": ops.sub(live["aa"], live["auv"]), "s3": live["ae"]}
     live = ops.stage("angles", angles)
     # pulse scaling: ticks = round(c1 * angle + c0), then the clamp to the pulse limits
-    live = ops.stage("scale", {s: ops.mul(live[s], ops.c(k["c1"][j])) for j, s in enumerate(cp.servos)})
+    live = ops.stage("scale", {s: ops.mulc(live[s], k["c1"][j]) for j, s in enumerate(cp.servos)})
     live = ops.stage("round", {s: ops.shr(ops.add(live[s], ops.c(k["c0"][j])), A + S)
                                for j, s in enumerate(cp.servos)})
     lo, hi = cp.limits

@@ -5,7 +5,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigne
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ..fit.cordic import CordicDesign, CordicPlan, datapath
+from ..fit.cordic import SHIFT_ADD_DIGITS, CordicDesign, CordicPlan, csd, datapath
 from ..fit.plan import bits_for
 
 __all__ = ["AmaranthOps", "CordicLegSolver", "cordic_input_layout", "cordic_output_layout"]
@@ -56,6 +56,22 @@ class AmaranthOps:
 
     def mul(self, a, b):
         return a * b
+
+    def mulc(self, a, c: int):
+        """a * c: a shift-add over the CSD digits of c when it has few, else ``*``."""
+        digits = csd(c)
+        if not digits:
+            return Const(0)
+        if len(digits) > SHIFT_ADD_DIGITS:
+            return a * Const(c)
+        a = Value.cast(a)
+        if not a.shape().signed:
+            a = Cat(a, Const(0, 1)).as_signed()
+        acc = None
+        for sign, k in sorted(digits, key=lambda d: -d[0]):   # positive digits first
+            term = a << k
+            acc = (term if sign > 0 else -term) if acc is None else (acc + term if sign > 0 else acc - term)
+        return acc
 
     def shr(self, a, k):
         return a >> k
@@ -120,7 +136,8 @@ class CordicLegSolver(wiring.Component):
     every ``stage`` of it is one register stage here, every register as wide as its analysed
     range, so no in-range input overflows (out-of-range port values are clamped to the
     workspace in the first stage). Constant multiplies (gain compensation, pulse scaling) are
-    written as ``*`` by a constant and left to Yosys (shift-add in LUTs or a DSP block);
+    shift-adds when the constant has at most ``SHIFT_ADD_DIGITS`` canonical signed digits
+    (480 ticks/degree: one subtraction), else ``*`` by a constant left to Yosys (a DSP block);
     CORDIC shifts are wiring; the square root is a restoring one with one result bit per stage.
 
     Parameters

@@ -48,6 +48,9 @@ class NumpyOps:
     def mul(self, a, b):
         return a * b
 
+    def mulc(self, a, c):
+        return a * np.int64(c)
+
     def shr(self, a, k):
         return a >> k
 

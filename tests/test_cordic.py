@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from amaranth.hdl import Module, Signal
+from amaranth.hdl import Module, Signal, signed
 
 from ikseries.fit import cordic as fc
 from ikseries.fit.cordic import DEFAULT_DESIGN, CordicDesign, CordicPlan, IntervalOps
@@ -269,3 +269,37 @@ def test_flat_verilog_top_ports(robot):
         assert port in text, port
     with pytest.raises(TypeError, match=r"^core must be a stream component with i, o and latency, not 3$"):
         FlatStreamTop(3)
+
+
+@pytest.mark.parametrize("c", [0, 1, 3, 7, 480, -480, 0b1011011101, 123457, -(1 << 20) + 3])
+def test_csd_digits(c):
+    d = fc.csd(c)
+    assert sum(s * (1 << k) for s, k in d) == c
+    ks = sorted(k for _, k in d)
+    assert all(b - a >= 2 for a, b in zip(ks, ks[1:]))     # no adjacent non-zero digits
+    assert len(d) <= (abs(c).bit_length() + 2) // 2
+
+
+def test_shift_add_constant_multiply_is_exact():
+    """The RTL's shift-add and ``*`` constant multiplies against the model, signed and unsigned."""
+    from amaranth.sim import Simulator
+    consts = [480, -480, 7, -3, 123457]
+    m = Module()
+    a_u, a_s = Signal(9), Signal(signed(12))
+    ops = AmaranthOps(m, Signal(), {}, [])
+    outs = [(a, c, ops.mulc(a, c)) for a in (a_u, a_s) for c in consts]
+    probes = [Signal(signed(40), name=f"p{k}") for k in range(len(outs))]
+    for p, (_, _, e) in zip(probes, outs):
+        m.d.comb += p.eq(e)
+    got = []
+
+    async def bench(ctx):
+        for vu, vs in [(0, 0), (511, -2048), (300, 2047), (1, -1)]:
+            ctx.set(a_u, vu)
+            ctx.set(a_s, vs)
+            got.append([(vu if a is a_u else vs) * c - ctx.get(p) for p, (a, c, _) in zip(probes, outs)])
+
+    sim = Simulator(m)
+    sim.add_testbench(bench)
+    sim.run()
+    assert all(v == 0 for row in got for v in row)
