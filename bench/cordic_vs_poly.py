@@ -79,7 +79,8 @@ def cordic_step(ctx: dict) -> None:
         fresh = measure_cordic(robot, design, verification_points(robot, seed=2))
         cp = CordicPlan(robot, design)
         ctx["designs"][name] = {
-            "core": CordicLegSolver(robot, design), "top": name + "_solver",
+            "core": CordicLegSolver(robot, design),
+            "top": name.replace(".", "p") + "_solver",
             "record": {"latency_cycles": cp.latency,
                        "max_error_pu": {s: e["total"] for s, e in m["servos"].items()},
                        "error_points": m["points"],

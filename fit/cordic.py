@@ -257,7 +257,8 @@ class IntervalOps:
         return Iv(l, h)
 
     def assume(self, a, lo, hi, why):
-        """``a`` is known (proved: ``why``) to lie in [lo, hi]; the model checks it."""
+        """``a`` is known (proved: ``why``) to lie in [lo, hi]. Only the analysis uses this; the
+        int64 model checks the value against the range of the register it is stored in."""
         return Iv(max(a.lo, lo), min(a.hi, hi))
 
     def stage(self, name, vals, hints=None):
@@ -282,7 +283,7 @@ def _round_shift(ops, a, k):
     return ops.shl(a, -k) if k < 0 else a
 
 
-def _norm_bound(ops, x, y) -> float:
+def _norm_bound(x: Iv, y: Iv) -> float:
     ax = max(abs(x.lo), abs(x.hi))
     ay = max(abs(y.lo), abs(y.hi))
     return math.hypot(ax, ay)
@@ -293,7 +294,7 @@ def _rotate(ops, live, n, table, cordics, tag):
     ``cordics`` = [(x, y, a) register names]; one pipeline stage per iteration."""
     bounds = {}
     if ops.analysis:
-        bounds = {xn: _cordic_bounds(_norm_bound(ops, live[xn], live[yn]), n) for xn, yn, _ in cordics}
+        bounds = {xn: _cordic_bounds(_norm_bound(live[xn], live[yn]), n) for xn, yn, _ in cordics}
     for i in range(n):
         new, hints = dict(live), {}
         for xn, yn, an in cordics:
@@ -327,7 +328,7 @@ def _vectoring(ops, live, n, table, cordics, tag):
     gain * hypot. ``x`` starts >= 0 and never decreases. One pipeline stage per iteration."""
     bounds = {}
     if ops.analysis:
-        bounds = {xn: (live[xn].lo, _cordic_bounds(_norm_bound(ops, live[xn], live[yn]), n))
+        bounds = {xn: (live[xn].lo, _cordic_bounds(_norm_bound(live[xn], live[yn]), n))
                   for xn, yn, _ in cordics}
     for i in range(n):
         new, hints = dict(live), {}
