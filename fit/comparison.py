@@ -36,6 +36,7 @@ def plan_figures(robot, plan: Plan, points: dict | None = None) -> dict:
     acc = measure(robot, plan, points)
     bounds = plan.rounding_bounds()
     shared = _shared_nodes(plan)
+    cert = {c["name"]: c for c in plan.meta.get("certificate", {}).get("servos", [])}
     out = {}
     for o in plan.outputs:
         cone = plan.cone(o.preround)
@@ -56,6 +57,8 @@ def plan_figures(robot, plan: Plan, points: dict | None = None) -> dict:
             "quantization_pu": e["quantization"],
             "worst_at": e["at"],
             "certified_rounding_pu": bounds[o.preround] / o.ticks_per_pu,
+            "certified_total_pu": cert[o.name]["total_pu"] if o.name in cert else None,
+            "certified_converged": cert[o.name]["converged"] if o.name in cert else None,
         }
     return {"points": acc["points"], "servos": out,
             "plan": {"nodes": len(plan.nodes), "multiplications": plan.count("mul"),
@@ -75,7 +78,8 @@ def compare(robot, ikseries_plan: Plan, paper_plan: Plan, points: dict | None = 
 
 
 _HEADER = ("terms", "multiplications (shared + own)", "coefficients", "coefficient bits (total / max)",
-           "max error (pu)", "approximation (pu)", "certified rounding bound (pu)")
+           "max error (pu)", "approximation (pu)", "certified rounding bound (pu)",
+           "certified max error (pu)")
 
 
 def _cells(f: dict) -> list[str]:
@@ -83,7 +87,16 @@ def _cells(f: dict) -> list[str]:
     return [str(f["terms"]),
             f"{f['multiplications']} ({f['shared_multiplications']} + {f['own_multiplications']})",
             str(f["coefficients"]), f"{f['coefficient_bits_total']} / {f['coefficient_bits_max']}",
-            f"{f['max_error_pu']:.4f}", f"{f['approximation_pu']:.4f}", f"{f['certified_rounding_pu']:.4f}"]
+            f"{f['max_error_pu']:.4f}", f"{f['approximation_pu']:.4f}", f"{f['certified_rounding_pu']:.4f}",
+            _certified(f)]
+
+
+def _certified(f: dict) -> str:
+    if f.get("certified_total_pu") is None:
+        return "not run"
+    if not f.get("certified_converged"):
+        return f"≤ {f['certified_total_pu']:.4g} (cell budget spent before the bound got tight)"
+    return f"{f['certified_total_pu']:.4f}"
 
 
 def render_comparison(result: dict) -> str:

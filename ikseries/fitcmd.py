@@ -22,6 +22,7 @@ from .robot import robot_record
 __all__ = ["METHODS", "FitCommandError", "run_fit", "default_fit_dir"]
 
 METHODS = ("ikseries", "paper", "divided-differences")
+PAPER_CERT_CELLS = 100_000   # cell budget per servo when certifying the paper's plan
 
 
 class FitCommandError(RuntimeError):
@@ -60,6 +61,7 @@ def _ikseries(robot, progress) -> tuple[dict, dict]:
 
 def _paper(robot, progress) -> tuple[dict, dict]:
     from .accuracy import verification_points
+    from .fit.certify import certify
     from .fit.comparison import compare, render_comparison
     from .fit.paper import fit_paper, paper_plan
     try:
@@ -67,10 +69,22 @@ def _paper(robot, progress) -> tuple[dict, dict]:
     except ValueError as e:
         raise FitCommandError(f"--method paper: {e}") from None
     pplan = paper_plan(robot, pfit, progress)
+    progress("certifying the paper plan's error over the continuous workspace")
+    pts = verification_points(robot)
+    sampled = measure(robot, pplan, pts)["servos"]
+    # refine each servo to just above its sampled error: the bound is then close to the truth
+    cert = certify(robot, pplan, target_pu=1.05 * max(e["approximation"] for e in sampled.values()),
+                   max_cells=PAPER_CERT_CELLS)
+    for line in cert.lines():
+        progress("  " + line)
+    rec = cert.to_json()
+    for c in rec["servos"]:
+        c.pop("seconds", None)
+    pplan.meta["certificate"] = rec
     progress("fitting the same robot with ikseries")
     plan, _ = fit_robot(robot, progress)
     progress("measuring both on the same >= 10^6 points")
-    res = compare(robot, plan, pplan, verification_points(robot))
+    res = compare(robot, plan, pplan, pts)
     return {"paper_plan.json": pplan.dumps(), "plan.json": plan.dumps(), "comparison.json": _dump(res),
             "comparison.md": render_comparison(res)}, res
 

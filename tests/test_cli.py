@@ -139,3 +139,18 @@ def test_unmeetable_tolerance_writes_nothing(capsys, tmp_path):
     code, _, err = run(capsys, "build", str(tight), "-q", "-o", str(out))
     assert code == 1 and "tolerance 0.01 pu leaves no approximation budget" in err and err.count("\n") == 1
     assert not out.exists() and sorted(tmp_path.iterdir()) == [tight]
+
+
+def test_fit_divided_differences_writes_its_report(capsys, tmp_path):
+    code, out, _ = run(capsys, "fit", "--preset", "planar-arm", "--method", "divided-differences",
+                       "-o", str(tmp_path / "dd"), "-q")
+    assert code == 0 and "divided differences on 3 paths" in out
+    assert sorted(p.name for p in (tmp_path / "dd").iterdir()) == ["divided.json", "divided.md"]
+    assert "phi180-vertical" in (tmp_path / "dd" / "divided.md").read_text()
+
+
+def test_fit_method_on_the_wrong_robot_is_a_one_line_error(capsys, tmp_path):
+    code, _, err = run(capsys, "fit", "--method", "divided-differences", "-o", str(tmp_path / "x"), "-q")
+    assert code == 2 and not (tmp_path / "x").exists()
+    assert err == ("ikseries: error: --method divided-differences needs a planar-arm robot, not "
+                   "'cylinder-leg' (geometry CylinderLeg)\n")
