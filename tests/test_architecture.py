@@ -37,10 +37,9 @@ def test_defaults_and_hexapod_preset():
     assert (r.legs, r.architecture, r.multipliers, r.dsp, r.min_refresh_hz) == (1, "pipelined", 1, "ice40", 1000.0)
     assert parse_robot(base(legs=2)).architecture == "auto"
     h = load_preset("hexapod")
-    assert (h.legs, h.architecture, h.dsp, h.min_refresh_hz, h.ticks_per_pu) == (6, "auto", "ice40", 1000.0, 24.0)
+    assert (h.legs, h.architecture, h.dsp, h.min_refresh_hz, h.ticks_per_pu) == (6, "auto", "ice40", 1000.0, 12.0)
     leg = load_preset("hexapod-leg")
-    assert (h.geometry, h.inputs, h.calibration, h.clock_hz) == (leg.geometry, leg.inputs, leg.calibration,
-                                                                 leg.clock_hz)
+    assert (h.geometry, h.inputs, h.calibration) == (leg.geometry, leg.inputs, leg.calibration)
 
 
 @pytest.mark.parametrize("top, hw, message", [

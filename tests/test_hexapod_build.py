@@ -50,7 +50,7 @@ def test_hexapod_build_report_and_ports(hexapod):
     assert ports["i_leg"] == ports["o_leg"] == 3
     md = (hexapod / "report.md").read_text()
     assert "cocotb skipped" in md and "Refresh rate" in md and "folded evaluator shared by 6 legs" in md
-    assert "create_clock -name clk -period 20.8333 [get_ports {clk}]" in (hexapod / "hexapod_core.sdc").read_text()
+    assert "create_clock -name clk -period 41.6667 [get_ports {clk}]" in (hexapod / "hexapod_core.sdc").read_text()
 
 
 def test_hexapod_core_rate_matches_a_rebuilt_core(hexapod):
