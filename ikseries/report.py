@@ -115,10 +115,12 @@ def render_markdown(r: dict) -> str:
     else:
         out.append("Synthesis was skipped (--no-synth).")
     out += ["", "## Coefficients", "",
-            "Integer coefficient = round(value * 2**frac_bits); term = x^i y^j z^k over the "
-            "normalised features (see plan.json `meta.features`), value in PWM ticks.", ""]
+            "Integer coefficient = round(value * 2**frac_bits); a term is the product of the "
+            "servo's normalised variables (see plan.json `meta.features`) raised to the listed "
+            "powers; value in PWM ticks.", ""]
     for s in r["servos"]:
-        out += [f"### {s['name']}", "", _row(["i j k", "integer", "value"]), _row(["---"] * 3)]
+        out += [f"### {s['name']}", "", _row(["powers of " + ", ".join(s["powers"]), "integer", "value"]),
+                _row(["---"] * 3)]
         out += [_row([" ".join(map(str, c["exponents"])), c["integer"], f"{c['value']:.10g}"])
                 for c in s["coefficients"]]
         out.append("")
