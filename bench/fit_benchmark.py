@@ -38,7 +38,8 @@ def bench_preset(name: str) -> dict:
     for sf in fits:
         coef_bits = max(bits_for(min(0, q), max(0, q))[0] for q in (quantize(c, sf.frac) for c in sf.poly.values()))
         cs = cert[sf.name]
-        servos.append({"servo": sf.name, "variables": sf.features.kind, "names": list(sf.features.names),
+        servos.append({"servo": sf.name, "variables": sf.features.kind + (" tensor" if sf.features.tensor else ""),
+                       "names": list(sf.features.names),
                        "degree": sf.degree, "terms": len(sf.poly), "multiplications": mults[sf.name],
                        "coefficient_bits": coef_bits, "coefficient_frac_bits": sf.frac,
                        "sampled_max_pu": acc["servos"][sf.name]["total"],

@@ -11,6 +11,7 @@ Error budget (pu): ``tolerance = approximation + quantization + output rounding
 """
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from dataclasses import dataclass
 
@@ -116,9 +117,17 @@ class FeatureSet:
     names: tuple
     allowed: tuple
     zero_free: int | None = None
+    tensor: bool = False      # every power up to ``degree`` per variable, not total degree
+
+    def label(self) -> str:
+        return f"{self.kind} {'/'.join(self.names)}" + (" tensor" if self.tensor else "")
 
     def terms(self, degree: int) -> list:
-        terms = total_degree_terms(degree, list(self.allowed))
+        if self.tensor:
+            terms = [e for e in total_degree_terms(degree * len(self.allowed), list(self.allowed))
+                     if max(e, default=0) <= degree]
+        else:
+            terms = total_degree_terms(degree, list(self.allowed))
         if self.zero_free is not None:
             k = self.zero_free
             terms = [e for e in terms if e[k] > 0 or sum(e) == 0]
@@ -185,6 +194,9 @@ def _feature_sets(robot, stage, k: int) -> list[FeatureSet]:
         norms = [Normaliser.for_range(i.min, i.max, i.frac_bits) for i in robot.inputs]
         fi = lambda *c: robot.pulses_pu(*c)[k]  # noqa: E731
         out.append(_analyse(fi, pts, norms, [i.name for i in robot.inputs], "direct"))
+    # the same variables with tensor-product terms (a per-variable degree) where that differs
+    out += [dataclasses.replace(fs, tensor=True) for fs in list(out)
+            if sum(a != "none" for a in fs.allowed) > 1]
     return out
 
 
@@ -305,7 +317,8 @@ def _fit_servo(robot, inputs, stage, name, candidates, sets, budget_ticks, progr
             if err > 8 * budget_ticks:
                 continue
             c, err, state = _fit_terms(terms, fit_set, check_set, budget_ticks)
-            progress(f"  {name}: {fs.kind} {'/'.join(fs.names)}, degree {deg}, {len(terms)} terms, "
+            progress(f"  {name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
+                     f"{len(terms)} terms, "
                      f"{cost} multipliers, max fit error {err:.4g} ticks")
             if err <= budget_ticks:
                 best = (cost, ServoFit(name, fs, deg, dict(zip(terms, (float(v) for v in c))), err), state)
@@ -413,6 +426,7 @@ def _lower(robot, inputs, stage, fits, budget, progress) -> Plan:
                    "max_degree": MAX_DEGREE},
         "features": {**stage.meta(), "frac_bits": fv},
         "servos": [{"name": sf.name, "variables": sf.features.kind, "names": list(sf.features.names),
+                    "term_set": "tensor" if sf.features.tensor else "total degree",
                     "powers": dict(zip(sf.features.names, sf.features.allowed)), "total_degree": sf.degree,
                     "terms": len(sf.poly), "multipliers": mults[sf.name], "accumulator_frac_bits": sf.frac,
                     "fit_error_pu": sf.fit_error_ticks / tpp, "certified_rounding_pu": sf.bound_pu,
@@ -455,7 +469,7 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tu
             sets = {fs.kind: tuple((f, t[k] * tpp) for f, t in zip(feats[fs.kind], targets))
                     for fs in candidates}
             progress(f"fitting {name}: candidates " + "; ".join(
-                f"{fs.kind} ({', '.join(f'{v} {a}' for v, a in zip(fs.names, fs.allowed))})"
+                f"{fs.label()} ({', '.join(f'{v} {a}' for v, a in zip(fs.names, fs.allowed))})"
                 for fs in candidates))
             fits[k] = _fit_servo(robot, inputs, stage, name, candidates, sets, approx[k], progress)
         plan = _lower(robot, inputs, stage, fits, budget, progress)

@@ -262,7 +262,7 @@ def make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, t
         servos.append({
             "name": sf.name,
             "total_degree": sf.degree,
-            "variables": sf.features.kind,
+            "variables": sf.features.kind + (", tensor terms" if sf.features.tensor else ""),
             "powers": dict(zip(sf.features.names, sf.features.allowed)),
             "terms": len(sf.poly),
             "accumulator_frac_bits": sf.frac,

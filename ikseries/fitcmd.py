@@ -43,7 +43,8 @@ def _ikseries(robot, progress) -> tuple[dict, dict]:
     progress("measuring the error on >= 10^6 points")
     acc = measure(robot, plan)
     mults = output_multipliers(plan)
-    rows = [{"servo": sf.name, "variables": sf.features.kind, "names": list(sf.features.names),
+    rows = [{"servo": sf.name, "variables": sf.features.kind + (" tensor" if sf.features.tensor else ""),
+             "names": list(sf.features.names),
              "degree": sf.degree, "terms": len(sf.poly), "multiplications": mults[sf.name],
              "coefficient_frac_bits": sf.frac, "sampled_max_pu": acc["servos"][sf.name]["total"],
              "certified_rounding_pu": sf.bound_pu} for sf in fits]

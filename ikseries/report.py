@@ -69,8 +69,8 @@ def render_markdown(r: dict) -> str:
                 f"![error map]({r['error_map']['file']})"]
     out += ["", "## Series", "",
             "Variables: *radial* = (x² + y², z), *cartesian* = (x, y, z) in the servo-axis frame, "
-            "*direct* = the input ports; chosen per servo as the fewest multipliers that meet the "
-            "approximation budget.", "",
+            "*direct* = the input ports; total-degree terms unless marked *tensor terms* (a degree per "
+            "variable); chosen per servo as the fewest multipliers that meet the approximation budget.", "",
             _row(["servo", "variables", "total degree", "powers", "terms", "multipliers (incl. coordinate stage)",
                   "coefficient frac bits"]), _row(["---"] * 7)]
     for s in r["servos"]:

@@ -141,3 +141,14 @@ def test_a_plan_that_fails_certification_is_refitted_then_refused(small_robot, m
     s2 = [b for name, b in refits if name == "s2"]
     assert len(s2) == fitter.CERTIFY_ATTEMPTS and s2[1] == pytest.approx(0.85 * s2[0])
     assert [name for name, _ in refits].count("s1") == 1      # passing servos are kept
+
+
+def test_tensor_terms_cap_each_variable():
+    from ikseries.fit.fitter import FeatureSet
+    fs = FeatureSet("cartesian", ("x", "y", "z"), ("any", "odd", "none"), zero_free=1, tensor=True)
+    terms = fs.terms(3)
+    assert max(e[0] for e in terms) == 3 and max(e[1] for e in terms) == 3
+    assert all(e[2] == 0 and (e[1] % 2 == 1 or sum(e) == 0) for e in terms)
+    assert (3, 3, 0) in terms and len(terms) == 1 + 4 * 2     # 1, and x^0..3 times y^1, y^3
+    total = FeatureSet("cartesian", ("x", "y", "z"), ("any", "odd", "none"), zero_free=1).terms(3)
+    assert (3, 3, 0) not in total and (2, 1, 0) in total
