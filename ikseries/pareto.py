@@ -23,7 +23,9 @@ Record fields (``None`` when not measured):
 ``LC``, ``LC_available``
     nextpnr's placed logic cells (iCE40 ICESTORM_LC, ECP5 TRELLIS_COMB) and the device's.
 ``harness``, ``harness_ffs``
-    Whether the core was wrapped in the timing harness and the FFs that harness adds.
+    Whether the core is wrapped in the timing harness (its port bits exceed the package's
+    pins, as :func:`~ikseries.pnr.place_and_route` decides) and the FFs that harness adds;
+    known from the ports, so also for a design that does not fit.
 ``area``
     The plotted area: ``LUT + FF - harness_ffs`` (Yosys counts, the harness' shift-register
     FFs removed; its one-LUT-per-output-bit capture mux, if any, remains).
@@ -41,7 +43,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable, Sequence
 
-from .pnr import PNR_DEVICES, DoesNotFitError, PnrError, place_and_route
+from .pnr import PNR_DEVICES, DoesNotFitError, PnrError, place_and_route, verilog_ports
 from .synth import categorise
 
 __all__ = ["DesignSpec", "pareto_front", "run_design", "run_matrix", "plot_device"]
@@ -136,6 +138,12 @@ def run_design(spec: DesignSpec, device: str, clock_hz: int, workdir: Path, *, s
     verilog, top = spec.verilog(device)
     rec["top"] = top
     workdir = Path(workdir)
+    # the harness place_and_route adds by default (port bits > package pins): one FF per
+    # port bit except the clock and reset, known before any tool runs
+    ports = verilog_ports(verilog, top)
+    if sum(p.width for p in ports) > PNR_DEVICES[device].user_io:
+        rec["harness"] = True
+        rec["harness_ffs"] = sum(p.width for p in ports if p.name not in ("clk", "rst"))
     try:
         res = place_and_route(verilog, top, device, clock_hz, workdir, seed=seed, timeout=timeout)
     except DoesNotFitError as e:
