@@ -1,0 +1,359 @@
+"""Benchmark: area vs latency per target, polynomial vs CORDIC, from real place and route.
+
+For the cylinder-leg robot, the IK cores alone (no PWM), as flat-port stream tops
+(``ikseries.hdl.flat.stream_verilog``):
+
+``pipelined``  the fully pipelined polynomial evaluator (``PlanEvaluator``, 1 target/clock);
+``folded1``    ``FoldedEvaluator`` with 1 multiplier of the device's DSP size
+               (iCE40 SB_MAC16 16x16, ECP5 MULT18X18D 18x18: ``hdl.schedule.DSP_SIZES``);
+``folded2``    the same with 2 multipliers;
+``cordic``     ``CordicLegSolver``, sized with ``size_cordic(margin_pu=0.075)`` (about 1.5 min)
+               unless ``--cordic-design JSON`` gives the design;
+
+and ``hexapod``: the hexapod preset's shared robot core (``RobotCore``: one folded evaluator
+for 6 legs, the configuration ``choose_architecture`` picks, iCE40 DSP size, plus the 18-channel
+PWM bank) on the iCE40UP5K only (``robot_verilog``).
+
+Each is placed and routed (``ikseries.pnr.place_and_route``, seed 1) on each device
+(iCE40UP5K sg48, ECP5-25F CABGA381) with nextpnr ``--freq`` = ``--clock-mhz`` (default 100 MHz).
+nextpnr reports the Fmax it achieved whether or not it meets the target; the target only
+steers its timing-driven placement and routing, so the default is above every core's expected
+Fmax (not the robots' 48 MHz) in case a lower one would let it stop early. Measured with the
+installed nextpnr-ecp5 (seed 1): folded2 and CORDIC reach the same Fmax (64.671, 104.471 MHz)
+with ``--clock-mhz`` 48, 100 and 200. A design that does not fit is recorded with Yosys' counts
+and the overflow.
+Accuracy: the polynomial plan's max |error| on the >= 10**6 verification points
+(``ikseries.accuracy.measure``; bit-exact for the pipelined and folded cores alike) and its
+certified bound; the CORDIC design's on the same points (``measure_cordic``).
+
+Writes JSON (default ``build/bench/pareto.json``), a plot per device next to it
+(``pareto_<device>.png``: area = LUT4 + FF from Yosys with the timing harness' FFs removed on x,
+latency in ns at Fmax on y, Pareto front of the placed cylinder-leg cores marked), and prints a table and
+verdicts for the issue's targets.
+
+    python bench/pareto.py [--devices ice40-up5k-sg48,ecp5-25f-cabga381]
+                           [--designs pipelined,folded1,folded2,cordic,hexapod] [--jobs 2]
+                           [--clock-mhz 100] [--cordic-design JSON] [--out build/bench/pareto.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+from ikseries.pareto import DesignSpec, plot_device, run_matrix
+from ikseries.pnr import PNR_DEVICES
+
+ICE40, ECP5 = "ice40-up5k-sg48", "ecp5-25f-cabga381"
+DESIGNS = ("pipelined", "folded1", "folded2", "cordic", "hexapod")
+TARGET_FMAX_MHZ, TARGET_LATENCY_NS, TARGET_THROUGHPUT = 150.0, 200.0, 20e6
+HEXAPOD_DSP, HEXAPOD_LC, HEXAPOD_REFRESH_HZ = 8, 5280, 1000.0
+
+
+def say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _family(device: str) -> str:
+    return PNR_DEVICES[device].family
+
+
+# -- design specs ----------------------------------------------------------------------------------
+def polynomial_specs(plan, max_error_pu: float | None, names=("pipelined", "folded1", "folded2"),
+                     extra: dict | None = None) -> list[DesignSpec]:
+    """Specs of the pipelined and folded (k = 1, 2; the device's DSP size) evaluators of ``plan``."""
+    from ikseries.hdl.evaluator import PlanEvaluator
+    from ikseries.hdl.flat import stream_verilog
+    from ikseries.hdl.folded import FoldedEvaluator
+    from ikseries.hdl.schedule import DSP_SIZES
+
+    extra = dict(extra or {})
+    specs = []
+    if "pipelined" in names:
+        specs.append(DesignSpec(
+            "pipelined", "polynomial", "polynomial, fully pipelined (PlanEvaluator)",
+            lambda dev: (stream_verilog(PlanEvaluator(plan), "poly_pipelined"), "poly_pipelined"),
+            lambda dev: PlanEvaluator(plan).latency, lambda dev: 1, max_error_pu, extra=extra))
+    for k in (1, 2):
+        if f"folded{k}" not in names:
+            continue
+
+        def make(dev, k=k):
+            return FoldedEvaluator(plan, k, DSP_SIZES[_family(dev)])
+        specs.append(DesignSpec(
+            f"folded{k}", "polynomial", f"polynomial, folded, {k} multiplier{'s' * (k > 1)} (device DSP size)",
+            lambda dev, make=make, k=k: (stream_verilog(make(dev), f"poly_folded{k}"), f"poly_folded{k}"),
+            lambda dev, make=make: make(dev).latency, lambda dev, make=make: make(dev).initiation_interval,
+            max_error_pu, extra=extra))
+    return specs
+
+
+def cordic_spec(robot, design, max_error_pu: float, extra: dict) -> DesignSpec:
+    """Spec of the pipelined CORDIC leg solver of ``design``."""
+    from ikseries.hdl.cordic import CordicLegSolver
+    from ikseries.hdl.flat import stream_verilog
+
+    return DesignSpec("cordic", "cordic", "CORDIC, fully pipelined (CordicLegSolver, margin 0.075 pu)",
+                      lambda dev: (stream_verilog(CordicLegSolver(robot, design), "cordic_solver"), "cordic_solver"),
+                      lambda dev: CordicLegSolver(robot, design).latency, lambda dev: 1, max_error_pu, extra=extra)
+
+
+def hexapod_spec(clock_hz_for_refresh=None) -> DesignSpec:
+    """Spec of the hexapod preset's shared core (the configuration ``choose_architecture`` picks)."""
+    from ikseries.accuracy import measure
+    from ikseries.architecture import choose_architecture
+    from ikseries.fit.fitter import fit_robot
+    from ikseries.hdl.export import robot_verilog
+    from ikseries.robot import load_preset
+
+    robot = load_preset("hexapod")
+    plan, _ = fit_robot(robot)
+    choice = choose_architecture(robot, plan)
+    core = choice.core
+    m = measure(robot, plan)
+    cert = plan.meta.get("certificate", {})
+    return DesignSpec(
+        "hexapod", "robot", f"hexapod shared core: {choice.candidate.describe()}, {core.legs} legs, "
+        f"{core.legs * len(core.servos)} PWM",
+        lambda dev: (robot_verilog(choice.candidate.build(robot, plan), "hexapod_core"), "hexapod_core"),
+        lambda dev: core.latency, lambda dev: core.initiation_interval,
+        max(e["total"] for e in m["servos"].values()), devices=(ICE40,),
+        extra={"legs": core.legs, "servos": core.legs * len(core.servos), "robot_clock_mhz": robot.clock_hz / 1e6,
+               "multipliers": choice.candidate.multipliers, "architecture_reason": choice.reason,
+               "max_error_pu_per_servo": {s: e["total"] for s, e in m["servos"].items()},
+               "certified_pu": _certified(cert)})
+
+
+def _certified(cert: dict) -> dict | None:
+    """Certified |error| bound per servo (pu) from ``plan.meta["certificate"]``, if any."""
+    servos = cert.get("servos") if isinstance(cert, dict) else None
+    if not isinstance(servos, list):
+        return None
+    return {c["name"]: c["total_pu"] for c in servos if "name" in c and "total_pu" in c}
+
+
+# -- verdicts --------------------------------------------------------------------------------------
+def _by(records, device, kind=None):
+    return [r for r in records if r["device"] == device and (kind is None or r["kind"] == kind)]
+
+
+def verdict_ecp5_speed(records) -> list[str]:
+    """Target 1: the fastest cylinder-leg configuration that fits an ECP5-25F."""
+    placed = [r for r in _by(records, ECP5) if r["kind"] != "robot" and r["status"] == "placed"]
+    if not placed:
+        return ["ECP5 speed target: no cylinder-leg core placed on the ECP5-25F - NOT MET"]
+    best = max(placed, key=lambda r: (r["throughput_per_s"], -r["latency_ns"]))
+    checks = [("Fmax", best["fmax_mhz"], ">=", TARGET_FMAX_MHZ, "MHz"),
+              ("latency", best["latency_ns"], "<=", TARGET_LATENCY_NS, "ns"),
+              ("throughput", best["throughput_per_s"] / 1e6, ">=", TARGET_THROUGHPUT / 1e6, "M/s")]
+    lines = [f"ECP5 speed target (fastest = highest throughput among placed cores): {best['design']}"]
+    ok_all = True
+    for name, v, op, t, unit in checks:
+        ok = v >= t if op == ">=" else v <= t
+        ok_all &= ok
+        lines.append(f"  {name} {v:.4g} {unit} {op} {t:g} {unit}: "
+                     + ("met" if ok else f"NOT MET (by {abs(v - t):.4g} {unit}, {abs(v - t) / t:.0%})"))
+    nofit = [r for r in _by(records, ECP5) if r["kind"] != "robot" and r["status"] == "does-not-fit"]
+    for r in nofit:
+        lines.append(f"  {r['design']} does not fit: " + ", ".join(
+            f"{k} {o['used']}/{o['available']} (+{o['over']}, {o['used'] / o['available']:.1f}x)"
+            for k, o in r["overflow"].items()))
+    also = [r["design"] for r in placed if r["fmax_mhz"] >= TARGET_FMAX_MHZ and r["latency_ns"] <= TARGET_LATENCY_NS
+            and r["throughput_per_s"] >= TARGET_THROUGHPUT]
+    lines.append(f"  verdict: {'MET' if ok_all else 'NOT MET'}; placed cores meeting all three: "
+                 f"{', '.join(also) or 'none'}")
+    return lines
+
+
+def verdict_hexapod(records) -> list[str]:
+    """Target 2: the hexapod on one iCE40UP5K refreshing the whole robot >= 1000/s."""
+    hx = [r for r in records if r["design"] == "hexapod" and r["device"] == ICE40]
+    if not hx:
+        return ["hexapod target: not run"]
+    r = hx[0]
+    if r["status"] != "placed":
+        over = ", ".join(f"{k} {o['used']}/{o['available']} (+{o['over']})" for k, o in (r["overflow"] or {}).items())
+        return [f"hexapod target: {r['status']} {over or r['error']} - NOT MET"]
+    refresh = r["refresh_hz_at_fmax"]
+    dsp_ok, lc_ok, hz_ok = r["DSP"] <= HEXAPOD_DSP, r["LC"] <= HEXAPOD_LC, refresh >= HEXAPOD_REFRESH_HZ
+    core_lc = r["LC"] - r["harness_ffs"]
+    return [f"hexapod target ({r['description']}):",
+            f"  DSP {r['DSP']} <= {HEXAPOD_DSP}: {'met' if dsp_ok else 'NOT MET'}",
+            f"  logic cells {r['LC']} <= {HEXAPOD_LC} (timing harness included; {r['harness_ffs']} harness "
+            f"FFs, so about {core_lc} without it): {'met' if lc_ok else 'NOT MET'}",
+            f"  whole-robot refresh at Fmax {r['fmax_mhz']:.1f} MHz: {refresh:,.0f} /s >= {HEXAPOD_REFRESH_HZ:g}: "
+            f"{'met' if hz_ok else 'NOT MET'} ({refresh / HEXAPOD_REFRESH_HZ:.1f}x); at the robot's "
+            f"{r['robot_clock_mhz']:g} MHz PWM clock: {r['refresh_hz_at_robot_clock']:,.0f} /s; Fmax "
+            f"{'>=' if r['fmax_mhz'] >= r['robot_clock_mhz'] else '<'} {r['robot_clock_mhz']:g} MHz",
+            f"  verdict: {'MET' if dsp_ok and lc_ok and hz_ok else 'NOT MET'}"]
+
+
+def verdict_poly_vs_cordic(records) -> list[str]:
+    """Target 3: polynomial < CORDIC in LUT and DSP on ECP5 at no worse latency."""
+    cor = [r for r in _by(records, ECP5, "cordic") if r["status"] == "placed"]
+    poly = [r for r in _by(records, ECP5, "polynomial") if r["status"] == "placed"]
+    if not cor or not poly:
+        return ["polynomial vs CORDIC on ECP5: needs a placed CORDIC and a placed polynomial core - not decided"]
+    c = cor[0]
+    lines = [f"polynomial vs CORDIC on ECP5 (CORDIC: {c['LUT']} LUT, {c['DSP']} DSP, {c['latency_ns']} ns, "
+             f"{c['throughput_per_s'] / 1e6:.4g} M/s, max error {c['max_error_pu']:.4f} pu):"]
+    winners = []
+    for p in sorted(poly, key=lambda r: r["latency_ns"]):
+        lut, dsp, lat = p["LUT"] < c["LUT"], p["DSP"] <= c["DSP"], p["latency_ns"] <= c["latency_ns"]
+        lines.append(f"  {p['design']}: LUT {p['LUT']} vs {c['LUT']} ({p['LUT'] - c['LUT']:+d}), DSP {p['DSP']} vs "
+                     f"{c['DSP']} ({p['DSP'] - c['DSP']:+d}), latency {p['latency_ns']} vs {c['latency_ns']} ns "
+                     f"({p['latency_ns'] / c['latency_ns']:.2f}x), throughput {p['throughput_per_s'] / 1e6:.4g} vs "
+                     f"{c['throughput_per_s'] / 1e6:.4g} M/s, max error {p['max_error_pu']:.4f} pu -> "
+                     + ("wins" if lut and dsp and lat else "loses on " + ", ".join(
+                         n for n, ok in (("LUT", lut), ("DSP", dsp), ("latency", lat)) if not ok)))
+        if lut and dsp and lat:
+            winners.append(p["design"])
+    lines.append(f"  verdict: {'MET by ' + ', '.join(winners) if winners else 'NOT MET'}")
+    return lines
+
+
+# -- table -----------------------------------------------------------------------------------------
+COLUMNS = [("design", "{}", 10), ("device", "{}", 18), ("status", "{}", 12), ("Fmax", "{:.1f}", 7),
+           ("LC", "{}", 6), ("LUT", "{}", 6), ("FF", "{}", 6), ("carry", "{}", 6), ("DSP", "{}", 4),
+           ("BRAM", "{}", 4), ("area", "{}", 6), ("lat", "{}", 4), ("lat_ns", "{:.1f}", 8), ("II", "{}", 4),
+           ("Msol/s", "{:.3g}", 7), ("err_pu", "{:.4f}", 7)]
+KEYS = {"Fmax": "fmax_mhz", "lat": "latency_cycles", "lat_ns": "latency_ns", "II": "initiation_interval",
+        "err_pu": "max_error_pu"}
+
+
+def table(records) -> str:
+    """Fixed-width table of the records; overflow listed below designs that did not fit."""
+    lines = [" ".join(f"{n:>{w}}" for n, _, w in COLUMNS)]
+    for r in records:
+        cells = []
+        for n, fmt, w in COLUMNS:
+            v = r["throughput_per_s"] / 1e6 if n == "Msol/s" and r["throughput_per_s"] else r.get(KEYS.get(n, n))
+            cells.append(f"{(fmt.format(v) if v is not None else '-'):>{w}}")
+        lines.append(" ".join(cells))
+        if r["overflow"]:
+            lines.append(" " * 12 + "overflow: " + ", ".join(
+                f"{k} {o['used']} of {o['available']} (+{o['over']}, {o['used'] / o['available']:.2f}x)"
+                for k, o in r["overflow"].items())
+                + (f" (LUT/FF counts include the timing harness: {r['harness_ffs']} FFs)" if r["harness"] else ""))
+        if r["error"]:
+            lines.append(" " * 12 + f"error: {r['error']}")
+    return "\n".join(lines)
+
+
+# -- main ------------------------------------------------------------------------------------------
+def _csv(value: str, allowed, what: str) -> list[str]:
+    aliases = {"ice40": ICE40, "ecp5": ECP5}
+    out = [aliases.get(v, v) for v in value.split(",") if v]
+    for v in out:
+        if v not in allowed:
+            sys.exit(f"--{what} must be among {', '.join(allowed)}, not {v!r}")
+    return out
+
+
+def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], dict]:
+    """Fit / size / measure what ``designs`` needs and return their specs and robot info."""
+    from ikseries.accuracy import measure, verification_points
+    from ikseries.fit.cordic import CordicDesign
+    from ikseries.fit.cordic_sizing import measure_cordic, size_cordic
+    from ikseries.fit.fitter import fit_robot
+    from ikseries.robot import load_preset
+
+    robot = load_preset("cylinder-leg")
+    info = {"robot": robot.name, "tolerance_pu": robot.tolerance_pu}
+    specs: list[DesignSpec] = []
+    points = None
+    poly_names = [d for d in designs if d in ("pipelined", "folded1", "folded2")]
+    if poly_names:
+        t0 = time.perf_counter()
+        plan, _ = fit_robot(robot)
+        points = verification_points(robot)
+        m = measure(robot, plan, points)
+        err = {s: e["total"] for s, e in m["servos"].items()}
+        extra = {"max_error_pu_per_servo": err, "error_points": m["points"],
+                 "certified_pu": _certified(plan.meta.get("certificate", {}))}
+        say(f"polynomial plan: latency {plan.latency}, {plan.count('mul')} mul, max error "
+            + ", ".join(f"{s} {e:.4f}" for s, e in err.items()) + f" pu ({time.perf_counter() - t0:.0f} s)")
+        specs += polynomial_specs(plan, max(err.values()), poly_names, extra)
+    if "cordic" in designs:
+        points = verification_points(robot) if points is None else points
+        if cordic_design:
+            try:
+                design = CordicDesign(**json.loads(cordic_design))
+            except (ValueError, TypeError) as e:
+                sys.exit(f"--cordic-design must be a JSON object of CordicDesign fields, not {cordic_design!r} ({e})")
+            sized = "given with --cordic-design"
+        else:
+            say("sizing the CORDIC design (margin 0.075 pu, about 1.5 min) ...")
+            design = size_cordic(robot, points, margin_pu=0.075, progress=say)
+            sized = "size_cordic, margin 0.075 pu"
+        m = measure_cordic(robot, design, points)
+        err = {s: e["total"] for s, e in m["servos"].items()}
+        say(f"CORDIC {design.as_dict()}: max error " + ", ".join(f"{s} {e:.4f}" for s, e in err.items()) + " pu")
+        specs.append(cordic_spec(robot, design, max(err.values()),
+                                 {"cordic_design": design.as_dict(), "sized": sized,
+                                  "max_error_pu_per_servo": err, "error_points": m["points"]}))
+    if "hexapod" in designs:
+        specs.append(hexapod_spec())
+    return specs, info
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--devices", default=f"{ICE40},{ECP5}", help="comma-separated (aliases: ice40, ecp5)")
+    ap.add_argument("--designs", default=",".join(DESIGNS))
+    ap.add_argument("--jobs", type=int, default=2, help="parallel place-and-route runs (1 or 2)")
+    ap.add_argument("--clock-mhz", type=float, default=100.0, help="nextpnr --freq target")
+    ap.add_argument("--cordic-design", default=None, help="CORDIC design as JSON (skips the sizing)")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--out", default="build/bench/pareto.json")
+    args = ap.parse_args(argv)
+    # latency / initiation interval come from components that are built and never elaborated
+    warnings.filterwarnings("ignore", message=".*created but never used")
+    devices = _csv(args.devices, list(PNR_DEVICES), "devices")
+    designs = _csv(args.designs, DESIGNS, "designs")
+    if args.jobs not in (1, 2):
+        sys.exit(f"--jobs must be 1 or 2, not {args.jobs}")
+    if not args.clock_mhz > 0:
+        sys.exit(f"--clock-mhz must be positive, not {args.clock_mhz}")
+    out = Path(args.out).resolve()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    specs, info = build_specs(designs, args.cordic_design)
+    # the slowest runs first, so two jobs overlap well
+    order = {"pipelined": 0, "cordic": 1, "hexapod": 2}
+    specs.sort(key=lambda s: order.get(s.name, 3))
+    clock_hz = int(round(args.clock_mhz * 1e6))
+    records = run_matrix(specs, devices, clock_hz, out.parent / "pareto", jobs=args.jobs, seed=args.seed,
+                         progress=say)
+    for r in records:
+        if r["kind"] == "robot" and r["status"] == "placed":
+            per = r["legs"] * r["initiation_interval"]
+            r["refresh_hz_at_fmax"] = round(r["fmax_mhz"] * 1e6 / per, 1)
+            r["refresh_hz_at_robot_clock"] = round(r["robot_clock_mhz"] * 1e6 / per, 1)
+    rank = {d: i for i, d in enumerate(DESIGNS)}
+    records.sort(key=lambda r: (devices.index(r["device"]), rank[r["design"]]))
+    plots = {}
+    for d in devices:
+        png = out.with_name(f"{out.stem}_{d}.png")
+        front = plot_device([r for r in records if r["kind"] != "robot"], d, png)
+        plots[d] = {"png": str(png), "pareto_front": front}
+    verdicts = {"ecp5_speed": verdict_ecp5_speed(records), "hexapod": verdict_hexapod(records),
+                "poly_vs_cordic": verdict_poly_vs_cordic(records)}
+    result = {**info, "clock_target_mhz": args.clock_mhz, "seed": args.seed, "devices": devices,
+              "area_metric": "LUT + FF - harness_ffs (Yosys counts)", "records": records, "plots": plots,
+              "verdicts": verdicts, "seconds": round(time.perf_counter() - t0, 1)}
+    out.write_text(json.dumps(result, indent=1) + "\n")
+    print(table(records))
+    for d, p in plots.items():
+        print(f"Pareto front on {d} (area, latency ns; cylinder-leg cores): {', '.join(p['pareto_front']) or '-'}")
+    for lines in verdicts.values():
+        print("\n".join(lines))
+    print(f"wrote {out} and {', '.join(p['png'] for p in plots.values())}")
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,118 @@
+"""The Pareto bench's machinery (ikseries.pareto, bench/pareto.py) on the tiny plan, iCE40 only.
+
+Two real place-and-route runs of small folded evaluators (a few seconds each once the YoWASP tools
+are cached) and one does-not-fit run that stops after Yosys.
+"""
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+from helpers import tiny_plan
+from ikseries import pnr
+from ikseries.pareto import pareto_front, plot_device, run_design, run_matrix
+
+ICE40 = "ice40-up5k-sg48"
+BENCH = Path(__file__).resolve().parent.parent / "bench" / "pareto.py"
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("pareto_bench", BENCH)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+# -- the Pareto front: pure function on hand-made points ---------------------------------------------
+@pytest.mark.parametrize("points, front", [
+    ([], []),
+    ([(1, 1)], [0]),
+    ([(1, 5), (2, 3), (3, 4), (4, 1), (5, 5)], [0, 1, 3]),   # (3,4) by (2,3); (5,5) by all
+    ([(2, 2), (2, 2), (3, 3)], [0, 1]),                      # equal points both stay
+    ([(1, 3), (1, 2)], [1]),                                 # equal x, smaller y dominates
+    ([(3, 1), (2, 1)], [1]),                                 # equal y, smaller x dominates
+    ([(1, 3), (2, 2), (3, 1)], [0, 1, 2]),                   # a trade-off curve: all on it
+])
+def test_pareto_front(points, front):
+    assert pareto_front(points) == front
+
+
+# -- real runs on the tiny plan -------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def records(tmp_path_factory):
+    bench = _bench()
+    plan = tiny_plan(3, clamp=(0, 100), degree=2)
+    specs = bench.polynomial_specs(plan, 0.25, ("folded1", "folded2"), {"max_error_pu_per_servo": {"y": 0.25}})
+    work = tmp_path_factory.mktemp("pareto")
+    return run_matrix(specs, [ICE40], 48_000_000, work, jobs=2), bench
+
+
+def test_placed_records_have_every_field(records):
+    recs, bench = records
+    assert [r["design"] for r in recs] == ["folded1", "folded2"]
+    for r in recs:
+        assert r["status"] == "placed", r
+        assert r["device"] == ICE40 and r["kind"] == "polynomial"
+        assert r["fmax_mhz"] > 0 and isinstance(r["meets_clock"], bool)
+        assert r["latency_cycles"] > 2 and r["initiation_interval"] == r["latency_cycles"]   # folded
+        assert r["latency_ns"] == pytest.approx(r["latency_cycles"] * 1e3 / r["fmax_mhz"], rel=1e-3)
+        assert r["throughput_per_s"] == pytest.approx(r["fmax_mhz"] * 1e6 / r["initiation_interval"], rel=1e-3)
+        assert 1 <= r["DSP"] <= 8 and r["LUT"] > 0 and r["FF"] > 0 and r["carry"] >= 0 and r["BRAM"] >= 0
+        assert 0 < r["LC"] <= r["LC_available"] == 5280
+        assert r["area"] == r["LUT"] + r["FF"] - r["harness_ffs"]
+        assert r["max_error_pu"] == 0.25 and r["overflow"] is None and r["error"] is None
+        json.dumps(r)
+    assert recs[1]["latency_cycles"] <= recs[0]["latency_cycles"]   # two multipliers: no slower
+    text = bench.table(recs)
+    assert "folded1" in text and "folded2" in text and f"{recs[0]['fmax_mhz']:.1f}" in text
+
+
+def test_plot_marks_the_front(records, tmp_path):
+    recs, _ = records
+    png = tmp_path / "p.png"
+    front = plot_device(recs, ICE40, png)
+    assert png.stat().st_size > 1000
+    expected = [recs[i]["design"] for i in pareto_front([(r["area"], r["latency_ns"]) for r in recs])]
+    assert front == expected and front
+
+
+def test_does_not_fit_is_recorded(records, tmp_path, monkeypatch):
+    _, bench = records
+    dev = pnr.PNR_DEVICES[ICE40]
+    small = dataclasses.replace(dev, cell_limits=tuple((n, rx, 1 if n == "DSP" else cap)
+                                                       for n, rx, cap in dev.cell_limits))
+    monkeypatch.setitem(pnr.PNR_DEVICES, ICE40, small)
+    spec = bench.polynomial_specs(tiny_plan(3, clamp=(0, 100), degree=2), None, ("pipelined",))[0]
+    r = run_design(spec, ICE40, 48_000_000, tmp_path / "w")
+    assert r["status"] == "does-not-fit"
+    assert r["overflow"]["DSP"]["available"] == 1 and r["overflow"]["DSP"]["over"] == r["DSP"] - 1 >= 1
+    assert r["LUT"] is not None and r["area"] == r["LUT"] + r["FF"]
+    assert r["fmax_mhz"] is None and r["latency_ns"] is None and r["latency_cycles"] > 0
+    assert "overflow: DSP" in bench.table([r])
+    lines = bench.verdict_poly_vs_cordic([r])
+    assert "not decided" in lines[0]
+
+
+def test_verdicts_on_hand_made_records(records):
+    _, bench = records
+    base = {"kind": "polynomial", "status": "placed", "overflow": None, "error": None, "max_error_pu": 0.4}
+    poly = {**base, "design": "folded2", "device": bench.ECP5, "fmax_mhz": 100.0, "latency_ns": 300.0,
+            "throughput_per_s": 3.3e6, "LUT": 900, "DSP": 4}
+    cordic = {**base, "kind": "cordic", "design": "cordic", "device": bench.ECP5, "fmax_mhz": 160.0,
+              "latency_ns": 250.0, "throughput_per_s": 160e6, "LUT": 5000, "DSP": 2}
+    speed = bench.verdict_ecp5_speed([poly, cordic])
+    assert "cordic" in speed[0] and any("latency 250 ns <= 200 ns: NOT MET (by 50 ns, 25%)" in s for s in speed)
+    assert speed[-1].startswith("  verdict: NOT MET")
+    pv = bench.verdict_poly_vs_cordic([poly, cordic])
+    assert "loses on DSP, latency" in pv[1] and pv[-1] == "  verdict: NOT MET"
+    pv = bench.verdict_poly_vs_cordic([{**poly, "DSP": 2, "latency_ns": 200.0}, cordic])
+    assert pv[-1] == "  verdict: MET by folded2"
+
+
+def test_jobs_must_be_one_or_two(tmp_path):
+    with pytest.raises(ValueError, match=r"^jobs must be 1 or 2 \(two cores, at most two tool processes\), not 3$"):
+        run_matrix([], [ICE40], 1, tmp_path, jobs=3)
