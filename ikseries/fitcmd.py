@@ -43,20 +43,23 @@ def _ikseries(robot, progress) -> tuple[dict, dict]:
     progress("measuring the error on >= 10^6 points")
     acc = measure(robot, plan)
     mults = output_multipliers(plan)
+    cert = {c["name"]: c for c in plan.meta.get("certificate", {}).get("servos", [])}
     rows = [{"servo": sf.name, "variables": sf.features.kind + (" tensor" if sf.features.tensor else ""),
              "names": list(sf.features.names),
              "degree": sf.degree, "terms": len(sf.poly), "multiplications": mults[sf.name],
              "coefficient_frac_bits": sf.frac, "sampled_max_pu": acc["servos"][sf.name]["total"],
-             "certified_rounding_pu": sf.bound_pu} for sf in fits]
+             "certified_rounding_pu": sf.bound_pu, "certified_total_pu": cert[sf.name]["total_pu"]}
+            for sf in fits]
     rec = {"robot": robot.name, "method": "ikseries", "tolerance_pu": robot.tolerance_pu,
            "points": acc["points"], "servos": rows}
     md = [f"# {robot.name}: ikseries fit", "", f"Tolerance ±{robot.tolerance_pu:g} pu; sampled on "
           f"{acc['points']:,} representable points.", "",
           "| servo | variables | degree | terms | multiplications | coefficient frac bits | "
-          "sampled max (pu) | certified rounding (pu) |", "|---|---|---|---|---|---|---|---|"]
+          "sampled max (pu) | certified rounding (pu) | certified total (pu) |",
+          "|---|---|---|---|---|---|---|---|---|"]
     md += [f"| {r['servo']} | {r['variables']} ({', '.join(r['names'])}) | {r['degree']} | {r['terms']} | "
            f"{r['multiplications']} | {r['coefficient_frac_bits']} | {r['sampled_max_pu']:.4f} | "
-           f"{r['certified_rounding_pu']:.4f} |" for r in rows]
+           f"{r['certified_rounding_pu']:.4f} | {r['certified_total_pu']:.4f} |" for r in rows]
     return {"plan.json": plan.dumps(), "fit.json": _dump(rec), "fit.md": "\n".join(md) + "\n"}, rec
 
 

@@ -154,3 +154,13 @@ def test_fit_method_on_the_wrong_robot_is_a_one_line_error(capsys, tmp_path):
     assert code == 2 and not (tmp_path / "x").exists()
     assert err == ("ikseries: error: --method divided-differences needs a planar-arm robot, not "
                    "'cylinder-leg' (geometry CylinderLeg)\n")
+
+
+def test_fit_ikseries_reports_sampled_and_certified(capsys, tmp_path):
+    code, out, _ = run(capsys, "fit", "--preset", "quadruped-hind", "-o", str(tmp_path / "f"), "-q")
+    assert code == 0 and out.startswith("quadruped-hind: ikseries fit, max error")
+    rec = json.loads((tmp_path / "f" / "fit.json").read_text())
+    assert [s["servo"] for s in rec["servos"]] == ["s1", "s2", "s3"]
+    for s in rec["servos"]:
+        assert s["sampled_max_pu"] <= s["certified_total_pu"] <= 0.5
+    assert (tmp_path / "f" / "plan.json").is_file()
