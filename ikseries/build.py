@@ -108,18 +108,29 @@ def _output_to(log: Path):
                 os.close(fd)
 
 
-def _cocotb(plan_file: Path, period: int, simulators, workdir: Path, logdir: Path, progress) -> dict:
+#: random targets of the build's cocotb back-to-back test on a pipelined core (fewer for a core
+#: with an initiation interval > 1, see :func:`ikseries.sim.runner.default_n_random`)
+COCOTB_N_RANDOM = 1000
+
+
+def _cocotb(plan_file: Path, period: int, simulators, workdir: Path, logdir: Path, progress,
+            core=None) -> tuple[dict, str | None]:
     """cocotb on the exported Verilog: bit-exact streaming with and without backpressure.
 
     ``simulators`` is a list of names, or "auto" for every installed one. The simulator
-    output goes to ``logdir/cocotb_<simulator>.log``.
+    output goes to ``logdir/cocotb_<simulator>.log``. ``core``: the leg or robot core to
+    export (None: the pipelined ``LegCore``). Returns (results per simulator, note naming
+    the simulators "auto" skipped because they are not installed, or None).
     """
-    from .sim.runner import SIMULATORS, run, simulator_available
-    out = {}
+    from .sim.runner import SIMULATORS, default_n_random, run, simulator_available
+    out, skipped = {}, []
     if simulators == "auto":
         simulators = [s for s in SIMULATORS if simulator_available(s)[0]]
         for s in sorted(set(SIMULATORS) - set(simulators)):
+            skipped.append(f"{s} ({simulator_available(s)[1]})")
             progress(f"cocotb on {s}: skipped ({simulator_available(s)[1]})")
+    ii = 1 if core is None else core.initiation_interval
+    n_random = default_n_random(ii, COCOTB_N_RANDOM)
     for sim in simulators:
         ok, why = simulator_available(sim)
         if not ok:
@@ -127,16 +138,20 @@ def _cocotb(plan_file: Path, period: int, simulators, workdir: Path, logdir: Pat
         progress(f"cocotb on {sim}: building and simulating the exported Verilog")
         log = logdir / f"cocotb_{sim}.log"
         with _output_to(log):
-            res = run(plan_file, period, sim, workdir / sim, n_random=1000,
-                      testcase="test_back_to_back,test_backpressure")
+            res = run(plan_file, period, sim, workdir / sim, n_random=n_random,
+                      testcase="test_back_to_back,test_backpressure", core=core)
         failed = {t: m for t, (ok_, m) in res.tests.items() if not ok_}
         if not res.ok or failed:
             raise BuildError(f"cocotb on {sim} failed (log: {log}): "
                              + "; ".join(f"{t}: {m}" for t, m in failed.items()).replace("\n", " "))
-        progress(f"cocotb on {sim}: {', '.join(sorted(res.tests))} passed, latency {res.latency} cycles")
+        progress(f"cocotb on {sim}: {', '.join(sorted(res.tests))} passed ({n_random} random targets "
+                 f"plus corners back to back, half as many with backpressure), latency {res.latency} "
+                 f"cycles, a target every {res.initiation_interval} cycles")
         out[sim] = {"tests": sorted(res.tests), "passed": True, "latency_cycles_measured": res.latency,
+                    "initiation_interval": res.initiation_interval, "random_targets": n_random,
                     "build_s": round(res.build_s, 1), "test_s": round(res.test_s, 1)}
-    return out
+    note = f"cocotb skipped on {', '.join(skipped)}" if skipped else None
+    return out, note
 
 
 def _check_output_dir(out_dir: Path) -> None:
@@ -220,15 +235,10 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         progress("plotting the error map")
         emap = error_map(robot, plan, tmp / "error_map.png")
         cocotb_res, cocotb_note = {}, None
-        if cocotb and choice.candidate.architecture != "pipelined":
-            cocotb_note = (f"cocotb skipped: its bench drives the pipelined leg top only, not this "
-                           f"{choice.candidate.architecture} core; the core was verified bit-exactly in "
-                           "the Amaranth simulation")
-            progress(cocotb_note)
-        elif cocotb:
+        if cocotb:
             t0 = time.perf_counter()
-            cocotb_res = _cocotb(tmp / "plan.json", robot.pwm_period_ticks, cocotb, tmp / "cocotb", tmp,
-                                 progress)
+            cocotb_res, cocotb_note = _cocotb(tmp / "plan.json", robot.pwm_period_ticks, cocotb,
+                                              tmp / "cocotb", tmp, progress, core)
             times["cocotb_s"] = round(time.perf_counter() - t0, 1)
             shutil.rmtree(tmp / "cocotb", ignore_errors=True)
         man = manifest(robot, plan, core, name, arch)

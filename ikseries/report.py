@@ -88,8 +88,11 @@ def render_markdown(r: dict) -> str:
             f"measured in the Amaranth simulation: {r['simulation']['latency_cycles_measured']} cycles "
             f"({r['simulation']['targets']} targets, {r['simulation']['mismatches']} mismatches against "
             "the golden model).",
-            *[f"- cocotb on {sim} (exported Verilog): {', '.join(c['tests'])} passed, latency "
-              f"{c['latency_cycles_measured']} cycles (build {c['build_s']} s, simulation {c['test_s']} s)."
+            *[f"- cocotb on {sim} (exported Verilog): {', '.join(c['tests'])} passed"
+              + (f" ({c['random_targets']} random targets plus the corners)" if "random_targets" in c else "")
+              + f", latency {c['latency_cycles_measured']} cycles"
+              + (f", a target every {c['initiation_interval']} cycles" if "initiation_interval" in c else "")
+              + f" (build {c['build_s']} s, simulation {c['test_s']} s)."
               for sim, c in (r.get("cocotb") or {}).items()],
             *([f"- {r['cocotb_note']}."] if r.get("cocotb_note") else []),
             *_throughput_lines(r), ""]

@@ -1,4 +1,5 @@
-"""cocotb testbench of the exported leg core (``ikseries.hdl.export.leg_verilog``).
+"""cocotb testbench of the exported leg core (``ikseries.hdl.export.leg_verilog``) and robot core
+(``ikseries.hdl.export.robot_verilog``).
 
 Runs inside the simulator (Icarus or Verilator); start it with :func:`ikseries.sim.runner.run`.
 Configuration comes from environment variables set by the runner:
@@ -8,10 +9,20 @@ Configuration comes from environment variables set by the runner:
 ``IKSERIES_LATENCY``   expected latency, input transfer edge -> output transfer edge
 ``IKSERIES_SEED``      seed of the random targets and handshakes (default 1)
 ``IKSERIES_N_RANDOM``  number of random back-to-back targets (default 3000)
+``IKSERIES_II``        initiation interval: cycles between input transfers (default 1, pipelined)
+``IKSERIES_TOP``       ``leg`` (default) or ``robot``
+``IKSERIES_LEGS``      legs of the robot top (default 1)
 
 Expected pulse widths come from the golden integer model (:mod:`ikseries.sim.golden`),
 never from the bench. Ports: clk, rst (active-high, synchronous), i_valid/i_ready/i_<input>,
-o_valid/o_ready/o_<servo>, pwm_<servo>.
+o_valid/o_ready/o_<servo>, pwm_<servo>; the robot top adds i_leg/o_leg and has
+pwm_l<leg>_<servo> and period_start instead of pwm_<servo>.
+
+With an initiation interval II > 1 (a folded evaluator: one evaluation at a time) i_ready is
+high exactly when no evaluation is in flight or its output transfers in that cycle, so input
+transfers are at least II cycles apart; the streaming tests check that rule in every cycle
+instead of the pipelined "i_ready high whenever o_ready is high". The robot top gets every
+target with a random leg and must return it on o_leg.
 
 Timing conventions: the clock starts low at ``t0`` and rises at ``t0 + T/2 + e*T``
 (rising edge ``e``); the falling edge at ``t0 + e*T`` precedes rising edge ``e``. The bench
@@ -35,7 +46,8 @@ from cocotb.triggers import FallingEdge, ReadOnly, Timer, ValueChange
 from ikseries.fit.plan import Plan
 from ikseries.sim import golden
 from ikseries.sim.targets import corner_targets, random_targets
-from ikseries.sim.runner import ENV_LATENCY, ENV_N_RANDOM, ENV_PERIOD, ENV_PLAN, ENV_SEED
+from ikseries.sim.runner import (ENV_II, ENV_LATENCY, ENV_LEGS, ENV_N_RANDOM, ENV_PERIOD, ENV_PLAN, ENV_SEED,
+                                 ENV_TOP)
 
 CLK_NS = 10
 MAX_ERRORS = 12     # messages kept per check
@@ -75,12 +87,25 @@ class Leg:
         self.latency = int(os.environ[ENV_LATENCY])
         self.seed = int(os.environ.get(ENV_SEED, "1"))
         self.n_random = int(os.environ.get(ENV_N_RANDOM, "3000"))
+        self.ii = int(os.environ.get(ENV_II, "1"))
+        self.robot = os.environ.get(ENV_TOP, "leg") == "robot"
+        self.legs = int(os.environ.get(ENV_LEGS, "1"))
+        assert self.ii >= 1 and self.legs >= 1 and (self.robot or self.legs == 1), \
+            f"bad bench configuration: II {self.ii}, top {os.environ.get(ENV_TOP)}, legs {self.legs}"
         self.rng = np.random.default_rng([self.seed, test_id])
         self.inputs = list(self.plan.inputs)
         self.servos = [o.name for o in self.plan.outputs]
         self.i_sig = {i.name: getattr(dut, f"i_{i.name}") for i in self.inputs}
         self.o_sig = {s: getattr(dut, f"o_{s}") for s in self.servos}
-        self.pwm_sig = {s: getattr(dut, f"pwm_{s}") for s in self.servos}
+        # leg top: {servo: pwm_<servo>}; robot top: {(leg, servo): pwm_l<leg>_<servo>}
+        if self.robot:
+            self.pwm_sig = {(g, s): getattr(dut, f"pwm_l{g}_{s}") for g in range(self.legs)
+                            for s in self.servos}
+        else:
+            self.pwm_sig = {s: getattr(dut, f"pwm_{s}") for s in self.servos}
+        # a one-leg robot core has zero-width leg ports (not exported)
+        self.i_leg = getattr(dut, "i_leg", None) if self.robot and self.legs > 1 else None
+        self.o_leg = getattr(dut, "o_leg", None) if self.robot and self.legs > 1 else None
         self.T = int(convert(CLK_NS, "ns", to="step"))
         assert self.T % 2 == 0
         self.clock = None
@@ -110,8 +135,9 @@ class Leg:
         assert get_sim_time("step") == target
 
     # ---- start / reset ----------------------------------------------------------------
-    def drive_inputs(self, values: dict | None):
-        """Drive target ``values`` ({input: int}); None: random port junk (i_valid is low)."""
+    def drive_inputs(self, values: dict | None, leg: int | None = None):
+        """Drive target ``values`` ({input: int}) for ``leg`` (robot top); None: random port
+        junk (i_valid is low)."""
         for i in self.inputs:
             if values is None:
                 lo, hi = i.port_range
@@ -119,6 +145,12 @@ class Leg:
             else:
                 v = int(values[i.name])
             self.i_sig[i.name].value = v
+        if self.i_leg is not None:
+            self.i_leg.value = int(self.rng.integers(self.legs)) if values is None or leg is None else int(leg)
+
+    def random_legs(self, n: int) -> np.ndarray:
+        """Random leg per target (all 0 for the leg top)."""
+        return self.rng.integers(0, self.legs, n) if self.robot else np.zeros(n, dtype=np.int64)
 
     async def start(self, reset_cycles: int = 3):
         dut = self.dut
@@ -149,22 +181,25 @@ class Leg:
             self.clock = None
 
     # ---- streaming ----------------------------------------------------------------------
-    async def stream(self, targets: dict, regimes, regime_len: int = 64):
+    async def stream(self, targets: dict, regimes, regime_len: int = 64, legs=None):
         """Offer ``targets`` in order and collect the outputs.
 
         ``regimes``: list of (p_valid, p_ready); every ``regime_len`` cycles one is chosen at
         random. i_valid is offered with probability p_valid, o_ready with p_ready (1.0 =
-        always). Checks the handshake rules on the way; returns (outputs, in edges, out edges,
-        stall edges, handshake checker).
+        always). ``legs``: leg of each target (robot top). Checks the handshake rules on the
+        way; returns (outputs, in edges, out edges, stall edges, handshake checker); the
+        outputs include ``"leg"`` (o_leg, 0 on the leg top).
         """
         dut, rng = self.dut, self.rng
         n = len(next(iter(targets.values())))
+        legs = np.zeros(n, dtype=np.int64) if legs is None else legs
         got = {s: [] for s in self.servos}
+        got_leg = []
         in_e, out_e, stall_e = [], [], []
         hs = Checker("stream handshake")
         k, held, cycle, drain = 0, None, 0, 0
         p_valid, p_ready = regimes[0]
-        limit = 50 * n + 10 * self.latency + 1000
+        limit = 50 * n * self.ii + 10 * self.latency + 1000
         while drain <= self.latency + 4:
             await FallingEdge(dut.clk)
             e = self.upcoming()
@@ -173,13 +208,24 @@ class Leg:
             offer = k < n and (p_valid >= 1 or rng.random() < p_valid)
             ready = p_ready >= 1 or rng.random() < p_ready
             dut.i_valid.value = int(offer)
-            self.drive_inputs({name: targets[name][k] for name in targets} if offer else None)
+            self.drive_inputs({name: targets[name][k] for name in targets} if offer else None,
+                              legs[k] if offer else None)
             dut.o_ready.value = int(ready)
             await ReadOnly()
             ov, ir = int(dut.o_valid.value), int(dut.i_ready.value)
-            pay = tuple(int(self.o_sig[s].value) for s in self.servos) if ov else None
-            hs(ir or not ready, lambda: f"edge {e}: i_ready low while o_ready high (stalls the stream)")
-            hs(not (ov and not ready and ir), lambda: f"edge {e}: i_ready high while o_valid & !o_ready")
+            pay = None
+            if ov:
+                pay = tuple(int(self.o_sig[s].value) for s in self.servos) + (
+                    (int(self.o_leg.value),) if self.o_leg is not None else (0,))
+            if self.ii == 1:
+                hs(ir or not ready, lambda: f"edge {e}: i_ready low while o_ready high (stalls the stream)")
+                hs(not (ov and not ready and ir), lambda: f"edge {e}: i_ready high while o_valid & !o_ready")
+            else:
+                # one evaluation at a time: ready iff none in flight or its output transfers now
+                idle = len(in_e) == len(out_e)
+                hs(ir == int(idle or (ov and ready)),
+                   lambda: f"edge {e}: i_ready {ir} with {len(in_e) - len(out_e)} target(s) in flight, "
+                           f"o_valid {ov}, o_ready {int(ready)}")
             if held is not None:
                 hs(ov and pay == held, lambda: f"edge {e}: o_valid/o payload changed while stalled: "
                                                f"{held} -> {pay if ov else 'o_valid low'}")
@@ -192,6 +238,7 @@ class Leg:
                     out_e.append(e)
                     for s, v in zip(self.servos, pay):
                         got[s].append(v)
+                    got_leg.append(pay[-1])
             if ov and not ready:
                 stall_e.append(e)
             if len(out_e) == n:
@@ -203,10 +250,13 @@ class Leg:
         await FallingEdge(dut.clk)
         dut.i_valid.value = 0
         dut.o_ready.value = 1
-        return {s: np.array(v, dtype=np.int64) for s, v in got.items()}, in_e, out_e, stall_e, hs
+        got = {s: np.array(v, dtype=np.int64) for s, v in got.items()}
+        got["leg"] = np.array(got_leg, dtype=np.int64)
+        return got, in_e, out_e, stall_e, hs
 
-    def check_stream(self, targets, got, in_e, out_e, stall_e, hs, exact_latency: bool):
-        """Bit-exact and in-order vs golden; latency per target (stall cycles subtracted)."""
+    def check_stream(self, targets, got, in_e, out_e, stall_e, hs, exact_latency: bool, legs=None):
+        """Bit-exact and in-order vs golden (and o_leg == the target's leg on the robot top);
+        latency per target (stall cycles subtracted); input transfers >= II cycles apart."""
         n = len(next(iter(targets.values())))
         exp = golden.outputs(self.plan, targets)
         hs.done()
@@ -221,6 +271,17 @@ class Leg:
                                    + ": " + ", ".join(f"{s} got {int(got[s][j])} expected {int(exp[s][j])}"
                                                       for s in bad)))
         bits.done()
+        if self.o_leg is not None:
+            legc = Checker(f"o_leg vs i_leg ({n} targets)")
+            for j in range(n):
+                legc(got["leg"][j] == legs[j], lambda: f"target {j}: o_leg {int(got['leg'][j])}, "
+                                                       f"sent to leg {int(legs[j])}")
+            legc.done()
+        gap = Checker(f"initiation interval (input transfers >= {self.ii} cycles apart)")
+        for j, d in enumerate(np.diff(in_e)):
+            gap(d >= self.ii, lambda: f"targets {j} and {j + 1}: input edges {in_e[j]} and {in_e[j + 1]}, "
+                                      f"{d} cycle(s) apart")
+        gap.done()
         lat = Checker(f"latency (expected {self.latency} cycles)")
         for j, (a, b) in enumerate(zip(in_e, out_e)):
             stalls = bisect.bisect_left(stall_e, b) - bisect.bisect_right(stall_e, a)
@@ -237,21 +298,30 @@ class Leg:
 
 @cocotb.test()
 async def test_back_to_back(dut):
-    """Corner + random targets, one per cycle, o_ready always high: bit-exact outputs in order,
-    i_ready never low, exactly one output per cycle, latency == IKSERIES_LATENCY for every target."""
+    """Corner + random targets offered every cycle, o_ready always high: bit-exact outputs in
+    order (robot top: each to a random leg, returned on o_leg), one input and one output transfer
+    every II cycles exactly (II = 1: i_ready never low, one output per cycle), latency ==
+    IKSERIES_LATENCY for every target."""
     leg = Leg(dut, 1)
     try:
         await leg.start()
         targets = concat(corner_targets(leg.plan, port_extremes=True), random_targets(leg.plan, leg.n_random, leg.rng))
         n = len(next(iter(targets.values())))
-        got, in_e, out_e, stall_e, hs = await leg.stream(targets, [(1.0, 1.0)])
-        leg.check_stream(targets, got, in_e, out_e, stall_e, hs, exact_latency=True)
-        thr = Checker("throughput (one target per cycle)")
-        thr(np.all(np.diff(in_e) == 1), "input transfers not on consecutive edges")
-        thr(np.all(np.diff(out_e) == 1), "output transfers not on consecutive edges")
+        legs = leg.random_legs(n)
+        got, in_e, out_e, stall_e, hs = await leg.stream(targets, [(1.0, 1.0)], legs=legs)
+        leg.check_stream(targets, got, in_e, out_e, stall_e, hs, exact_latency=True, legs=legs)
+        if leg.ii == 1:
+            thr = Checker("throughput (one target per cycle)")
+            thr(np.all(np.diff(in_e) == 1), "input transfers not on consecutive edges")
+            thr(np.all(np.diff(out_e) == 1), "output transfers not on consecutive edges")
+        else:
+            thr = Checker(f"throughput (one target every {leg.ii} cycles)")
+            thr(np.all(np.diff(in_e) == leg.ii), lambda: f"input transfer gaps {sorted(set(np.diff(in_e).tolist()))}")
+            thr(np.all(np.diff(out_e) == leg.ii), lambda: f"output transfer gaps {sorted(set(np.diff(out_e).tolist()))}")
         thr.done()
-        leg.log.info("%d targets (%d corner) back to back: bit-exact, latency %d cycles each, "
-                     "edges %d..%d", n, n - leg.n_random, leg.latency, in_e[0], out_e[-1])
+        leg.log.info("%d targets (%d corner) back to back, one every %d cycle(s)%s: bit-exact, latency %d "
+                     "cycles each, edges %d..%d", n, n - leg.n_random, leg.ii,
+                     f", legs {sorted(set(legs.tolist()))}" if leg.robot else "", leg.latency, in_e[0], out_e[-1])
     finally:
         leg.stop()
 
@@ -260,15 +330,20 @@ async def test_back_to_back(dut):
 async def test_backpressure(dut):
     """Random i_valid gaps and random o_ready backpressure: outputs bit-exact, in order, none
     dropped or duplicated; o_valid and payload hold while stalled; i_ready high whenever o_ready
-    is high and low while o_valid & !o_ready; latency == expected + stall cycles in between."""
+    is high and low while o_valid & !o_ready (II > 1: i_ready high exactly when nothing is in
+    flight or the output transfers); inputs >= II cycles apart; robot top: o_leg == the target's
+    random leg; latency == expected + stall cycles in between."""
     leg = Leg(dut, 2)
     try:
         await leg.start()
         targets = concat(corner_targets(leg.plan, port_extremes=True), random_targets(leg.plan, max(leg.n_random // 2, 1), leg.rng))
         n = len(next(iter(targets.values())))
+        legs = leg.random_legs(n)
         regimes = [(0.5, 0.5), (0.9, 0.3), (0.3, 0.9), (1.0, 0.7), (0.8, 1.0), (0.1, 0.1), (1.0, 0.0)]
-        got, in_e, out_e, stall_e, hs = await leg.stream(targets, regimes, regime_len=48)
-        leg.check_stream(targets, got, in_e, out_e, stall_e, hs, exact_latency=False)
+        # regimes last ~48 cycles, or ~2 evaluations of a core with II > 1
+        got, in_e, out_e, stall_e, hs = await leg.stream(targets, regimes, regime_len=max(48, 2 * leg.ii),
+                                                         legs=legs)
+        leg.check_stream(targets, got, in_e, out_e, stall_e, hs, exact_latency=False, legs=legs)
         cycles = out_e[-1] - in_e[0] + 1
         leg.log.info("%d targets over %d cycles with %d stall cycles: bit-exact, in order, "
                      "latency %d + stalls", n, cycles, len(stall_e), leg.latency)
@@ -292,9 +367,10 @@ def _pwm_expected(transfers, period: int, n_end: int) -> np.ndarray:
     return ((n - 1) % period < active[(n - 1) // period]).astype(np.int64)
 
 
-def _transitions(values: np.ndarray, first_edge: int = 1) -> list[tuple[int, int]]:
-    """(edge, new value) wherever ``values`` (after edges first_edge, ...) changes; starts from 0."""
-    v = np.concatenate([[0], values])
+def _transitions(values: np.ndarray, first_edge: int = 1, initial: int = 0) -> list[tuple[int, int]]:
+    """(edge, new value) wherever ``values`` (after edges first_edge, ...) changes; starts from
+    ``initial``."""
+    v = np.concatenate([[initial], values])
     idx = np.flatnonzero(np.diff(v))
     return [(int(i) + first_edge, int(v[i + 1])) for i in idx]
 
@@ -317,12 +393,19 @@ async def test_pwm(dut):
     (constant high across the period boundary). Checks: low after reset and through period 0
     although A, B, C arrive in it; every rising edge at a period start, one period apart;
     high time == the width last transferred up to that period start; the exact list of pwm
-    (and o_valid) transitions equals the model's; reset at the end forces every output low.
+    (and o_valid, i_ready) transitions equals the model's; reset at the end forces every output low.
+
+    With an initiation interval II > 1, B and D come II edges after A and C (B's input transfers
+    at A's output edge). The robot top gets every target for its last leg: that leg's pwm
+    outputs are checked as above, o_leg must name it, every other leg's pwm outputs must stay
+    low, and period_start must be high exactly after relative edges k*P + 1.
     """
     leg = Leg(dut, 3)
-    P, L = leg.period, leg.latency
+    P, L, II = leg.period, leg.latency, leg.ii
+    sel = leg.legs - 1                          # the robot top's leg under test
     try:
-        assert P // 2 - L >= 2, f"PWM test needs a period of at least {2 * L + 4} cycles, got {P}"
+        assert P // 2 - L >= 2 and P // 2 >= 2 * II, \
+            f"PWM test needs a period of at least {max(2 * L + 4, 4 * II)} cycles, got {P}"
         # pick targets by their golden widths
         pool = random_targets(leg.plan, 4000, leg.rng)
         w = golden.outputs(leg.plan, pool)
@@ -345,7 +428,7 @@ async def test_pwm(dut):
         if not len(long_):
             leg.log.info("no target has a width >= the period %d: constant-high case not covered", P)
         names = "ABCDF"
-        sched_rel = {"A": P // 2, "B": P // 2 + 1, "C": P, "D": P + 1, "F": 2 * P + 5}  # output edges
+        sched_rel = {"A": P // 2, "B": P // 2 + II, "C": P, "D": P + II, "F": 2 * P + 5}  # output edges
         tgt = {nm: {i.name: int(pool[i.name][j]) for i in leg.inputs} for nm, j in zip(names, picks)}
         wid = {nm: {s: int(W[j, c]) for c, s in enumerate(leg.servos)} for nm, j in zip(names, picks)}
         for nm in names:
@@ -360,14 +443,22 @@ async def test_pwm(dut):
         await ReadOnly()
         chk = Checker("PWM at reset release")
         for s, sig in leg.pwm_sig.items():
-            chk(int(sig.value) == 0, f"pwm_{s} high at reset release")
+            chk(int(sig.value) == 0, f"{sig._name} high at reset release")
         chk.done()
+        # pwm of the servos under test (leg top: all; robot top: leg `sel`'s)
+        pwm_sel = {s: leg.pwm_sig[(sel, s) if leg.robot else s] for s in leg.servos}
+        others = {k: sig for k, sig in leg.pwm_sig.items() if leg.robot and k[0] != sel}
         logs = {s: [] for s in leg.servos}
-        ov_log, ir_log = [], []
+        other_logs = {k: [] for k in others}
+        ov_log, ir_log, ps_log = [], [], []
         for s in leg.servos:
-            cocotb.start_soon(_watch(leg.pwm_sig[s], logs[s]))
+            cocotb.start_soon(_watch(pwm_sel[s], logs[s]))
+        for k, sig in others.items():
+            cocotb.start_soon(_watch(sig, other_logs[k]))
         cocotb.start_soon(_watch(dut.o_valid, ov_log))
         cocotb.start_soon(_watch(dut.i_ready, ir_log))
+        if leg.robot:
+            cocotb.start_soon(_watch(dut.period_start, ps_log))
 
         # drive: input at (output edge - L); sample the output payload before its transfer edge
         actions: dict = {}
@@ -384,7 +475,7 @@ async def test_pwm(dut):
             await leg.goto(e)
             if "drive" in act:
                 dut.i_valid.value = int(bool(act["drive"]))
-                leg.drive_inputs(tgt[act["drive"]] if act["drive"] else None)
+                leg.drive_inputs(tgt[act["drive"]] if act["drive"] else None, sel)
             await ReadOnly()
             if act.get("drive"):
                 io(int(dut.i_ready.value) == 1, f"i_ready low at the input edge of {act['drive']}")
@@ -392,6 +483,8 @@ async def test_pwm(dut):
                 got = {s: int(leg.o_sig[s].value) for s in leg.servos}
                 io(int(dut.o_valid.value) == 1 and got == wid[nm],
                    f"{nm}: o_valid={dut.o_valid.value} o={got} before edge {e}, expected {wid[nm]}")
+                if leg.o_leg is not None:
+                    io(int(leg.o_leg.value) == sel, f"{nm}: o_leg={int(leg.o_leg.value)}, expected {sel}")
         io.done()
 
         # run freely to the end of the observation window, then reset while F is still active
@@ -402,7 +495,7 @@ async def test_pwm(dut):
         rst_chk = Checker("reset while pulsing")
         before = {s: [v for t, v in logs[s] if leg.edge_at(t) - rel0 <= n_end] for s in leg.servos}
         for s, sig in leg.pwm_sig.items():
-            rst_chk(int(sig.value) == 0, f"pwm_{s} still high one edge after rst")
+            rst_chk(int(sig.value) == 0, f"{sig._name} still high one edge after rst")
         rst_chk(int(dut.o_valid.value) == 0, "o_valid high after rst")
         high_at_reset = [s for s in leg.servos if before[s] and before[s][-1] == 1]
         rst_chk(bool(high_at_reset) or not len(long_),
@@ -437,8 +530,8 @@ async def test_pwm(dut):
             for a, b in zip(rises, rises[1:]):
                 pulse((b - a) % P == 0, f"pwm_{s}: rising edges {a} and {b} are "
                                         f"{b - a} cycles apart, period {P}")
-            leg.log.info("pwm_%s: rising edges (relative) %s, falling %s; expected widths per period %s",
-                         s, rises, falls, [([wv for t, wv in transfers[s] if t <= k * P] or [0])[-1]
+            leg.log.info("%s: rising edges (relative) %s, falling %s; expected widths per period %s",
+                         pwm_sel[s]._name, rises, falls, [([wv for t, wv in transfers[s] if t <= k * P] or [0])[-1]
                                            for k in range((n_end - 1) // P + 1)])
             pulse(len(rises) >= 3, f"pwm_{s}: only {len(rises)} pulses seen")
         # o_valid: high exactly in the cycle before each output transfer edge
@@ -449,8 +542,24 @@ async def test_pwm(dut):
         ov_exp = _transitions(ov_vals)
         wave([x for x in ov_rec if x[0] <= n_end] == ov_exp,
              lambda: f"o_valid: recorded {ov_rec[:12]} expected {ov_exp}")
-        wave(not [x for x in ir_log if leg.edge_at(x[0]) - rel0 <= n_end],
-             lambda: f"i_ready changed with o_ready high: {ir_log[:6]}")
+        # i_ready (o_ready high): II = 1 always high; II > 1 low after an input transfer edge
+        # until one cycle before its output transfer edge
+        ir_vals = np.ones(n_end, dtype=np.int64)
+        if II > 1:
+            for nm in names:
+                ir_vals[sched_rel[nm] - L - 1:sched_rel[nm] - 2] = 0   # relative edges in .. out-2
+        ir_rec = [(leg.edge_at(t) - rel0, v) for t, v in ir_log]
+        ir_exp = _transitions(ir_vals, initial=1)
+        wave([x for x in ir_rec if x[0] <= n_end] == ir_exp,
+             lambda: f"i_ready (o_ready high): recorded {ir_rec[:12]} expected {ir_exp[:12]}")
+        for (g, s), lg in other_logs.items():
+            wave(not [x for x in lg if leg.edge_at(x[0]) - rel0 <= n_end],
+                 lambda: f"pwm_l{g}_{s} (no target sent to leg {g}) changed: {lg[:6]}")
+        if leg.robot:
+            ps_rec = [(leg.edge_at(t) - rel0, v) for t, v in ps_log]
+            ps_exp = _transitions((np.arange(n_end) % P == 0).astype(np.int64))
+            wave([x for x in ps_rec if x[0] <= n_end] == ps_exp,
+                 lambda: f"period_start: recorded {ps_rec[:12]} expected {ps_exp[:12]}")
         wave.done()
         pulse.done()
         rst_chk.done()

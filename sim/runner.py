@@ -1,9 +1,11 @@
 """Build and run the cocotb testbench of the exported leg core on Icarus or Verilator.
 
-The Verilog is exported from ``LegCore(plan, period)`` into ``build_dir``, built with
-:func:`cocotb_tools.runner.get_runner` and simulated with the cocotb test module
-:mod:`ikseries.sim.cocotb_leg`. The plan file, the PWM period and the expected latency
-reach that module through environment variables (see ``ENV_*``).
+The Verilog is exported from ``LegCore(plan, period)`` (or from a given leg or robot core:
+a folded :class:`~ikseries.hdl.leg.LegCore`, a shared :class:`~ikseries.hdl.shared.RobotCore`)
+into ``build_dir``, built with :func:`cocotb_tools.runner.get_runner` and simulated with the
+cocotb test module :mod:`ikseries.sim.cocotb_leg`. The plan file, the PWM period, the expected
+latency, the initiation interval and the top (leg or robot, with its number of legs) reach that
+module through environment variables (see ``ENV_*``).
 
 Example::
 
@@ -24,7 +26,8 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 __all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_PLAN", "ENV_PERIOD", "ENV_LATENCY", "ENV_SEED",
-           "ENV_N_RANDOM", "VERILATOR_OPT", "Result", "simulator_available", "verilator_bin_dir", "export", "run"]
+           "ENV_N_RANDOM", "ENV_II", "ENV_TOP", "ENV_LEGS", "VERILATOR_OPT", "default_n_random", "Result",
+           "simulator_available", "verilator_bin_dir", "export", "run"]
 
 SIMULATORS = ("icarus", "verilator")
 TEST_MODULE = "ikseries.sim.cocotb_leg"
@@ -35,8 +38,36 @@ ENV_PERIOD = "IKSERIES_PERIOD"      # PWM period in clock cycles the Verilog was
 ENV_LATENCY = "IKSERIES_LATENCY"    # expected input-transfer -> output-transfer latency (cycles)
 ENV_SEED = "IKSERIES_SEED"          # seed of the bench's random targets and handshakes
 ENV_N_RANDOM = "IKSERIES_N_RANDOM"  # number of random back-to-back targets
+ENV_II = "IKSERIES_II"              # initiation interval: cycles between input transfers (1: pipelined)
+ENV_TOP = "IKSERIES_TOP"            # "leg" (FlatLegTop) or "robot" (FlatRobotTop)
+ENV_LEGS = "IKSERIES_LEGS"          # legs of the robot top (1 for the leg top)
+
+#: simulated cycles of random targets the bench aims at for a core with an initiation interval > 1
+#: (Icarus checks ~9k cycles/s; the backpressure test runs half as many targets, with gaps)
+FOLDED_CYCLE_BUDGET = 60_000
 
 VERILATOR_OPT = "-O1"
+
+
+def default_n_random(initiation_interval: int, n_pipelined: int = 3000) -> int:
+    """Random targets of the back-to-back test: ``n_pipelined`` for a pipelined core, else as many
+    as fit ``FOLDED_CYCLE_BUDGET`` cycles (at least 16, at most ``n_pipelined``).
+
+    Parameters
+    ----------
+    initiation_interval : int
+        Cycles between input transfers of the core.
+    n_pipelined : int
+        The number for a core with an initiation interval of 1.
+
+    Returns
+    -------
+    int
+        Number of random targets (the bench adds the corner targets).
+    """
+    if initiation_interval <= 1:
+        return n_pipelined
+    return int(min(n_pipelined, max(16, FOLDED_CYCLE_BUDGET // initiation_interval)))
 
 
 def verilator_bin_dir() -> str | None:
@@ -116,18 +147,29 @@ def _write_if_changed(path: Path, text: str) -> None:
         path.write_text(text)
 
 
-def export(plan_path, period: int, build_dir, name: str = TOPLEVEL):
-    """Export ``LegCore(plan, period)`` to ``build_dir/<name>.v``; returns (path, core)."""
-    from ikseries.fit.plan import Plan
-    from ikseries.hdl.export import leg_verilog
-    from ikseries.hdl.leg import LegCore
+def export(plan_path, period: int, build_dir, name: str = TOPLEVEL, core=None):
+    """Export a core with flat ports to ``build_dir/<name>.v``; returns (path, core).
 
-    plan = Plan.from_json(json.loads(Path(plan_path).read_text()))
-    core = LegCore(plan, period)
+    ``core``: a :class:`~ikseries.hdl.leg.LegCore` or :class:`~ikseries.hdl.shared.RobotCore`
+    built from the plan at ``plan_path`` with PWM period ``period``; None builds
+    ``LegCore(plan, period)`` (the pipelined leg).
+    """
+    from ikseries.fit.plan import Plan
+    from ikseries.hdl.export import leg_verilog, robot_verilog
+    from ikseries.hdl.leg import LegCore
+    from ikseries.hdl.shared import RobotCore
+
+    if core is None:
+        plan = Plan.from_json(json.loads(Path(plan_path).read_text()))
+        core = LegCore(plan, period)
+    elif not isinstance(core, (LegCore, RobotCore)):
+        raise TypeError(f"core must be a LegCore or a RobotCore, not {type(core).__name__}")
+    elif core.period != period:
+        raise ValueError(f"core has a PWM period of {core.period} cycles, not {period}")
     build_dir = Path(build_dir)
     build_dir.mkdir(parents=True, exist_ok=True)
     v = build_dir / f"{name}.v"
-    _write_if_changed(v, leg_verilog(core, name))
+    _write_if_changed(v, robot_verilog(core, name) if isinstance(core, RobotCore) else leg_verilog(core, name))
     return v, core
 
 
@@ -152,6 +194,10 @@ class Result:
     test_s: float
     exit_code: int
     waves: Path | None
+    initiation_interval: int = 1
+    top: str = "leg"
+    legs: int = 1
+    n_random: int | None = None
 
     @property
     def ok(self) -> bool:
@@ -183,7 +229,8 @@ def _parse_results(xml: Path) -> dict:
 def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = False,
         seed: int = 1, n_random: int | None = None, latency: int | None = None,
         testcase: str | None = None, test_module: str = TEST_MODULE, name: str = TOPLEVEL,
-        verilator_opt: str | None = VERILATOR_OPT) -> Result:
+        verilator_opt: str | None = VERILATOR_OPT, core=None,
+        initiation_interval: int | None = None) -> Result:
     """Export, build and simulate; returns a :class:`Result` (does not raise on test failures).
 
     Parameters
@@ -196,12 +243,17 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
     waves : write a VCD of the whole run into ``build_dir`` (Icarus: ``<name>.vcd``,
         Verilator: ``dump.vcd``).
     seed : seed of the bench's random targets and handshakes.
-    n_random : number of random back-to-back targets (bench default if None).
+    n_random : number of random back-to-back targets (default: :func:`default_n_random` of the
+        core's initiation interval: 3000 for a pipelined core, fewer for a folded one).
     latency : expected latency told to the bench (default: ``core.latency``).
     testcase : run only this cocotb test (comma-separated names).
     verilator_opt : C++ optimisation flag for the Verilator build (``OPT_FAST``, ``OPT_SLOW``,
         ``OPT_GLOBAL``); None keeps Verilator's ``-Os``. ``-O1`` built the small plan's model in
         ~30 s instead of ~47 s and simulates it at least as fast.
+    core : the core to export and test (see :func:`export`): a folded ``LegCore`` or a
+        ``RobotCore`` gets its initiation interval (and legs) passed to the bench; None: the
+        pipelined ``LegCore(plan, period)``.
+    initiation_interval : initiation interval told to the bench (default: the core's).
     """
     from cocotb_tools.runner import get_runner
 
@@ -212,7 +264,12 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
         raise RuntimeError(why)
     plan_path = Path(plan_path).resolve()
     build_dir = Path(build_dir).resolve()
-    vfile, core = export(plan_path, period, build_dir, name)
+    vfile, core = export(plan_path, period, build_dir, name, core)
+    from ikseries.hdl.shared import RobotCore
+    robot = isinstance(core, RobotCore)
+    ii = core.initiation_interval if initiation_interval is None else initiation_interval
+    if n_random is None:
+        n_random = default_n_random(ii)
     sources = [vfile]
     build_args: list = []
     if simulator == "verilator":
@@ -222,9 +279,9 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
         build_args = ["-s", "ikseries_vcd_dump"]
 
     env = {ENV_PLAN: str(plan_path), ENV_PERIOD: str(period),
-           ENV_LATENCY: str(core.latency if latency is None else latency), ENV_SEED: str(seed)}
-    if n_random is not None:
-        env[ENV_N_RANDOM] = str(n_random)
+           ENV_LATENCY: str(core.latency if latency is None else latency), ENV_SEED: str(seed),
+           ENV_N_RANDOM: str(n_random), ENV_II: str(ii), ENV_TOP: "robot" if robot else "leg",
+           ENV_LEGS: str(core.legs if robot else 1)}
     xml = build_dir / "results.xml"
     path = makeflags = None
     if simulator == "verilator":
@@ -258,4 +315,5 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
     if waves:
         wave_file = build_dir / (f"{name}.vcd" if simulator == "icarus" else "dump.vcd")
     return Result(simulator, build_dir, xml, _parse_results(xml), int(env[ENV_LATENCY]),
-                  t1 - t0, t2 - t1, exit_code or 0, wave_file)
+                  t1 - t0, t2 - t1, exit_code or 0, wave_file, ii, env[ENV_TOP], int(env[ENV_LEGS]),
+                  n_random)

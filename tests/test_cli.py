@@ -24,7 +24,8 @@ def small_toml(tmp_path_factory):
     p = tmp_path_factory.mktemp("robot") / "small-leg.toml"
     p.write_text(preset_text("cylinder-leg").replace('name = "cylinder-leg"', 'name = "small-leg"')
                  .replace("tolerance_pu = 0.5 ", "tolerance_pu = 4.0 ")
-                 # the pipelined leg (auto would pick a folded one), so cocotb runs on it
+                 # the pipelined leg (auto would pick a folded one: cocotb on folded builds is
+                 # tested in test_hexapod_build.py)
                  .replace("pwm_period_us = 20000.0", 'pwm_period_us = 20000.0\narchitecture = "pipelined"'))
     return p
 

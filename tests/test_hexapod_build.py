@@ -18,7 +18,7 @@ def _ports(verilog, module):
 @pytest.fixture(scope="module")
 def hexapod(tmp_path_factory):
     out = tmp_path_factory.mktemp("hexapod") / "build"
-    # cocotb is asked for: the build must skip it for the robot top and say so
+    # cocotb on Icarus runs the bench on the exported robot top (random legs, II > 1)
     assert main(["build", "--preset", "hexapod", "--no-synth", "--cocotb", "icarus", "-q", "-o", str(out)]) == 0
     return out
 
@@ -28,7 +28,7 @@ def test_hexapod_build_report_and_ports(hexapod):
     man = json.loads((hexapod / "manifest.json").read_text())
     robot = load_preset("hexapod")
     assert sorted(p.name for p in hexapod.iterdir()) == [
-        "error_map.png", "hexapod_core.sdc", "hexapod_core.v", "manifest.json", "plan.json",
+        "cocotb_icarus.log", "error_map.png", "hexapod_core.sdc", "hexapod_core.v", "manifest.json", "plan.json",
         "report.json", "report.md"]
     a = rep["architecture"]
     assert (a["architecture"], a["multipliers"], a["dsp"], a["legs"]) == ("shared", 1, "ice40", 6)
@@ -39,7 +39,13 @@ def test_hexapod_build_report_and_ports(hexapod):
     assert rep["refresh_hz"] == man["refresh_hz"] == robot.clock_hz / (6 * ii) >= 1000
     assert rep["simulation"]["mismatches"] == rep["simulation"]["leg_mismatches"] == 0
     assert rep["simulation"]["legs_addressed"] == [0, 1, 2, 3, 4, 5]
-    assert rep["cocotb"] == {} and rep["cocotb_note"].startswith("cocotb skipped")
+    c = rep["cocotb"]["icarus"]
+    assert rep["cocotb_note"] is None and c["passed"]
+    assert c["tests"] == ["test_back_to_back", "test_backpressure"]
+    assert c["latency_cycles_measured"] == rep["latency_cycles"] and c["initiation_interval"] == ii
+    assert c["random_targets"] == min(1000, 60_000 // ii)
+    log = (hexapod / "cocotb_icarus.log").read_text()
+    assert f"one every {ii} cycle(s), legs [0, 1, 2, 3, 4, 5]: bit-exact" in log
     assert all(s["error_pu"]["total"] <= 0.5 for s in rep["servos"])
     ports = _ports((hexapod / "hexapod_core.v").read_text(), "hexapod_core")
     pwm = sorted(p for p in ports if p.startswith("pwm_"))
@@ -49,7 +55,9 @@ def test_hexapod_build_report_and_ports(hexapod):
         assert ports[f["port"]] == f["width"], f
     assert ports["i_leg"] == ports["o_leg"] == 3
     md = (hexapod / "report.md").read_text()
-    assert "cocotb skipped" in md and "Refresh rate" in md and "folded evaluator shared by 6 legs" in md
+    assert f"cocotb on icarus (exported Verilog): test_back_to_back, test_backpressure passed ({c['random_targets']} " \
+           f"random targets plus the corners), latency {ii} cycles, a target every {ii} cycles" in md
+    assert "cocotb skipped" not in md and "Refresh rate" in md and "folded evaluator shared by 6 legs" in md
     assert "create_clock -name clk -period 41.6667 [get_ports {clk}]" in (hexapod / "hexapod_core.sdc").read_text()
 
 
@@ -70,7 +78,7 @@ def test_single_leg_folded_build_from_the_command_line(tmp_path, capsys):
                     .replace("tolerance_pu = 0.5 ", "tolerance_pu = 4.0 "))
     out = tmp_path / "out"
     assert main(["build", str(toml), "--architecture", "folded", "--multipliers", "2", "--dsp", "none",
-                 "--no-synth", "--cocotb", "none", "-q", "-o", str(out)]) == 0
+                 "--no-synth", "--cocotb", "icarus", "-q", "-o", str(out)]) == 0
     assert "2 multipliers (full-width)" in capsys.readouterr().out
     rep = json.loads((out / "report.json").read_text())
     a = rep["architecture"]
@@ -79,5 +87,8 @@ def test_single_leg_folded_build_from_the_command_line(tmp_path, capsys):
     ii = rep["initiation_interval"]
     assert ii > 1 and rep["simulation"]["initiation_interval_measured"] == ii
     assert rep["refresh_hz"] == 48e6 / ii and rep["cocotb_note"] is None
+    c = rep["cocotb"]["icarus"]
+    assert c["passed"] and c["initiation_interval"] == ii and c["latency_cycles_measured"] == rep["latency_cycles"]
+    assert "cocotb_icarus.log" in {p.name for p in out.iterdir()}
     ports = _ports((out / "small_leg_core.v").read_text(), "small_leg_core")
     assert {"pwm_s1", "pwm_s2", "pwm_s3", "i_r", "o_s1"} <= set(ports) and "i_leg" not in ports
