@@ -91,7 +91,7 @@ def _cached_plan(robot, path):
 
     from .build import default_output_dir
     from .fit.plan import Plan
-    from .robot import robot_record
+    from .robot import fit_record, robot_record
     given = path is not None
     path = Path(path) if given else default_output_dir(robot) / "plan.json"
     if not path.exists():
@@ -102,9 +102,9 @@ def _cached_plan(robot, path):
         plan = Plan.from_json(json.loads(path.read_text()))
     except (ValueError, KeyError, TypeError) as e:
         raise CliError(f"{path}: not a valid ikseries plan: {e}") from None
-    if robot_record(robot) != plan.meta.get("robot_description"):
+    if fit_record(robot_record(robot)) != fit_record(plan.meta.get("robot_description") or {}):
         if given:
-            raise CliError(f"{path} was built for a different robot description than {robot.name!r}")
+            raise CliError(f"{path} was fitted for a different robot description than {robot.name!r}")
         return None
     return plan
 

@@ -16,7 +16,7 @@ from .planar_arm import PlanarArm
 from .quadruped import QuadrupedFore, QuadrupedHind
 
 __all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot",
-           "robot_record", "robot_from_record", "with_hardware", "ARCHITECTURES", "DSP_CHOICES"]
+           "robot_record", "robot_from_record", "fit_record", "with_hardware", "ARCHITECTURES", "DSP_CHOICES"]
 
 #: hardware.architecture values: "auto" picks the smallest that meets hardware.min_refresh_hz.
 #: Default: "pipelined" (one target per clock, verified by cocotb too) for one leg, "auto" for more.
@@ -297,6 +297,16 @@ def robot_record(robot: Robot) -> dict:
     d["geometry"] = {"type": gtype, **dataclasses.asdict(robot.geometry)}
     d["inputs"] = [dataclasses.asdict(i) for i in robot.inputs]
     return json.loads(json.dumps(d))
+
+
+#: Robot fields that do not change the fitted plan (hardware architecture, naming, PWM period)
+NON_FIT_FIELDS = ("name", "description", "legs", "architecture", "multipliers", "dsp", "min_refresh_hz",
+                  "pwm_period_us")
+
+
+def fit_record(record: dict) -> dict:
+    """The part of a :func:`robot_record` that decides the fitted plan."""
+    return {k: v for k, v in record.items() if k not in NON_FIT_FIELDS}
 
 
 def robot_from_record(d: dict) -> Robot:

@@ -165,3 +165,18 @@ def test_fit_ikseries_reports_sampled_and_certified(capsys, tmp_path):
     for s in rec["servos"]:
         assert s["sampled_max_pu"] <= s["certified_total_pu"] <= 0.5
     assert (tmp_path / "f" / "plan.json").is_file()
+
+
+def test_eval_plan_ignores_hardware_fields_but_not_fit_fields(capsys, built, small_toml, tmp_path):
+    """A plan is reused when only the architecture differs; another tolerance is refused."""
+    folded = tmp_path / "folded.toml"
+    folded.write_text(small_toml.read_text().replace('architecture = "pipelined"', 'architecture = "folded"'))
+    code, out, _ = run(capsys, "eval", "--robot", str(folded), "--plan", str(built / "plan.json"),
+                       "10", "45", "5", "-q")
+    assert code == 0 and "s3" in out
+    tight = tmp_path / "tight.toml"
+    tight.write_text(small_toml.read_text().replace("tolerance_pu = 4.0 ", "tolerance_pu = 2.0 "))
+    code, _, err = run(capsys, "eval", "--robot", str(tight), "--plan", str(built / "plan.json"),
+                       "10", "45", "5", "-q")
+    assert code == 2 and err == (f"ikseries: error: {built / 'plan.json'} was fitted for a different "
+                                 "robot description than 'small-leg'\n")
