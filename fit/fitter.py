@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -48,6 +48,8 @@ class ServoFit:
     fit_error_ticks: float   # max error on the fit and check samples (float coefficients)
     frac: int = 0            # accumulator / coefficient fractional bits
     bound_pu: float = 0.0    # certified rounding bound
+    # fit data for the refit after quantization: (check set, working set + Lawson weights, budget)
+    refit: tuple | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass
@@ -369,7 +371,63 @@ def _prune(robot, inputs, stage, sf: ServoFit, cost: int, data, state, budget_ti
             misses += 1
     progress(f"  {sf.name}: pruned to {len(terms)} terms, {cost} multipliers, "
              f"max fit error {sf.fit_error_ticks:.4g} ticks")
+    sf.refit = (check_set, state, budget_ticks)
     return sf
+
+
+def _round_and_refit(sf: ServoFit, frac: int):
+    """Coefficients on the grid 2**-frac, rounded one at a time (highest degree first) while
+    the rest are refitted (weighted least squares with the fit's final Lawson weights on its
+    working set) to absorb each rounding; plain rounding instead if that is better on the
+    check set (the refit is a heuristic for the maximum error). Returns (poly, max error on
+    the check set) or None without fit data."""
+    if sf.refit is None:
+        return None
+    (cpts, ctarget), (xp, xt, w), _ = sf.refit
+    terms = sorted(sf.poly, key=lambda e: (-sum(e), e))
+    a = vander(xp, terms)
+    coef = np.array([sf.poly[e] for e in terms])
+    fixed = np.zeros(len(terms), dtype=bool)
+    grid = 2.0 ** frac
+    for k in range(len(terms)):
+        coef[k] = np.round(coef[k] * grid) / grid
+        fixed[k] = True
+        free = ~fixed
+        if free.any():
+            rhs = xt - a[:, fixed] @ coef[fixed]
+            coef[free] = fit_least_squares(a[:, free], rhs, w)
+    ca = vander(cpts, terms)
+    err = float(np.max(np.abs(ca @ coef - ctarget)))
+    naive = np.array([np.round(sf.poly[e] * grid) / grid for e in terms])
+    naive_err = float(np.max(np.abs(ca @ naive - ctarget)))
+    if naive_err < err:          # the refit is a heuristic: never worse than plain rounding
+        coef, err = naive, naive_err
+    return {e: float(c) for e, c in zip(terms, coef)}, err
+
+
+def _requantize(robot, inputs, stage, fits, fv, budget: Budget, progress) -> None:
+    """Re-optimise each servo's coefficients after quantization, then take the narrowest
+    accumulator format whose certified rounding bound still meets the quantization budget
+    and whose refitted polynomial still meets the approximation budget on the check set."""
+    tpp = robot.ticks_per_pu
+    for sf in fits:
+        best = None
+        for frac in range(sf.frac, max(-1, sf.frac - 4), -1):
+            r = _round_and_refit(sf, frac)
+            if r is None or r[1] > sf.refit[2]:
+                break
+            trial = ServoFit(sf.name, sf.features, sf.degree, r[0], r[1], frac=frac)
+            try:
+                plan = _build(robot, inputs, stage, [trial], fv)
+            except OverflowError:
+                break
+            if plan.rounding_bounds()[plan.outputs[0].preround] / tpp > budget.quantization:
+                break
+            best = trial
+        if best is not None:
+            progress(f"  {sf.name}: coefficients re-optimised on the 2^-{best.frac} grid "
+                     f"(was 2^-{sf.frac}), max fit error {best.fit_error_ticks:.4g} ticks")
+            sf.poly, sf.fit_error_ticks, sf.frac = best.poly, best.fit_error_ticks, best.frac
 
 
 def _choose_formats(robot, inputs, stage, fits, budget: Budget, progress) -> int:
@@ -412,6 +470,7 @@ def _lower(robot, inputs, stage, fits, budget, progress) -> Plan:
     """Choose the formats and build the plan of every servo, with its meta data."""
     tpp = robot.ticks_per_pu
     fv = _choose_formats(robot, inputs, stage, fits, budget, progress)
+    _requantize(robot, inputs, stage, fits, fv, budget, progress)
     plan = _build(robot, inputs, stage, fits, fv)
     bounds = plan.rounding_bounds()
     for sf, o in zip(fits, plan.outputs):
