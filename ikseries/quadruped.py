@@ -32,6 +32,21 @@ def _targets(x, y, pivot_height):
     return x, y, np.ravel(np.hypot(x, pivot_height - y))
 
 
+def _checked_angles(geom, x, y, pivot_height, reachable, reach_message):
+    """``geom.angles`` for toe targets (x, y), raising :class:`UnreachableError` for the first
+    target (C order) whose pivot-toe distance fails ``reachable`` (message from
+    ``reach_message(distance)``) or that needs a joint beyond ``geom.joint_ranges``."""
+    x, y, lt = _targets(x, y, pivot_height)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = geom.angles(NUMPY_MATH, x, y)
+        finite = np.logical_and.reduce([np.isfinite(np.ravel(v)) for v in a])
+        out = ~(reachable(lt) & finite)
+    raise_first_unreachable(geom.inputs, (x, y), [
+        (out, lambda i: reach_message(lt[i])),
+        *joint_range_checks(a, geom.servo_names, geom.joint_ranges)])
+    return a
+
+
 def _sagittal_tip(pivot_height, segments):
     """Tip (x, y) from (length, direction in rad from +x forward, counter-clockwise) pairs."""
     x = sum(length * np.cos(a) for length, a in segments)
@@ -155,17 +170,11 @@ class QuadrupedHind:
             Naming the first target (C order) out of reach or needing a joint beyond
             :attr:`joint_ranges`.
         """
-        x, y, lt = _targets(x, y, self.hip_height)
         lo, hi = self.reach()
-        with np.errstate(invalid="ignore", divide="ignore"):
-            a = self.angles(NUMPY_MATH, x, y)
-            finite = np.logical_and.reduce([np.isfinite(np.ravel(v)) for v in a])
-            out = ~((lt > lo) & (lt < hi) & finite)
-        raise_first_unreachable(self.inputs, (x, y), [
-            (out, lambda i: f"hip-toe distance {lt[i]:.6g} mm must be within "
-                            f"({lo:g}, {hi:g}) mm with the shin bisected by the hip-toe line"),
-            *joint_range_checks(a, self.servo_names, self.joint_ranges)])
-        return a
+        return _checked_angles(
+            self, x, y, self.hip_height, lambda d: (d > lo) & (d < hi),
+            lambda d: f"hip-toe distance {d:.6g} mm must be within ({lo:g}, {hi:g}) mm with the "
+                      "shin bisected by the hip-toe line")
 
     def fk(self, s1, s2, s3):
         """Toe (x, y) in mm for joint angles in degrees (the inverse of :meth:`ik`)."""
@@ -254,17 +263,10 @@ class QuadrupedFore:
             Naming the first target (C order) out of reach or needing a joint beyond
             :attr:`joint_ranges`.
         """
-        x, y, lt = _targets(x, y, self.shoulder_height)
         lo, hi = self.reach()
-        with np.errstate(invalid="ignore", divide="ignore"):
-            a = self.angles(NUMPY_MATH, x, y)
-            finite = np.logical_and.reduce([np.isfinite(np.ravel(v)) for v in a])
-            out = ~((lt >= lo) & (lt <= hi) & (lt > 0) & finite)
-        raise_first_unreachable(self.inputs, (x, y), [
-            (out, lambda i: f"shoulder-toe distance {lt[i]:.6g} mm must be within "
-                            f"[{lo:g}, {hi:g}] mm"),
-            *joint_range_checks(a, self.servo_names, self.joint_ranges)])
-        return a
+        return _checked_angles(
+            self, x, y, self.shoulder_height, lambda d: (d >= lo) & (d <= hi) & (d > 0),
+            lambda d: f"shoulder-toe distance {d:.6g} mm must be within [{lo:g}, {hi:g}] mm")
 
     def fk(self, s1, s2, s3):
         """Toe (x, y) in mm for joint angles in degrees (the inverse of :meth:`ik`)."""
