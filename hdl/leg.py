@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 from ..fit.plan import Plan
 from .evaluator import PlanEvaluator, input_layout, output_layout
 from .folded import FoldedEvaluator
-from .pwm import ServoPWM
+from .pwm import ServoPWM, servo_channels
 
 __all__ = ["LegCore"]
 
@@ -68,15 +68,7 @@ class LegCore(wiring.Component):
             if not isinstance(multipliers, int) or isinstance(multipliers, bool) or multipliers < 1:
                 raise ValueError(f"multipliers must be None or an integer >= 1, not {multipliers!r}")
             self._evaluator = FoldedEvaluator(plan, multipliers, dsp)
-        for o in plan.outputs:
-            if plan.nodes[o.node].lo < 0:
-                raise ValueError(f"plan output {o.name} must be a non-negative pulse width, but its "
-                                 f"range starts at {plan.nodes[o.node].lo}")
-        self._servos = [o.name for o in plan.outputs]
-        reset_widths = dict(reset_widths or {})
-        unknown = sorted(set(reset_widths) - set(self._servos))
-        if unknown:
-            raise ValueError(f"reset_widths keys must be servos {self._servos}, not {unknown[0]!r}")
+        self._servos, reset_widths = servo_channels(plan, reset_widths)
         layout = output_layout(plan)
         self._pwms = {s: ServoPWM(period, layout.members[s].width, reset_widths.get(s, 0))
                       for s in self._servos}

@@ -5,7 +5,7 @@ from amaranth.hdl import Module, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-__all__ = ["ServoPWM"]
+__all__ = ["ServoPWM", "servo_channels"]
 
 
 class ServoPWM(wiring.Component):
@@ -89,3 +89,21 @@ class ServoPWM(wiring.Component):
         # registered output: high for cycles 0 .. active-1 of the counter, one cycle later
         m.d.sync += [self.pwm.eq(count < active), self.period_start.eq(count == 0)]
         return m
+
+
+def servo_channels(plan, reset_widths: dict | None) -> tuple[list[str], dict]:
+    """The servo names of ``plan``'s outputs and the checked ``reset_widths`` per servo.
+
+    Every output must be a non-negative pulse width (PWM generators count ticks), and
+    ``reset_widths`` may only name those servos.
+    """
+    for o in plan.outputs:
+        if plan.nodes[o.node].lo < 0:
+            raise ValueError(f"plan output {o.name} must be a non-negative pulse width, but its "
+                             f"range starts at {plan.nodes[o.node].lo}")
+    servos = [o.name for o in plan.outputs]
+    reset_widths = dict(reset_widths or {})
+    unknown = sorted(set(reset_widths) - set(servos))
+    if unknown:
+        raise ValueError(f"reset_widths keys must be servos {servos}, not {unknown[0]!r}")
+    return servos, reset_widths

@@ -8,6 +8,7 @@ from amaranth.lib.wiring import In, Out
 from ..fit.plan import Plan
 from .evaluator import input_layout, output_layout
 from .folded import FoldedEvaluator
+from .pwm import servo_channels
 from .pwmbank import ServoPWMBank
 
 __all__ = ["RobotCore", "robot_input_layout", "robot_output_layout"]
@@ -75,15 +76,7 @@ class RobotCore(wiring.Component):
         if isinstance(clock_hz, bool) or not isinstance(clock_hz, (int, float)) or not clock_hz > 0:
             raise ValueError(f"clock_hz must be a positive number, not {clock_hz!r}")
         self._evaluator = FoldedEvaluator(plan, multipliers, dsp)
-        for o in plan.outputs:
-            if plan.nodes[o.node].lo < 0:
-                raise ValueError(f"plan output {o.name} must be a non-negative pulse width, but its "
-                                 f"range starts at {plan.nodes[o.node].lo}")
-        self._servos = [o.name for o in plan.outputs]
-        reset_widths = dict(reset_widths or {})
-        unknown = sorted(set(reset_widths) - set(self._servos))
-        if unknown:
-            raise ValueError(f"reset_widths keys must be servos {self._servos}, not {unknown[0]!r}")
+        self._servos, reset_widths = servo_channels(plan, reset_widths)
         width_bits = max(plan.nodes[o.node].width for o in plan.outputs)
         self._bank = ServoPWMBank(period, width_bits, legs, len(self._servos),
                                   [reset_widths.get(s, 0) for s in self._servos] * legs)
