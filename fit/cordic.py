@@ -47,7 +47,7 @@ from dataclasses import dataclass, fields
 
 from .plan import PlanInput, bits_for
 
-__all__ = ["CordicDesign", "CordicPlan", "IntervalOps", "Iv", "datapath", "cordic_gain",
+__all__ = ["CordicDesign", "CordicPlan", "IntervalOps", "OperatorOps", "Iv", "datapath", "cordic_gain",
            "DEFAULT_DESIGN", "ITERATION_FIELDS", "WIDTH_FIELDS", "csd", "SHIFT_ADD_DIGITS"]
 
 ITERATION_FIELDS = ("rot_iters", "xy_iters", "uv_iters", "law_iters")
@@ -166,6 +166,26 @@ def _iv(lo: int, hi: int, what: str) -> Iv:
         raise OverflowError(f"CORDIC datapath {what} needs more than 63 bits (interval [{lo}, {hi}]): "
                             f"narrow len_frac / area_frac / gain_frac")
     return Iv(int(lo), int(hi))
+
+
+class OperatorOps:
+    """The datapath operations that are plain Python operators on the value type (shared by
+    the numpy golden model and the Amaranth back end)."""
+
+    def shr(self, a, k):
+        return a >> k
+
+    def shl(self, a, k):
+        return a << k
+
+    def lt(self, a, b):
+        return a < b
+
+    def ge(self, a, b):
+        return a >= b
+
+    def not_(self, a):
+        return ~a
 
 
 class IntervalOps:

@@ -5,7 +5,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigne
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ..fit.cordic import SHIFT_ADD_DIGITS, CordicDesign, CordicPlan, csd, datapath
+from ..fit.cordic import SHIFT_ADD_DIGITS, CordicDesign, CordicPlan, OperatorOps, csd, datapath
 from ..fit.plan import bits_for
 
 __all__ = ["AmaranthOps", "CordicLegSolver", "cordic_input_layout", "cordic_output_layout"]
@@ -26,7 +26,7 @@ def cordic_output_layout(cp: CordicPlan) -> data.StructLayout:
     return data.StructLayout({s: _shape(*cp.limits) for s in cp.servos})
 
 
-class AmaranthOps:
+class AmaranthOps(OperatorOps):
     """Datapath back end emitting Amaranth: combinational expressions (exact: Amaranth widens
     ``+``, ``-``, ``*`` and shifts), and one register per value at each ``stage`` with the width
     of its analysed range, loaded when ``en`` is high."""
@@ -72,21 +72,6 @@ class AmaranthOps:
             term = a << k
             acc = (term if sign > 0 else -term) if acc is None else (acc + term if sign > 0 else acc - term)
         return acc
-
-    def shr(self, a, k):
-        return a >> k
-
-    def shl(self, a, k):
-        return a << k
-
-    def lt(self, a, b):
-        return a < b
-
-    def ge(self, a, b):
-        return a >= b
-
-    def not_(self, a):
-        return ~a
 
     def addsub(self, a, b, sub):
         """a - b if sub else a + b, as ONE adder: a + (b ^ -sub) + sub (a conditional

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..fit.cordic import CordicDesign, CordicPlan, datapath
+from ..fit.cordic import CordicDesign, CordicPlan, OperatorOps, datapath
 
 __all__ = ["NumpyOps", "evaluate", "outputs", "errors_pu"]
 
 
-class NumpyOps:
+class NumpyOps(OperatorOps):
     """Datapath back end over int64 arrays (exact: the analysis bounds every value < 2**62).
 
     ``observed`` collects, per register ``(stage, name)``, the (min, max) actually seen."""
@@ -50,21 +50,6 @@ class NumpyOps:
 
     def mulc(self, a, c):
         return a * np.int64(c)
-
-    def shr(self, a, k):
-        return a >> k
-
-    def shl(self, a, k):
-        return a << k
-
-    def lt(self, a, b):
-        return a < b
-
-    def ge(self, a, b):
-        return a >= b
-
-    def not_(self, a):
-        return ~a
 
     def addsub(self, a, b, sub):
         return np.where(sub, a - b, a + b)
