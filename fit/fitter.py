@@ -180,22 +180,21 @@ def _feature_sets(robot, stage, k: int) -> list[FeatureSet]:
     cal = robot.calibration
     fk = lambda *c: cal.pulses(stage.ik_frame(*c))[k]  # noqa: E731
     frame = list(stage.frame(*pts))
+    cartesian = _analyse(fk, frame, stage.norms, stage.names, "cartesian")
     out = []
     if stage.has_plan_axes:
         rho = np.hypot(frame[0], frame[1])
+        p0 = fk(*frame)
         try:
-            radial = np.max(np.abs(fk(rho, 0 * rho, *frame[2:]) - fk(*frame))) < 1e-9 * max(
-                1.0, float(np.ptp(fk(*frame))))
+            radial = np.max(np.abs(fk(rho, 0 * rho, *frame[2:]) - p0)) < 1e-9 * max(1.0, float(np.ptp(p0)))
         except UnreachableError:
             radial = False
         if radial:
-            rest = _analyse(fk, frame, stage.norms, stage.names, "cartesian")
-            out.append(FeatureSet("radial", ("rho2", *stage.names[2:]), ("any", *rest.allowed[2:])))
-    out.append(_analyse(fk, frame, stage.norms, stage.names, "cartesian"))
+            out.append(FeatureSet("radial", ("rho2", *stage.names[2:]), ("any", *cartesian.allowed[2:])))
+    out.append(cartesian)
     if stage.kind != "cartesian":
-        norms = [Normaliser.for_range(i.min, i.max, i.frac_bits) for i in robot.inputs]
         fi = lambda *c: robot.pulses_pu(*c)[k]  # noqa: E731
-        out.append(_analyse(fi, pts, norms, [i.name for i in robot.inputs], "direct"))
+        out.append(_analyse(fi, pts, _input_norms(robot), [i.name for i in robot.inputs], "direct"))
     # the same variables with tensor-product terms (a per-variable degree) where that differs
     out += [dataclasses.replace(fs, tensor=True) for fs in list(out)
             if sum(a != "none" for a in fs.allowed) > 1]
