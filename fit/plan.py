@@ -16,6 +16,15 @@ Operations
 ``shr``    floor(a / 2**s) (arithmetic shift right)        wiring only
 ``shl``    a * 2**s                                        wiring only
 ``frac``   same integer, new binary point (``reinterpret``)  wiring only
+``index``  floor(a / 2**s), 0 fractional bits: a table index  wiring only
+``mask``   a mod 2**s (the low s bits), same ``frac``          wiring only
+``lut``    table[a]: a constant per index (``param`` the integers,
+           ``ideal`` the real values they were rounded from)  registered
+
+``index`` and ``mask`` cut an exact value (an input port, offset) into a cell number and the
+offset inside the cell: a piecewise plan looks its coefficients up by cell with ``lut``. Their
+ideal (real) value is the same floor / remainder of the ideal argument, so within one cell the
+offset is an exact affine function of the input.
 
 Registered operations take one pipeline stage; wiring-only ones take none.
 """
@@ -29,8 +38,9 @@ __all__ = ["quantize", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder",
 
 PLAN_FORMAT = "ikseries.plan"
 PLAN_VERSION = 1
-REGISTERED_OPS = frozenset({"add", "mul", "clamp"})
-_OPS = {"input": 0, "const": 0, "add": 2, "mul": 2, "clamp": 1, "shr": 1, "shl": 1, "frac": 1}
+REGISTERED_OPS = frozenset({"add", "mul", "clamp", "lut"})
+_OPS = {"input": 0, "const": 0, "add": 2, "mul": 2, "clamp": 1, "shr": 1, "shl": 1, "frac": 1,
+        "index": 1, "mask": 1, "lut": 1}
 
 
 def quantize(value: float, frac: int) -> int:
@@ -53,8 +63,8 @@ class Node:
     frac: int
     lo: int
     hi: int
-    param: object = None        # input name | const value | shift | (lo, hi) for clamp
-    ideal: float | None = None  # const only: real value before rounding
+    param: object = None        # input name | const value | shift | (lo, hi) for clamp | lut table
+    ideal: float | tuple | None = None  # const / lut only: real value(s) before rounding
 
     @property
     def width(self) -> int:
@@ -161,6 +171,12 @@ class Plan:
                 e = err[n.args[0]] + (1 - 2.0 ** -n.param) * sc
             elif n.op == "frac":  # same integer, real value scaled by 2**(frac(a) - frac)
                 e = err[n.args[0]] * 2.0 ** (self.nodes[n.args[0]].frac - n.frac)
+            elif n.op in ("index", "mask"):  # a cell of an exact value only: a rounded one
+                e = 0.0 if err[n.args[0]] == 0.0 else float("inf")  # could pick another cell
+            elif n.op == "lut":
+                a = self.nodes[n.args[0]]
+                e = 0.0 if n.ideal is None else max(
+                    abs(n.param[i] * sc - n.ideal[i]) for i in range(a.lo, a.hi + 1))
             else:  # shl: exact; clamp: the ideal value is clamped too, and a clamp
                 e = err[n.args[0]]  # never increases a distance (it is 1-Lipschitz)
             err.append(e)
@@ -184,7 +200,7 @@ class Plan:
         if n.param is not None:
             d["param"] = list(n.param) if isinstance(n.param, tuple) else n.param
         if n.ideal is not None:
-            d["ideal"] = n.ideal
+            d["ideal"] = list(n.ideal) if isinstance(n.ideal, tuple) else n.ideal
         return d
 
     @classmethod
@@ -198,7 +214,10 @@ class Plan:
             param = nd.get("param")
             if isinstance(param, list):
                 param = tuple(param)
-            b._append(nd["op"], tuple(nd["args"]), nd["frac"], param, nd.get("ideal"), share=False)
+            ideal = nd.get("ideal")
+            if isinstance(ideal, list):
+                ideal = tuple(ideal)
+            b._append(nd["op"], tuple(nd["args"]), nd["frac"], param, ideal, share=False)
             n = b.nodes[-1]
             if (n.lo, n.hi) != (nd["lo"], nd["hi"]):
                 raise ValueError(f"plan node {nd['id']}: stored interval [{nd['lo']}, {nd['hi']}] "
@@ -257,6 +276,26 @@ class PlanBuilder:
             lo, hi = a[0].lo >> param, a[0].hi >> param
         elif op == "shl":
             lo, hi = a[0].lo << param, a[0].hi << param
+        elif op == "index":
+            if frac != 0:
+                raise ValueError(f"index must have 0 fractional bits, not {frac}")
+            lo, hi = a[0].lo >> param, a[0].hi >> param
+        elif op == "mask":
+            if frac != a[0].frac:
+                raise ValueError("mask keeps the fractional bits of its operand")
+            m = (1 << param) - 1
+            lo, hi = (a[0].lo & m, a[0].hi & m) if a[0].lo >> param == a[0].hi >> param else (0, m)
+        elif op == "lut":
+            table = param
+            if not (isinstance(table, tuple) and table and all(isinstance(v, int) for v in table)):
+                raise ValueError(f"lut table must be a non-empty tuple of integers, not {table!r}")
+            if ideal is not None and len(ideal) != len(table):
+                raise ValueError(f"lut ideal values must be one per entry ({len(table)}), not {len(ideal)}")
+            if a[0].frac != 0 or a[0].lo < 0 or a[0].hi >= len(table):
+                raise ValueError(f"lut index must be an integer in [0, {len(table) - 1}], "
+                                 f"not [{a[0].lo}, {a[0].hi}] with {a[0].frac} fractional bits")
+            reach = table[a[0].lo:a[0].hi + 1]
+            lo, hi = min(reach), max(reach)
         else:  # frac
             lo, hi = a[0].lo, a[0].hi
         if max(abs(lo), abs(hi)) >= 1 << 62:
@@ -310,6 +349,16 @@ class PlanBuilder:
         if n.lo >= lo and n.hi <= hi:
             return a
         return self._append("clamp", (a,), n.frac, (int(lo), int(hi)))
+
+    def cell(self, a: int, shift: int) -> tuple[int, int]:
+        """(cell number, offset inside the cell) of the exact value ``a`` cut every 2**shift integers."""
+        return self._append("index", (a,), 0, shift), self._append("mask", (a,), self.frac(a), shift)
+
+    def lut(self, index: int, values, frac: int) -> int:
+        """Per index, ``values[index]`` rounded to ``frac`` fractional bits (ideal values kept)."""
+        q = tuple(quantize(v, frac) for v in values)
+        exact = all(qi == v * 2.0 ** frac for qi, v in zip(q, values))
+        return self._append("lut", (index,), frac, q, None if exact else tuple(float(v) for v in values))
 
     def round(self, a: int, frac: int) -> int:
         """Round half up to ``frac`` fractional bits."""

@@ -76,6 +76,12 @@ def _int_step(n, ports, vals):
         return a << n.param
     if op == "clamp":
         return np.clip(a, n.param[0], n.param[1])
+    if op == "index":
+        return a >> n.param
+    if op == "mask":
+        return a & ((1 << n.param) - 1)
+    if op == "lut":
+        return np.asarray(n.param, dtype=np.int64)[a]
     return a  # frac: same integer
 
 
@@ -103,6 +109,12 @@ def evaluate_ideal(plan: Plan, ints: dict, keep=None) -> dict:
             return np.clip(a, n.param[0] * 2.0 ** -n.frac, n.param[1] * 2.0 ** -n.frac)
         if op == "frac":
             return a * 2.0 ** (nodes[n.args[0]].frac - n.frac)
+        if op in ("index", "mask"):  # cells of 2**s integers of the argument
+            cell = np.floor(a * 2.0 ** (nodes[n.args[0]].frac - n.param))
+            return cell.astype(np.int64) if op == "index" else a - cell * 2.0 ** (n.param - nodes[n.args[0]].frac)
+        if op == "lut":
+            return np.asarray(n.ideal if n.ideal is not None else n.param, dtype=np.float64)[a] * (
+                1.0 if n.ideal is not None else 2.0 ** -n.frac)
         return a  # shr, shl: exact in real arithmetic
     return _run(plan, ints, keep, step)
 

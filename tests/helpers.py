@@ -20,6 +20,24 @@ def tiny_plan(seed=0, clamp=(-100, 100), degree=4) -> Plan:
     return b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
 
 
+def tiny_piecewise_plan(seed=0, shift=2, degree=3) -> Plan:
+    """``tiny_plan``'s inputs, input a cut into cells of 2**shift port values, a random
+    polynomial per cell in the offset inside the cell (centred on [-1, 1)) and b, its
+    coefficients looked up by cell (``lut``)."""
+    rng = np.random.default_rng(seed)
+    inputs = [PlanInput("a", "mm", 2, 0, 12, 4, False), PlanInput("b", "deg", 1, -10, 9, 5, True)]
+    b = PlanBuilder(inputs)
+    cell, off = b.cell(b.input_nodes["a"], shift)
+    t = b.add(b.reinterpret(off, shift - 1), b.const(-1.0, shift - 1))
+    b_n = b.reinterpret(b.input_nodes["b"], 5)
+    cells = b.nodes[cell].hi + 1
+    poly = {(i, j): tuple(float(v) for v in rng.normal(size=cells) * 50)
+            for i in range(degree + 1) for j in range(3) if i + j <= degree}
+    acc = horner(b, poly, [t, b_n], 5, lambda v, f: b.lut(cell, v, f))
+    out = b.clamp(b.round(acc, 0), -100, 100)
+    return b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
+
+
 def all_ports(plan):
     ranges = []
     for i in plan.inputs:

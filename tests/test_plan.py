@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from helpers import all_ports, tiny_plan
+from helpers import all_ports, tiny_piecewise_plan, tiny_plan
 from ikseries.fit.horner import parity_split
 from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for
 from ikseries.sim import golden
@@ -108,3 +108,46 @@ def test_rounding_bound_scales_with_a_binary_point_change():
         assert err <= bound[k] * (1 + 1e-12)
         assert bound[k] <= 4 * err   # and not wildly pessimistic
     assert bound[plan.outputs[0].node] == 256 * bound[plan.outputs[1].node]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_piecewise_plan_intervals_and_rounding_bound_hold_exhaustively(seed):
+    plan = tiny_piecewise_plan(seed)
+    assert plan.count("lut") > 0 and plan.count("index") == 1 and plan.count("mask") == 1
+    ports = all_ports(plan)
+    iv, fv = golden.evaluate(plan, ports), golden.evaluate_ideal(plan, ports)
+    bound = plan.rounding_bounds()
+    for k, n in enumerate(plan.nodes):
+        v = np.asarray(iv[k])
+        assert v.min() >= n.lo and v.max() <= n.hi, (k, n.op)
+    for k in plan.cone(plan.outputs[0].preround):
+        err = np.abs(np.asarray(iv[k]) * 2.0 ** -plan.nodes[k].frac - fv[k])
+        assert err.max() <= bound[k] * (1 + 1e-12) + 1e-12, (k, plan.nodes[k].op)
+
+
+def test_piecewise_plan_is_the_float_polynomial_of_each_cell():
+    plan = tiny_piecewise_plan(4, shift=2, degree=2)
+    ports = all_ports(plan)
+    a = np.clip(ports["a"], 0, 12)
+    cell, t = a >> 2, ((a & 3) - 2) / 2
+    bb = np.clip(ports["b"], -10, 9) / 2 / 16
+    rng = np.random.default_rng(4)
+    poly = {(i, j): rng.normal(size=4) * 50 for i in range(3) for j in range(3) if i + j <= 2}
+    want = sum(c[cell] * t ** i * bb ** j for (i, j), c in poly.items())
+    got = golden.evaluate_ideal(plan, ports)[plan.outputs[0].preround]
+    assert np.allclose(got, want, rtol=0, atol=1e-9)
+    assert Plan.from_json(json.loads(plan.dumps())).dumps() == plan.dumps()
+
+
+def test_lut_and_cell_operations_check_their_operands():
+    b = PlanBuilder([PlanInput("a", "mm", 2, 0, 12, 4, False)])
+    a = b.input_nodes["a"]
+    cell, off = b.cell(a, 2)
+    assert (b.nodes[cell].lo, b.nodes[cell].hi) == (0, 3) and (b.nodes[off].lo, b.nodes[off].hi) == (0, 3)
+    with pytest.raises(ValueError, match=r"lut index must be an integer in \[0, 2\], not \[0, 3\]"):
+        b.lut(cell, [1.0, 2.0, 3.0], 0)
+    with pytest.raises(ValueError, match="lut table must be a non-empty tuple of integers"):
+        b._append("lut", (cell,), 0, (), None)
+    lut = b.lut(cell, [0.5, 1.0, -2.0, 0.25], 1)
+    assert (b.nodes[lut].lo, b.nodes[lut].hi) == (-4, 2)
+    assert b.nodes[lut].ideal == (0.5, 1.0, -2.0, 0.25)
