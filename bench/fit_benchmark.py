@@ -19,7 +19,6 @@ from pathlib import Path
 
 from ikseries.accuracy import measure
 from ikseries.fit.fitter import FitError, fit_robot, output_multipliers
-from ikseries.fit.plan import bits_for, quantize
 from ikseries.robot import load_preset, preset_names
 
 
@@ -36,9 +35,9 @@ def bench_preset(name: str) -> dict:
     mults = output_multipliers(plan)
     servos = []
     for sf in fits:
-        coef_bits = max(bits_for(min(0, q), max(0, q))[0] for q in (quantize(c, sf.frac) for c in sf.poly.values()))
+        coef_bits = sf.coefficient_bits()
         cs = cert[sf.name]
-        servos.append({"servo": sf.name, "variables": sf.features.kind + (" tensor" if sf.features.tensor else ""),
+        servos.append({"servo": sf.name, "variables": sf.features.structure(),
                        "names": list(sf.features.names),
                        "degree": sf.degree, "terms": len(sf.poly), "multiplications": mults[sf.name],
                        "coefficient_bits": coef_bits, "coefficient_frac_bits": sf.frac,

@@ -42,15 +42,17 @@ def plan_figures(robot, plan: Plan, points: dict | None = None) -> dict:
         cone = plan.cone(o.preround)
         muls = [i for i in cone if plan.nodes[i].op == "mul"]
         consts = [plan.nodes[i] for i in cone - shared if plan.nodes[i].op == "const"]
+        tables = [plan.nodes[i] for i in cone - shared if plan.nodes[i].op == "lut"]
         e = acc["servos"][o.name]
         out[o.name] = {
             "terms": _servo_terms(plan, o.name),
             "multiplications": len(muls),
             "shared_multiplications": sum(1 for i in muls if i in shared),
             "own_multiplications": sum(1 for i in muls if i not in shared),
-            "coefficients": len(consts),
-            "coefficient_bits_total": sum(n.width for n in consts),
-            "coefficient_bits_max": max((n.width for n in consts), default=0),
+            "coefficients": len(consts) + sum(len(n.param) for n in tables),
+            "coefficient_bits_total": sum(n.width for n in consts) + sum(n.width * len(n.param) for n in tables),
+            "coefficient_bits_max": max((n.width for n in consts + tables), default=0),
+            "table_cells": max((len(n.param) for n in tables), default=1),
             "accumulator_frac_bits": plan.nodes[o.preround].frac,
             "max_error_pu": e["total"],
             "approximation_pu": e["approximation"],

@@ -21,7 +21,7 @@ from ..kinematics import UnreachableError
 from .certify import CertificationError, certify
 from .features import Normaliser, coordinate_stage
 from .horner import horner, parity_split
-from .plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for
+from .plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for, quantize
 from .polyfit import fit_least_squares, lawson, total_degree_terms, vander
 
 __all__ = ["FitError", "ServoFit", "FeatureSet", "fit_robot", "plan_inputs", "workspace_samples",
@@ -33,6 +33,7 @@ PRUNE_REJECTS = 3
 FIT_SEED = 20261124
 FIT_SAMPLES = (30000, 3000)      # random interior points, points per face
 CHECK_SAMPLES = (100000, 10000)  # + points per edge / 4
+CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
 
 
 class FitError(RuntimeError):
@@ -48,8 +49,18 @@ class ServoFit:
     fit_error_ticks: float   # max error on the fit and check samples (float coefficients)
     frac: int = 0            # accumulator / coefficient fractional bits
     bound_pu: float = 0.0    # certified rounding bound
-    # fit data for the refit after quantization: (check set, working set + Lawson weights, budget)
+    # fit data for the refit after quantization: (_Cells, per cell working set + Lawson weights, budget)
     refit: tuple | None = field(default=None, repr=False, compare=False)
+
+    def integers(self) -> dict:
+        """{exponents: coefficient integer on the 2**-frac grid} (a tuple per cell if piecewise)."""
+        q = lambda c: quantize(c, self.frac)  # noqa: E731
+        return {e: tuple(map(q, c)) if isinstance(c, tuple) else q(c) for e, c in self.poly.items()}
+
+    def coefficient_bits(self) -> int:
+        """Widest coefficient integer (two's complement bits)."""
+        ints = np.ravel(list(self.integers().values()))
+        return max(bits_for(min(0, int(q)), max(0, int(q)))[0] for q in ints)
 
 
 @dataclass
@@ -105,6 +116,38 @@ def workspace_samples(robot, n_random: int, n_face: int, seed: int, edges: bool 
 
 
 @dataclass(frozen=True)
+class Cut:
+    """Cells of 2**shift integers of input port ``port`` (from its lowest value); variable
+    ``var`` of the polynomial is the offset inside the cell, normalised to [-1, 1)."""
+    var: int
+    port: str
+    shift: int
+    cells: int
+
+    def rows(self, port, values, cell: int) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of real input values of ``port`` (a PlanInput) that cell ``cell`` is fitted on,
+        and their normalised offsets from the cell. The last cell, which may hold fewer port
+        values, is fitted on the last full cell width of the range (offsets below -1), so its
+        polynomial is never fitted on a sliver."""
+        u = np.asarray(values, dtype=np.float64) * 2.0 ** port.frac - port.lo
+        width, top = 2 ** self.shift, port.hi - port.lo
+        start = min(cell * width, max(0, top + 1 - width))
+        sel = np.flatnonzero((u >= start) & (u <= min((cell + 1) * width, top)))
+        half = width / 2
+        return sel, (u[sel] - cell * width - half) / half
+
+    def build(self, b: PlanBuilder, port) -> tuple[int, int]:
+        """(cell, offset) nodes: the offset has ``shift - 1`` fractional bits, in [-1, 1)."""
+        node = b.input_nodes[port.name]
+        if port.lo:
+            node = b.add(node, b.const(-port.lo * 2.0 ** -port.frac, port.frac))
+        u = b.reinterpret(node, 0)
+        cell, off = b.cell(u, self.shift)
+        f = self.shift - 1
+        return cell, b.add(b.reinterpret(off, f), b.const(-1.0, f))
+
+
+@dataclass(frozen=True)
 class FeatureSet:
     """The variables one servo polynomial is fitted over.
 
@@ -120,9 +163,29 @@ class FeatureSet:
     allowed: tuple
     zero_free: int | None = None
     tensor: bool = False      # every power up to ``degree`` per variable, not total degree
+    cut: "Cut | None" = None  # piecewise: variable ``cut.var`` is the offset in a cell of its port
 
     def label(self) -> str:
-        return f"{self.kind} {'/'.join(self.names)}" + (" tensor" if self.tensor else "")
+        return f"{self.kind} {'/'.join(self.names)}" + self.extras()
+
+    def structure(self) -> str:
+        """Kind, term set and cells, e.g. ``radial, 3 cells in z`` (for reports)."""
+        return self.kind + self.extras().replace(" tensor", ", tensor terms")
+
+    def extras(self) -> str:
+        return (" tensor" if self.tensor else "") + (f", {self.cut.cells} cells in {self.cut.port}"
+                                                      if self.cut else "")
+
+    def piecewise(self, var: int, port, cells: int) -> "FeatureSet":
+        """The same variables with variable ``var`` (the normalised input ``port``) replaced by
+        the offset inside ``cells`` equal cells of the port's integer range: the offset has no
+        symmetry, so its powers are "any"."""
+        per = -(-(port.hi - port.lo + 1) // cells)          # port values per cell, rounded up
+        shift = max(1, (per - 1).bit_length())
+        allowed = self.allowed[:var] + ("any",) + self.allowed[var + 1:]
+        zero_free = None if self.zero_free == var else self.zero_free
+        return dataclasses.replace(self, allowed=allowed, zero_free=zero_free,
+                                   cut=Cut(var, port.name, shift, ((port.hi - port.lo) >> shift) + 1))
 
     def terms(self, degree: int) -> list:
         if self.tensor:
@@ -235,16 +298,23 @@ class _Nodes:
 
 def _servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], fv: int, frac: int) -> int:
     """Lower one servo polynomial by nested Horner; for the first even/odd variable v,
-    ``E(..., v**2, ...) + v * O(..., v**2, ...)``."""
+    ``E(..., v**2, ...) + v * O(..., v**2, ...)``. A piecewise polynomial (``fs.cut``) takes
+    the offset in the cell for the cut variable and looks its coefficients up by cell."""
+    coefficient = None
+    if fs.cut is not None:
+        port = next(i for i in b.inputs if i.name == fs.cut.port)
+        cell, off = fs.cut.build(b, port)
+        feats = feats[:fs.cut.var] + [off] + feats[fs.cut.var + 1:]
+        coefficient = lambda v, f: b.lut(cell, v, f)  # noqa: E731
     k = next((j for j, a in enumerate(fs.allowed) if a in ("even", "odd")), None)
     if k is None:
-        return horner(b, poly, feats, frac)
+        return horner(b, poly, feats, frac, coefficient)
     v2 = b.mul(feats[k], feats[k], fv)
     even, odd = parity_split(poly, k)
     vars_ = feats[:k] + [v2] + feats[k + 1:]
-    acc = horner(b, even, vars_, frac) if even else None
+    acc = horner(b, even, vars_, frac, coefficient) if even else None
     if odd:
-        o = b.mul(feats[k], horner(b, odd, vars_, frac), frac)
+        o = b.mul(feats[k], horner(b, odd, vars_, frac, coefficient), frac)
         acc = o if acc is None else b.add(acc, o)
     return acc
 
@@ -270,7 +340,9 @@ def _cost(robot, inputs, stage, fs: FeatureSet, terms: list) -> int:
     """Multipliers of the servo evaluation (coordinate stage included) for ``terms``,
     known before fitting: the structure alone decides it."""
     # distinct coefficients: equal ones would share Horner sub-expressions
-    sf = ServoFit("cost", fs, 0, {e: 1.0 + k / 4096 for k, e in enumerate(terms)}, 0.0, frac=16)
+    cells = fs.cut.cells if fs.cut else 0
+    sf = ServoFit("cost", fs, 0, {e: (1.0 + k / 4096,) * cells if cells else 1.0 + k / 4096
+                                  for k, e in enumerate(terms)}, 0.0, frac=16)
     plan = _build(robot, inputs, stage, [sf], 16)
     return output_multipliers(plan)["cost"]
 
@@ -297,57 +369,122 @@ def _fit_terms(terms, fit_set, check_set, budget_ticks, rounds: int = 4, warm=No
     return c, err, (xp, xt, w)
 
 
-def _fit_servo(robot, inputs, stage, name, candidates, sets, budget_ticks, progress) -> ServoFit:
+@dataclass
+class _Cells:
+    """Fit and check sets of one servo polynomial, per cell of a piecewise fit (a single cell
+    otherwise); each set is (features (N, n), target ticks)."""
+    fit: list
+    check: list
+
+    @classmethod
+    def whole(cls, fit_set, check_set) -> "_Cells":
+        return cls([fit_set], [check_set])
+
+    @classmethod
+    def cut(cls, fs: FeatureSet, port, fit_set, check_set, raw) -> "_Cells":
+        """Rows of each cell of ``fs.cut``, the cut variable replaced by the offset in the cell;
+        ``raw`` = real values of the cut port at the fit and check rows."""
+        out = cls([], [])
+        for c in range(fs.cut.cells):
+            for dst, (x, t), v in ((out.fit, fit_set, raw[0]), (out.check, check_set, raw[1])):
+                sel, off = fs.cut.rows(port, v, c)
+                xc = x[sel].copy()
+                xc[:, fs.cut.var] = off
+                dst.append((xc, t[sel]))
+        return out
+
+    def poly(self, terms, coef: np.ndarray) -> dict:
+        """{exponents: coefficient} (a tuple per cell when piecewise) from coef (cells, terms)."""
+        if len(self.fit) == 1:
+            return {e: float(v) for e, v in zip(terms, coef[0])}
+        return {e: tuple(float(v) for v in coef[:, j]) for j, e in enumerate(terms)}
+
+    def coef(self, poly: dict, terms) -> np.ndarray:
+        return np.array([[poly[e] for e in terms]]) if len(self.fit) == 1 else \
+            np.array([poly[e] for e in terms]).T
+
+    def lsq_error(self, terms) -> float:
+        err = 0.0
+        for x, t in self.fit:
+            a = vander(x, terms)
+            err = max(err, float(np.max(np.abs(a @ fit_least_squares(a, t) - t))))
+        return err
+
+    def fit_terms(self, terms, budget_ticks, rounds: int = 4, warm=None, iterations: int = 30):
+        """:func:`_fit_terms` in every cell: (coef (cells, terms), max error, states)."""
+        coefs, err, states = [], 0.0, []
+        for c, (fit_set, check_set) in enumerate(zip(self.fit, self.check)):
+            cf, e, st = _fit_terms(terms, fit_set, check_set, budget_ticks, rounds,
+                                   None if warm is None else warm[c], iterations)
+            coefs.append(cf)
+            err, states = max(err, e), states + [st]
+        return np.array(coefs), err, states
+
+
+def _fit_servo(robot, inputs, stage, name, candidates, sets, raw, budget_ticks, progress) -> ServoFit:
     """The cheapest (fewest multipliers) polynomial over any candidate variable set whose
     near-minimax fit meets ``budget_ticks`` on the check set, then pruned.
 
-    ``sets[kind]`` = (fit set, check set), each (features, target ticks). Per candidate the
-    total degree rises until the fit meets the budget or the structure already costs
-    more than the best plan found.
+    ``sets[kind]`` = (fit set, check set), each (features, target ticks); ``raw[port]`` = the
+    real values of an input port at the fit and check rows. Per candidate the total degree
+    rises until the fit meets the budget or the structure already costs more than the best
+    plan found. Then the best variable set is tried piecewise: cut along each of its
+    variables that is an input port into ``CUT_CELLS`` cells (coefficient tables, a lower
+    degree); a piecewise plan wins only with strictly fewer multipliers, the fewest cells first.
     """
     best = None
-    for fs in candidates:
-        fit_set, check_set = sets[fs.kind]
+
+    def search(fs, data):
+        nonlocal best
         for deg in range(1, MAX_DEGREE + 1):
             terms = fs.terms(deg)
             cost = _cost(robot, inputs, stage, fs, terms)
             if best is not None and cost >= best[0]:
-                break
-            a = vander(fit_set[0], terms)
-            err = float(np.max(np.abs(a @ fit_least_squares(a, fit_set[1]) - fit_set[1])))
-            if err > 8 * budget_ticks:
+                return
+            if data.lsq_error(terms) > 8 * budget_ticks:
                 continue
-            c, err, state = _fit_terms(terms, fit_set, check_set, budget_ticks)
+            c, err, state = data.fit_terms(terms, budget_ticks)
             progress(f"  {name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
-                     f"{len(terms)} terms, "
-                     f"{cost} multipliers, max fit error {err:.4g} ticks")
+                     f"{len(terms)} terms, {cost} multipliers, max fit error {err:.4g} ticks")
             if err <= budget_ticks:
-                best = (cost, ServoFit(name, fs, deg, dict(zip(terms, (float(v) for v in c))), err), state)
-                break
+                best = (cost, ServoFit(name, fs, deg, data.poly(terms, c), err), state, data)
+                return
+
+    for fs in candidates:
+        search(fs, _Cells.whole(*sets[fs.kind]))
     if best is None:
         raise FitError(f"servo {name}: no polynomial up to total degree {MAX_DEGREE} reaches the "
                        f"approximation budget of {budget_ticks:g} ticks")
-    cost, sf, state = best
-    return _prune(robot, inputs, stage, sf, cost, sets[sf.features.kind], state, budget_ticks, progress)
+    base = best[1].features
+    ports = {i.name: i for i in inputs}
+    for var, nm in enumerate(base.names):
+        if nm not in ports or base.allowed[var] == "none":
+            continue
+        for cells in CUT_CELLS:
+            fs = base.piecewise(var, ports[nm], cells)
+            if fs.cut.cells > 1:
+                search(fs, _Cells.cut(fs, ports[nm], *sets[base.kind], raw[nm]))
+    cost, sf, state, data = best
+    return _prune(robot, inputs, stage, sf, cost, data, state, budget_ticks, progress)
 
 
-def _prune(robot, inputs, stage, sf: ServoFit, cost: int, data, state, budget_ticks, progress) -> ServoFit:
+def _prune(robot, inputs, stage, sf: ServoFit, cost: int, data: _Cells, state, budget_ticks,
+           progress) -> ServoFit:
     """Drop terms while the refitted polynomial still meets the budget.
 
     Only removals that save a multiplier are tried (in a nested Horner scheme most
     inner coefficients cost an add, not a multiply), least important first
-    (|coefficient| x largest |monomial| on the check set); stops after
-    ``PRUNE_REJECTS`` refused removals in a row. Each trial refit is warm-started from
+    (|coefficient| x largest |monomial| on the check set, the largest over the cells); stops
+    after ``PRUNE_REJECTS`` refused removals in a row. Each trial refit is warm-started from
     the current fit's working set and Lawson weights (one exchange round).
     """
-    fit_set, check_set = data
     terms = list(sf.poly)
-    coef = np.array([sf.poly[e] for e in terms])
+    coef = data.coef(sf.poly, terms)
     rejected: set = set()
     misses = 0
     while misses < PRUNE_REJECTS:
-        scale = np.abs(vander(check_set[0], terms)).max(axis=0)
-        order = np.argsort(np.abs(coef) * scale, kind="stable")
+        scale = np.max([np.abs(vander(x, terms)).max(axis=0) for x, _ in data.check], axis=0)
+        order = np.argsort(np.max(np.abs(coef), axis=0) * scale, kind="stable")
         pick = None
         for i in order:
             t = terms[i]
@@ -361,16 +498,16 @@ def _prune(robot, inputs, stage, sf: ServoFit, cost: int, data, state, budget_ti
         if pick is None:
             break
         t, rest, c2 = pick
-        c, err, st = _fit_terms(rest, fit_set, check_set, budget_ticks, rounds=1, warm=state, iterations=12)
+        c, err, st = data.fit_terms(rest, budget_ticks, rounds=1, warm=state, iterations=12)
         if err <= budget_ticks:
             terms, coef, cost, misses, state = rest, c, c2, 0, st
-            sf = ServoFit(sf.name, sf.features, sf.degree, dict(zip(terms, (float(v) for v in c))), err)
+            sf = ServoFit(sf.name, sf.features, sf.degree, data.poly(terms, c), err)
         else:
             rejected.add(t)
             misses += 1
     progress(f"  {sf.name}: pruned to {len(terms)} terms, {cost} multipliers, "
              f"max fit error {sf.fit_error_ticks:.4g} ticks")
-    sf.refit = (check_set, state, budget_ticks)
+    sf.refit = (data, state, budget_ticks)
     return sf
 
 
@@ -378,30 +515,34 @@ def _round_and_refit(sf: ServoFit, frac: int):
     """Coefficients on the grid 2**-frac, rounded one at a time (highest degree first) while
     the rest are refitted (weighted least squares with the fit's final Lawson weights on its
     working set) to absorb each rounding; plain rounding instead if that is better on the
-    check set (the refit is a heuristic for the maximum error). Returns (poly, max error on
-    the check set) or None without fit data."""
+    check set (the refit is a heuristic for the maximum error). Piecewise: in every cell.
+    Returns (poly, max error on the check set) or None without fit data."""
     if sf.refit is None:
         return None
-    (cpts, ctarget), (xp, xt, w), _ = sf.refit
+    data, states, _ = sf.refit
     terms = sorted(sf.poly, key=lambda e: (-sum(e), e))
-    a = vander(xp, terms)
-    coef = np.array([sf.poly[e] for e in terms])
-    fixed = np.zeros(len(terms), dtype=bool)
     grid = 2.0 ** frac
-    for k in range(len(terms)):
-        coef[k] = np.round(coef[k] * grid) / grid
-        fixed[k] = True
-        free = ~fixed
-        if free.any():
-            rhs = xt - a[:, fixed] @ coef[fixed]
-            coef[free] = fit_least_squares(a[:, free], rhs, w)
-    ca = vander(cpts, terms)
-    err = float(np.max(np.abs(ca @ coef - ctarget)))
-    naive = np.array([np.round(sf.poly[e] * grid) / grid for e in terms])
-    naive_err = float(np.max(np.abs(ca @ naive - ctarget)))
-    if naive_err < err:          # the refit is a heuristic: never worse than plain rounding
-        coef, err = naive, naive_err
-    return {e: float(c) for e, c in zip(terms, coef)}, err
+    coefs, worst = [], 0.0
+    for orig, (xp, xt, w), (cpts, ctarget) in zip(data.coef(sf.poly, terms), states, data.check):
+        a = vander(xp, terms)
+        coef = orig.copy()
+        fixed = np.zeros(len(terms), dtype=bool)
+        for k in range(len(terms)):
+            coef[k] = np.round(coef[k] * grid) / grid
+            fixed[k] = True
+            free = ~fixed
+            if free.any():
+                rhs = xt - a[:, fixed] @ coef[fixed]
+                coef[free] = fit_least_squares(a[:, free], rhs, w)
+        ca = vander(cpts, terms)
+        err = float(np.max(np.abs(ca @ coef - ctarget)))
+        naive = np.round(orig * grid) / grid
+        naive_err = float(np.max(np.abs(ca @ naive - ctarget)))
+        if naive_err < err:          # the refit is a heuristic: never worse than plain rounding
+            coef, err = naive, naive_err
+        coefs.append(coef)
+        worst = max(worst, err)
+    return data.poly(terms, np.array(coefs)), worst
 
 
 def _requantize(robot, inputs, stage, fits, fv, budget: Budget, progress) -> None:
@@ -487,6 +628,9 @@ def _lower(robot, inputs, stage, fits, budget, progress) -> Plan:
                     "term_set": "tensor" if sf.features.tensor else "total degree",
                     "powers": dict(zip(sf.features.names, sf.features.allowed)), "total_degree": sf.degree,
                     "terms": len(sf.poly), "multipliers": mults[sf.name], "accumulator_frac_bits": sf.frac,
+                    "piecewise": None if sf.features.cut is None else {
+                        "input": sf.features.cut.port, "variable": sf.features.names[sf.features.cut.var],
+                        "cells": sf.features.cut.cells, "port_values_per_cell": 2 ** sf.features.cut.shift},
                     "fit_error_pu": sf.fit_error_ticks / tpp, "certified_rounding_pu": sf.bound_pu,
                     "coefficients": [{"exponents": list(e), "value": c} for e, c in sf.poly.items()]}
                    for sf in fits],
@@ -513,6 +657,7 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tu
     fit_pts = workspace_samples(robot, *FIT_SAMPLES, FIT_SEED)
     check_pts = workspace_samples(robot, *CHECK_SAMPLES, FIT_SEED + 1, edges=True)
     targets = [robot.pulses_pu(*p) for p in (fit_pts, check_pts)]
+    raw = {i.name: (fit_pts[k], check_pts[k]) for k, i in enumerate(robot.inputs)}
     feats: dict = {}
     approx = [budget.approximation * tpp] * len(robot.servos)
     fits: list = [None] * len(robot.servos)
@@ -529,7 +674,7 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tu
             progress(f"fitting {name}: candidates " + "; ".join(
                 f"{fs.label()} ({', '.join(f'{v} {a}' for v, a in zip(fs.names, fs.allowed))})"
                 for fs in candidates))
-            fits[k] = _fit_servo(robot, inputs, stage, name, candidates, sets, approx[k], progress)
+            fits[k] = _fit_servo(robot, inputs, stage, name, candidates, sets, raw, approx[k], progress)
         plan = _lower(robot, inputs, stage, fits, budget, progress)
         if not certified:
             return plan, fits

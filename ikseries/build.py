@@ -17,7 +17,6 @@ from .accuracy import measure
 from .architecture import ArchitectureError, choose_architecture
 from .constraints.timing import clock_sdc
 from .fit.fitter import FitError, fit_robot
-from .fit.plan import quantize
 from .hdl.export import leg_verilog, manifest, module_name, robot_verilog
 from .hdl.shared import RobotCore
 from .plots import error_map
@@ -272,13 +271,13 @@ def make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, t
         servos.append({
             "name": sf.name,
             "total_degree": sf.degree,
-            "variables": sf.features.kind + (", tensor terms" if sf.features.tensor else ""),
+            "variables": sf.features.structure(),
             "powers": dict(zip(sf.features.names, sf.features.allowed)),
             "terms": len(sf.poly),
             "accumulator_frac_bits": sf.frac,
             "multipliers": sum(1 for i in cone if plan.nodes[i].op == "mul"),
-            "coefficients": [{"exponents": list(e), "integer": quantize(c, sf.frac), "value": c}
-                             for e, c in sf.poly.items()],
+            "coefficients": [{"exponents": list(e), "integer": q, "value": sf.poly[e]}
+                             for e, q in sf.integers().items()],
             "error_pu": acc["servos"][sf.name],
             "certified_rounding_bound_pu": sf.bound_pu,
             "certificate": next((c for c in plan.meta.get("certificate", {}).get("servos", [])

@@ -44,7 +44,7 @@ def _ikseries(robot, progress) -> tuple[dict, dict]:
     acc = measure(robot, plan)
     mults = output_multipliers(plan)
     cert = {c["name"]: c for c in plan.meta.get("certificate", {}).get("servos", [])}
-    rows = [{"servo": sf.name, "variables": sf.features.kind + (" tensor" if sf.features.tensor else ""),
+    rows = [{"servo": sf.name, "variables": sf.features.structure(),
              "names": list(sf.features.names),
              "degree": sf.degree, "terms": len(sf.poly), "multiplications": mults[sf.name],
              "coefficient_frac_bits": sf.frac, "sampled_max_pu": acc["servos"][sf.name]["total"],

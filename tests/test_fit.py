@@ -38,7 +38,7 @@ def test_symmetry_and_unused_variables_are_found(fitted):
     # the coxa axis, so fitted over (x**2 + y**2, z) only
     assert (by["s1"].kind, by["s1"].allowed) == ("cartesian", ("any", "odd", "none"))
     assert by["s1"].zero_free == 1
-    assert by["s2"] == by["s3"]
+    assert by["s2"].kind == by["s3"].kind == "radial"
     assert (by["s2"].kind, by["s2"].names, by["s2"].allowed) == ("radial", ("rho2", "z"), ("any", "any"))
     for f in fits:
         for e in f.poly:
@@ -162,15 +162,45 @@ def test_coefficients_are_reoptimised_on_their_grid(fitted):
     from ikseries.fit.polyfit import vander
     plan, fits = fitted
     for sf in fits:
-        for c in sf.poly.values():
+        for c in np.ravel(list(sf.poly.values())):
             assert c * 2.0 ** sf.frac == round(c * 2.0 ** sf.frac)
-    consts = [n for n in plan.nodes if n.op == "const" and n.ideal is not None]
-    assert len(consts) < sum(len(sf.poly) for sf in fits)   # only the trig series rounds
+    rounded = [n for n in plan.nodes if n.op in ("const", "lut") and n.ideal is not None]
+    assert len(rounded) < sum(len(sf.poly) for sf in fits)   # only the trig series rounds
     for sf in fits[1:]:
-        (cpts, ctarget), _, _ = sf.refit
+        data = sf.refit[0]
         terms = list(sf.poly)
         for frac in (sf.frac - 3, sf.frac - 6):
             poly, err = _round_and_refit(sf, frac)
-            assert all(c * 2.0 ** frac == round(c * 2.0 ** frac) for c in poly.values())
-            naive = np.array([round(sf.poly[e] * 2.0 ** frac) / 2.0 ** frac for e in terms])
-            assert err <= float(np.max(np.abs(vander(cpts, terms) @ naive - ctarget)))
+            assert all(c * 2.0 ** frac == round(c * 2.0 ** frac) for c in np.ravel(list(poly.values())))
+            naive = np.round(data.coef(sf.poly, terms) * 2.0 ** frac) / 2.0 ** frac
+            assert err <= max(float(np.max(np.abs(vander(cpts, terms) @ n - ctarget)))
+                              for n, (cpts, ctarget) in zip(naive, data.check))
+
+
+def test_piecewise_cells_of_the_fit_are_the_cells_of_the_plan():
+    """The fitter's cell and offset of every port value (its data) equal what the plan
+    computes from the port integer (index / mask), and the last, shorter cell is fitted on
+    a full cell width."""
+    from ikseries.fit.fitter import Cut, FeatureSet
+    from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
+    from ikseries.sim import golden
+    port = PlanInput("z", "mm", 3, -7, 313, 10, True)
+    fs = FeatureSet("direct", ("z",), ("odd",), zero_free=0).piecewise(0, port, 4)
+    assert fs.allowed == ("any",) and fs.zero_free is None
+    assert fs.cut == Cut(0, "z", 7, 3) and "3 cells in z" in fs.label()
+    b = PlanBuilder([port])
+    cell, off = fs.cut.build(b, port)
+    plan = b.build([PlanOutput("c", cell, cell, "ticks", 1.0), PlanOutput("o", off, off, "ticks", 1.0)])
+    ints = np.arange(port.lo, port.hi + 1)
+    got = golden.evaluate(plan, {"z": ints}, keep={plan.outputs[0].node, plan.outputs[1].node})
+    ideal = golden.evaluate_ideal(plan, {"z": ints}, keep={plan.outputs[1].node})[plan.outputs[1].node]
+    c_plan, o_plan = got[plan.outputs[0].node], got[plan.outputs[1].node] * 2.0 ** -6
+    assert np.array_equal(ideal, o_plan) and o_plan.min() == -1 and o_plan.max() < 1
+    covered = np.zeros(len(ints), dtype=int)
+    for c in range(fs.cut.cells):
+        sel, t = fs.cut.rows(port, ints / 8, c)
+        mine = c_plan[sel] == c
+        assert np.array_equal(t[mine], o_plan[sel][mine])
+        covered[sel[mine]] += 1
+        assert len(sel) >= 2 ** fs.cut.shift        # the last cell too: a full width of data
+    assert np.all(covered == 1)
