@@ -30,10 +30,11 @@ Registered operations take one pipeline stage; wiring-only ones take none.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 from dataclasses import dataclass, field
 
-__all__ = ["quantize", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for", "PLAN_FORMAT",
+__all__ = ["quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for", "PLAN_FORMAT",
            "PLAN_VERSION", "REGISTERED_OPS"]
 
 PLAN_FORMAT = "ikseries.plan"
@@ -46,6 +47,20 @@ _OPS = {"input": 0, "const": 0, "add": 2, "mul": 2, "clamp": 1, "shr": 1, "shl":
 def quantize(value: float, frac: int) -> int:
     """Nearest integer to ``value * 2**frac``: a constant with ``frac`` fractional bits."""
     return int(round(value * 2.0 ** frac))
+
+
+def extend_stages(nodes: list["Node"], st: list[int]) -> list[int]:
+    """Append to ``st`` (the stages of ``nodes[:len(st)]``) the stage of every later node
+    (see :meth:`Plan.stages`); returns ``st``."""
+    for n in nodes[len(st):]:
+        if n.op == "const":
+            st.append(0)
+        elif n.op == "input":
+            st.append(1)
+        else:
+            s = max([st[a] for a in n.args] + [0])
+            st.append(s + 1 if n.op in REGISTERED_OPS else s)
+    return st
 
 
 def bits_for(lo: int, hi: int) -> tuple[int, bool]:
@@ -113,16 +128,7 @@ class Plan:
     def stages(self) -> list[int]:
         """Pipeline stage of every node: the number of clock edges after an input transfer at
         which the node's value is valid (inputs are registered: 1; constants: 0)."""
-        st: list[int] = []
-        for n in self.nodes:
-            if n.op == "const":
-                st.append(0)
-            elif n.op == "input":
-                st.append(1)
-            else:
-                s = max([st[a] for a in n.args] + [0])
-                st.append(s + 1 if n.op in REGISTERED_OPS else s)
-        return st
+        return extend_stages(self.nodes, [])
 
     @property
     def latency(self) -> int:
@@ -303,6 +309,21 @@ class PlanBuilder:
         self.nodes.append(Node(op, tuple(args), frac, lo, hi, param, ideal))
         self._memo[key] = len(self.nodes) - 1
         return len(self.nodes) - 1
+
+    @contextlib.contextmanager
+    def trial(self):
+        """A scratch evaluation: nodes appended inside the ``with`` block are discarded on exit
+        (as is their structural sharing), so alternative lowerings can be built and measured."""
+        n, memo = len(self.nodes), dict(self._memo)
+        try:
+            yield self
+        finally:
+            del self.nodes[n:]
+            self._memo = memo
+
+    def stages(self) -> list[int]:
+        """Pipeline stage of every node so far (see :meth:`Plan.stages`)."""
+        return extend_stages(self.nodes, [])
 
     # -- helpers ---------------------------------------------------------------
     def const(self, value: float, frac: int) -> int:

@@ -3,6 +3,7 @@ import numpy as np
 
 from ikseries.fit.horner import horner
 from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput
+from ikseries.sim import golden
 
 
 def tiny_plan(seed=0, clamp=(-100, 100), degree=4) -> Plan:
@@ -47,3 +48,49 @@ def all_ports(plan):
     return {i.name: g.ravel() for i, g in zip(plan.inputs, grid)}
 
 
+
+
+TINY_INPUTS = [PlanInput("a", "mm", 2, 0, 12, 4, False), PlanInput("b", "deg", 1, -10, 9, 5, True),
+               PlanInput("c", "mm", 0, -4, 3, 3, True)]
+
+
+def tiny_vars(b: PlanBuilder, nvars: int) -> list[int]:
+    """Normalised variables of ``TINY_INPUTS``: a / 16 in [0, 0.75], b / 32 in [-0.31, 0.28],
+    c / 4 in [-1, 0.75]."""
+    make = [lambda: b.align(b.reinterpret(b.input_nodes["a"], 4), 6),
+            lambda: b.reinterpret(b.input_nodes["b"], 5),
+            lambda: b.align(b.reinterpret(b.input_nodes["c"], 2), 6)]
+    return [m() for m in make[:nvars]]
+
+
+def tiny_ideal_vars(ports: dict, nvars: int) -> list:
+    """The real values of ``tiny_vars`` for port integers."""
+    make = [lambda: np.clip(ports["a"], 0, 12) / 16, lambda: np.clip(ports["b"], -10, 9) / 32,
+            lambda: ports["c"] / 4]
+    return [m() for m in make[:nvars]]
+
+
+def tiny_lowered_plan(lower, nvars: int = 2) -> Plan:
+    """``lower(b, var_nodes)`` (the accumulator node, frac 5) on ``nvars`` of ``TINY_INPUTS``,
+    rounded and clamped."""
+    b = PlanBuilder(TINY_INPUTS[:nvars])
+    acc = lower(b, tiny_vars(b, nvars))
+    out = b.clamp(b.round(acc, 0), -100, 100)
+    return b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
+
+
+def check_exhaustively(plan, want=None):
+    """For every port value: every node in its interval, every node the first output's
+    pre-rounding value needs within its rounding bound, and (if ``want(ports)`` is given)
+    that value's ideal equal to ``want``."""
+    ports = all_ports(plan)
+    iv, fv = golden.evaluate(plan, ports), golden.evaluate_ideal(plan, ports)
+    bound = plan.rounding_bounds()
+    for k, n in enumerate(plan.nodes):
+        v = np.asarray(iv[k])
+        assert v.min() >= n.lo and v.max() <= n.hi, (k, n.op)
+    for k in plan.cone(plan.outputs[0].preround):
+        err = np.abs(np.asarray(iv[k]) * 2.0 ** -plan.nodes[k].frac - fv[k])
+        assert err.max() <= bound[k] * (1 + 1e-12) + 1e-12, (k, plan.nodes[k].op)
+    if want is not None:
+        assert np.allclose(fv[plan.outputs[0].preround], want(ports), rtol=0, atol=1e-9)

@@ -1,0 +1,114 @@
+"""Benchmark: pipeline latency of the servo polynomials lowered by Horner vs the Horner/Estrin mix.
+
+Fits the preset once (the fits are not changed), then rebuilds the plan from the same fits
+and formats with each lowering and reports the plan latency, the multipliers (plan total
+and per servo, coordinate stage included) and, per servo, the certified rounding bound
+(pu) with its ratio to Horner's and the split chosen.
+
+Schemes: ``horner`` (as the fitter lowers), ``mix`` (per servo the split of least depth,
+then fewest multipliers: :func:`ikseries.fit.horner.lower_poly`), ``mix+N`` (at most N
+multipliers more than Horner per servo polynomial) and ``mix guard G`` (the powers of the
+variables kept with G more fractional bits).
+
+    python bench/lowering_latency.py [PRESET] [--extra N ...] [--guard G ...] [--json build/bench/lowering_latency.json]
+
+Rebuilding a plan from fits uses the fitter internals ``_Nodes`` (the feature nodes) and the
+coordinate stage as ``fit_robot`` configures it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from ikseries.fit import fitter
+from ikseries.fit.features import coordinate_stage
+from ikseries.fit.horner import choose_split, estrin, poly_degrees
+from ikseries.fit.plan import PlanBuilder, PlanOutput
+from ikseries.robot import load_preset
+
+
+def _parity(fs):
+    return next((j for j, a in enumerate(fs.allowed) if a in ("even", "odd")), None)
+
+
+def rebuild(robot, plan, fits, extra: int | None, horner: bool = False, guard: int = 0):
+    """The plan of ``fits`` (formats as fitted) with Horner or the mix; also the splits."""
+    inputs = fitter.plan_inputs(robot)
+    rmax = max(abs(robot.inputs[0].min), abs(robot.inputs[0].max))   # as fit_robot
+    stage = coordinate_stage(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)))
+    fv = plan.meta["features"]["frac_bits"]
+    b = PlanBuilder(inputs)
+    nodes = fitter._Nodes(robot, stage, b, fv)
+    lo, hi = robot.pulse_limits_ticks()
+    outs, splits = [], {}
+    for sf in fits:
+        feats, k = nodes[sf.features.kind], _parity(sf.features)
+
+        def lower(split, sf=sf, feats=feats, k=k):
+            return estrin(b, sf.poly, feats, sf.frac, split=split, parity=k, guard=guard)
+        split = None if horner else choose_split(b, lower, poly_degrees(sf.poly, k), extra)[0]
+        splits[sf.name] = split
+        acc = lower(split)
+        out = b.clamp(b.round(acc, 0), lo, hi)
+        outs.append(PlanOutput(sf.name, out, acc, "ticks", robot.ticks_per_pu))
+    return b.build(outs), splits
+
+
+def measure(robot, plan, fits, extras, guards=()) -> dict:
+    schemes = {"horner": rebuild(robot, plan, fits, None, horner=True)}
+    for e in extras:
+        schemes["mix" if e is None else f"mix+{e}"] = rebuild(robot, plan, fits, e)
+    for g in guards:
+        schemes[f"mix guard {g}"] = rebuild(robot, plan, fits, None, guard=g)
+    ref = schemes["horner"][0].rounding_bounds()
+    href = {o.name: ref[o.preround] for o in schemes["horner"][0].outputs}
+    out = {}
+    for name, (p, splits) in schemes.items():
+        bounds, st, mults = p.rounding_bounds(), p.stages(), fitter.output_multipliers(p)
+        out[name] = {"latency": p.latency, "multipliers": p.count("mul"), "servos": [
+            {"servo": o.name, "split": splits[o.name], "stage": st[o.node], "multipliers": mults[o.name],
+             "rounding_bound_pu": bounds[o.preround] / robot.ticks_per_pu,
+             "bound_vs_horner": bounds[o.preround] / href[o.name]} for o in p.outputs]}
+    return out
+
+
+def table(res: dict) -> str:
+    rows = [("scheme", "latency", "mults", "servo", "split", "out stage", "servo mults", "bound pu", "x horner")]
+    for name, r in res.items():
+        for s in r["servos"]:
+            rows.append((name, r["latency"], r["multipliers"], s["servo"], str(s["split"]), s["stage"],
+                         s["multipliers"], f"{s['rounding_bound_pu']:.4f}", f"{s['bound_vs_horner']:.3f}"))
+    w = [max(len(str(row[i])) for row in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(str(c).ljust(w[i]) for i, c in enumerate(row)) for row in rows)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("preset", nargs="?", default="cylinder-leg")
+    ap.add_argument("--extra", type=int, nargs="*", default=[0, 2],
+                    help="multiplier allowances per servo polynomial to report besides the unlimited mix")
+    ap.add_argument("--guard", type=int, nargs="*", default=[4],
+                    help="extra fractional bits of the powers of the variables to report for the mix")
+    ap.add_argument("--json", default="build/bench/lowering_latency.json")
+    args = ap.parse_args(argv)
+    robot = load_preset(args.preset)
+    t0 = time.perf_counter()
+    plan, fits = fitter.fit_robot(robot)
+    print(f"fitted {args.preset} in {time.perf_counter() - t0:.1f} s: latency {plan.latency}, "
+          f"{plan.count('mul')} multipliers")
+    t0 = time.perf_counter()
+    res = measure(robot, plan, fits, [None, *args.extra], args.guard)
+    if res["horner"]["latency"] != plan.latency or res["horner"]["multipliers"] != plan.count("mul"):
+        raise SystemExit("the Horner rebuild does not reproduce the fitted plan")
+    print(table(res))
+    print(f"lowered and measured in {time.perf_counter() - t0:.1f} s")
+    out = Path(args.json)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"preset": args.preset, "schemes": res}, indent=1) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
