@@ -20,7 +20,7 @@ import numpy as np
 from ..kinematics import UnreachableError
 from .certify import CertificationError, certify
 from .features import Normaliser, coordinate_stage
-from .horner import horner, parity_split
+from .horner import estrin, lower_poly
 from .plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for, quantize
 from .polyfit import fit_least_squares, lawson, total_degree_terms, vander
 
@@ -33,6 +33,7 @@ PRUNE_REJECTS = 3
 FIT_SEED = 20261124
 FIT_SAMPLES = (30000, 3000)      # random interior points, points per face
 CHECK_SAMPLES = (100000, 10000)  # + points per edge / 4
+MIX_EXTRA_MULTIPLIERS = 2       # fit.lowering = "mixed": extra multiplications allowed per servo
 CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
 
 
@@ -296,8 +297,11 @@ class _Nodes:
         return self._kinds[kind]
 
 
-def _servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], fv: int, frac: int) -> int:
-    """Lower one servo polynomial by nested Horner; for the first even/odd variable v,
+def _servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], fv: int, frac: int,
+                 mixed: bool = False) -> int:
+    """Lower one servo polynomial: nested Horner, or with ``mixed`` the Horner/Estrin mix of
+    least pipeline depth using at most ``MIX_EXTRA_MULTIPLIERS`` more multiplications
+    (:func:`ikseries.fit.horner.lower_poly`). For the first even/odd variable v,
     ``E(..., v**2, ...) + v * O(..., v**2, ...)``. A piecewise polynomial (``fs.cut``) takes
     the offset in the cell for the cut variable and looks its coefficients up by cell."""
     coefficient = None
@@ -307,25 +311,20 @@ def _servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], f
         feats = feats[:fs.cut.var] + [off] + feats[fs.cut.var + 1:]
         coefficient = lambda v, f: b.lut(cell, v, f)  # noqa: E731
     k = next((j for j, a in enumerate(fs.allowed) if a in ("even", "odd")), None)
-    if k is None:
-        return horner(b, poly, feats, frac, coefficient)
-    v2 = b.mul(feats[k], feats[k], fv)
-    even, odd = parity_split(poly, k)
-    vars_ = feats[:k] + [v2] + feats[k + 1:]
-    acc = horner(b, even, vars_, frac, coefficient) if even else None
-    if odd:
-        o = b.mul(feats[k], horner(b, odd, vars_, frac, coefficient), frac)
-        acc = o if acc is None else b.add(acc, o)
-    return acc
+    if mixed:
+        return lower_poly(b, poly, feats, frac, coefficient, parity=k, max_extra_muls=MIX_EXTRA_MULTIPLIERS)
+    return estrin(b, poly, feats, frac, coefficient, split=None, parity=k)
 
 
-def _build(robot, inputs, stage, fits: list[ServoFit], fv: int) -> Plan:
+def _build(robot, inputs, stage, fits: list[ServoFit], fv: int, mixed: bool | None = None) -> Plan:
+    """The plan of ``fits``; ``mixed`` None: as ``robot.lowering`` says."""
+    mixed = getattr(robot, "lowering", "mixed") == "mixed" if mixed is None else mixed
     b = PlanBuilder(inputs)
     nodes = _Nodes(robot, stage, b, fv)
     lo, hi = robot.pulse_limits_ticks()
     outs = []
     for sf in fits:
-        acc = _servo_nodes(b, sf.features, sf.poly, nodes[sf.features.kind], fv, sf.frac)
+        acc = _servo_nodes(b, sf.features, sf.poly, nodes[sf.features.kind], fv, sf.frac, mixed)
         out = b.clamp(b.round(acc, 0), lo, hi)
         outs.append(PlanOutput(sf.name, out, acc, "ticks", robot.ticks_per_pu))
     return b.build(outs)
@@ -343,7 +342,7 @@ def _cost(robot, inputs, stage, fs: FeatureSet, terms: list) -> int:
     cells = fs.cut.cells if fs.cut else 0
     sf = ServoFit("cost", fs, 0, {e: (1.0 + k / 4096,) * cells if cells else 1.0 + k / 4096
                                   for k, e in enumerate(terms)}, 0.0, frac=16)
-    plan = _build(robot, inputs, stage, [sf], 16)
+    plan = _build(robot, inputs, stage, [sf], 16, mixed=False)
     return output_multipliers(plan)["cost"]
 
 
@@ -621,6 +620,7 @@ def _lower(robot, inputs, stage, fits, budget, progress) -> Plan:
         "budget_pu": vars(budget),
         "method": {"fit": "Lawson near-minimax + exchange on a check set; per servo the variable set "
                           "and total degree with the fewest multipliers, then pruned",
+                   "lowering": getattr(robot, "lowering", "mixed"),
                    "seed": FIT_SEED, "fit_samples": FIT_SAMPLES, "check_samples": CHECK_SAMPLES,
                    "max_degree": MAX_DEGREE},
         "features": {**stage.meta(), "frac_bits": fv},

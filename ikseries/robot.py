@@ -18,6 +18,9 @@ from .quadruped import QuadrupedFore, QuadrupedHind
 __all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot",
            "robot_record", "robot_from_record", "fit_record", "with_hardware", "ARCHITECTURES", "DSP_CHOICES"]
 
+#: fit.lowering values: "mixed" = per servo the Horner/Estrin mix of least pipeline depth (a few
+#: more multiplications), "horner" = nested Horner (fewest multiplications, deepest)
+LOWERINGS = ("mixed", "horner")
 #: hardware.architecture values: "auto" picks the smallest that meets hardware.min_refresh_hz.
 #: Default: "pipelined" (one target per clock, verified by cocotb too) for one leg, "auto" for more.
 ARCHITECTURES = ("auto", "pipelined", "folded")
@@ -77,6 +80,7 @@ class Robot:
     multipliers: int = 1            # multiplier units of a folded evaluator
     dsp: str = "ice40"              # one of DSP_CHOICES
     min_refresh_hz: float = 1000.0  # every leg's servos re-evaluated at least this often
+    lowering: str = "mixed"         # one of LOWERINGS: how servo polynomials become plan operations
 
     @property
     def servos(self) -> tuple[str, ...]:
@@ -206,10 +210,13 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
         raise RobotError(f"calibration.pulse_max_us must be > pulse_min_us ({pmin!r}), not {pmax!r}")
 
     fit = _table(data, "fit", "", required=False)
-    _no_extra(fit, ["tolerance_pu"], "fit.")
+    _no_extra(fit, ["tolerance_pu", "lowering"], "fit.")
     tol = fit.get("tolerance_pu", 0.5)
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not tol > 0:
         raise RobotError(f"fit.tolerance_pu must be > 0 pu, not {tol!r}")
+    lowering = fit.get("lowering", "mixed")
+    if lowering not in LOWERINGS:
+        raise RobotError(f"fit.lowering must be one of {', '.join(LOWERINGS)}, not {lowering!r}")
 
     hw = _table(data, "hardware", "", required=False)
     _no_extra(hw, ["clock_hz", "pwm_period_us", "architecture", "multipliers", "dsp", "min_refresh_hz"],
@@ -227,7 +234,7 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
                   legs=data.get("legs", 1),
                   architecture=hw.get("architecture", "auto" if data.get("legs", 1) != 1 else "pipelined"),
                   multipliers=hw.get("multipliers", 1), dsp=hw.get("dsp", "ice40"),
-                  min_refresh_hz=hw.get("min_refresh_hz", 1000.0))
+                  min_refresh_hz=hw.get("min_refresh_hz", 1000.0), lowering=lowering)
     _check_hardware(robot)
     if "multipliers" in hw and robot.architecture != "folded":
         raise RobotError(f"hardware.architecture must be folded when hardware.multipliers is given "
