@@ -3,15 +3,44 @@ from __future__ import annotations
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
+from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..fit.plan import REGISTERED_OPS, Plan
 
-__all__ = ["PlanEvaluator", "input_layout", "output_layout"]
+__all__ = ["PlanEvaluator", "input_layout", "lut_groups", "lut_rom_init", "output_layout"]
 
 
 def _shape(node):
     return signed(node.width) if node.signed else unsigned(node.width)
+
+
+def lut_groups(plan: Plan) -> dict[int, list[int]]:
+    """``lut`` nodes by index node (in plan order): the tables one ROM holds side by side."""
+    groups: dict[int, list[int]] = {}
+    for idx, n in enumerate(plan.nodes):
+        if n.op == "lut":
+            groups.setdefault(n.args[0], []).append(idx)
+    return groups
+
+
+def lut_rom_init(plan: Plan, index: int, luts: list[int]) -> tuple[list[int], int]:
+    """``(init, width)`` of the ROM shared by the ``luts`` read at node ``index``.
+
+    Entry ``j`` (0 <= j <= index.hi) is the concatenation, first lut in the low bits, of
+    ``table[j]`` of every lut as a ``width``-bit two's complement field of that lut's node
+    width; entries the index never takes (j < index.lo) hold 0 (they may not fit the field).
+    """
+    lo, hi = plan.nodes[index].lo, plan.nodes[index].hi
+    init = [0] * (hi + 1)
+    off = 0
+    for li in luts:
+        n = plan.nodes[li]
+        mask = (1 << n.width) - 1
+        for j in range(lo, hi + 1):
+            init[j] |= (n.param[j] & mask) << off
+        off += n.width
+    return init, off
 
 
 def input_layout(plan: Plan) -> data.StructLayout:
@@ -27,8 +56,13 @@ def output_layout(plan: Plan) -> data.StructLayout:
 class PlanEvaluator(wiring.Component):
     """Evaluates every output of ``plan`` for a stream of inputs.
 
-    Each registered plan operation (add, mul, clamp) is one pipeline stage;
-    shifts and binary-point changes are wiring. Operands computed early are
+    Each registered plan operation (add, mul, clamp, lut) is one pipeline stage;
+    shifts, binary-point changes, ``index`` (a shift) and ``mask`` (the low bits)
+    are wiring. The ``lut`` nodes that share an index node are one ROM
+    (``Memory`` with ``init``, a block RAM where the FPGA has one; see
+    :func:`lut_rom_init`): one word per index value, the tables side by side,
+    read by one synchronous port addressed by the index and enabled with the
+    pipeline, so the ROM read is that stage's register. Operands computed early are
     delayed to meet their consumers; every width comes from the plan's interval
     analysis, so no in-range input overflows (out-of-range inputs are clamped
     to the workspace by the plan's first stage).
@@ -50,7 +84,8 @@ class PlanEvaluator(wiring.Component):
     Throughput
     ----------
     One input per cycle. When ``o.valid`` is high and ``o.ready`` low, the whole
-    pipeline stalls and ``i.ready`` is low.
+    pipeline stalls (lut ROM read ports included: their ``en`` is the pipeline
+    enable) and ``i.ready`` is low.
     """
 
     def __init__(self, plan: Plan):
@@ -87,6 +122,8 @@ class PlanEvaluator(wiring.Component):
 
         vals: list = []
         delayed: dict = {}
+        groups = lut_groups(plan)
+        lut_field: dict = {}      # lut node -> its field of its ROM's read data
 
         def at(idx, stage):
             """Value of node ``idx`` delayed so that it is valid at ``stage``."""
@@ -122,13 +159,19 @@ class PlanEvaluator(wiring.Component):
             elif n.op == "clamp":
                 lo, hi = n.param
                 expr = Mux(ops[0] < lo, lo, Mux(ops[0] > hi, hi, ops[0]))
-            elif n.op == "shr":
+            elif n.op in ("shr", "index"):
                 expr = ops[0] >> n.param
+            elif n.op == "mask":   # two's complement low bits: non-negative, zero-extended
+                expr = ops[0] & Const((1 << n.param) - 1, unsigned(n.param))
+            elif n.op == "lut":
+                if idx not in lut_field:
+                    lut_field.update(self._lut_rom(m, en, n.args[0], groups[n.args[0]], ops[0]))
+                expr = lut_field[idx]
             elif n.op == "shl":
                 expr = ops[0] << n.param
             else:  # frac: same integer
                 expr = ops[0]
-            if n.op in REGISTERED_OPS:
+            if n.op in REGISTERED_OPS and n.op != "lut":   # lut: the ROM port registers
                 with m.If(en):
                     m.d.sync += sig.eq(expr)
             else:
@@ -142,4 +185,21 @@ class PlanEvaluator(wiring.Component):
         for o in plan.outputs:
             m.d.comb += self.o.payload[o.name].eq(at(o.node, lat))
         return m
+
+    def _lut_rom(self, m, en, index, luts, addr) -> dict:
+        """ROM of the ``luts`` read at node ``index`` (address ``addr``, valid the stage
+        before them), one field per lut node, sign-restored for signed nodes."""
+        plan = self._plan
+        init, width = lut_rom_init(plan, index, luts)
+        rom = Memory(shape=unsigned(width), depth=len(init), init=init)
+        m.submodules[f"lut{index}"] = rom
+        port = rom.read_port(domain="sync")
+        m.d.comb += [port.addr.eq(addr), port.en.eq(en)]
+        fields, off = {}, 0
+        for li in luts:
+            n = plan.nodes[li]
+            f = port.data[off:off + n.width]
+            fields[li] = f.as_signed() if n.signed else f
+            off += n.width
+        return fields
 

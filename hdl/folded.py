@@ -1,7 +1,7 @@
 """Folded evaluator: the whole plan on a few shared units, driven by a microcode ROM."""
 from __future__ import annotations
 
-from amaranth.hdl import Const, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -24,17 +24,23 @@ def microcode_layout(prog: Program) -> data.StructLayout:
     ``rx``/``ry``: value-memory read addresses; ``alu``: ALU operation on the data read
     the cycle before; ``go``: one bit per multiplier, latch the data read the cycle before;
     ``we``/``wa``: write the write-back value at address ``wa``; ``src``: write-back source
-    (0 ALU, 1..k multipliers, k+1.. input registers); ``view``: index of the write-back
-    shift ``(x >> a) << b``; ``cap``: one bit per output, capture the write-back value.
+    (0 ALU, 1..k multipliers, k+1.. input registers, then the table ROM if any); ``view``:
+    index of the write-back shift ``(x >> a) << b``; ``cap``: one bit per output, capture the
+    write-back value; ``tab`` (only when the plan has ``lut`` nodes): table number of the ROM
+    lookup of the index read the cycle before.
     """
     k = prog.multipliers
-    return data.StructLayout({
+    fields = {
         "rx": unsigned(_bits(prog.depth)), "ry": unsigned(_bits(prog.depth)),
         "alu": unsigned(_bits(len(ALU_OPS))), "go": unsigned(k),
         "we": unsigned(1), "wa": unsigned(_bits(prog.depth)),
-        "src": unsigned(_bits(1 + k + len(prog.plan.inputs))), "view": unsigned(_bits(len(prog.views))),
+        "src": unsigned(_bits(1 + k + len(prog.plan.inputs) + bool(prog.tables))),
+        "view": unsigned(_bits(len(prog.views))),
         "cap": unsigned(len(prog.plan.outputs)),
-    })
+    }
+    if prog.tables:
+        fields["tab"] = unsigned(_bits(len(prog.tables)))
+    return data.StructLayout(fields)
 
 
 class FoldedEvaluator(wiring.Component):
@@ -44,7 +50,11 @@ class FoldedEvaluator(wiring.Component):
     (:func:`ikseries.hdl.schedule.compile_program`); one evaluation then runs through a
     horizontal microcode ROM, one word per cycle. Constants are pre-loaded into the value
     memory (``Memory`` with ``init``: block RAM), which also holds the intermediates (two
-    read ports, one write port). Every stored value is the exact integer of a plan node
+    read ports, one write port). The ``lut`` tables are one more ROM (``Memory`` with
+    ``init``), one entry per (table, index value), addressed by the table number from the
+    microcode above the low bits of the index read from the value memory; its synchronous
+    read is written back like an ALU result (see :mod:`ikseries.hdl.schedule`); ``mask`` is an
+    ALU ``and``, ``index`` a shift view. Every stored value is the exact integer of a plan node
     (shifts applied on the write port, floor for ``shr``), so the outputs equal
     :func:`ikseries.sim.golden.evaluate` for every input, bit for bit. The datapath is as
     wide as the plan needs (``program.store_width``, ``program.acc_width``), whatever plan
@@ -69,7 +79,9 @@ class FoldedEvaluator(wiring.Component):
 
     Latency
     -------
-    ``latency`` = ``program.steps + 1`` cycles from an input transfer to ``o.valid``.
+    ``latency`` = ``program.steps + 1`` cycles from an input transfer to ``o.valid``. A
+    ``lut`` lookup occupies one issue slot and is written 2 cycles after its issue (like an
+    ALU operation); the schedule, hence ``program.steps``, includes it.
 
     Throughput
     ----------
@@ -155,6 +167,8 @@ class FoldedEvaluator(wiring.Component):
                 m.d.sync += alu.eq(Mux(x > y, x, y))
             with m.Case(ALU_OPS.index("min")):
                 m.d.sync += alu.eq(Mux(x < y, x, y))
+            with m.Case(ALU_OPS.index("and")):
+                m.d.sync += alu.eq(x & y)
             with m.Default():
                 m.d.sync += alu.eq(x)
 
@@ -168,6 +182,13 @@ class FoldedEvaluator(wiring.Component):
                          mu.i.payload.a.eq(x), mu.i.payload.b.eq(y)]
             muls.append(mu)
 
+        # coefficient tables: the ROM registers the address (index read the cycle before)
+        if prog.tables:
+            m.submodules.tables = tab = Memory(shape=signed(prog.lut_width), depth=len(prog.lut_init()),
+                                               init=prog.lut_init())
+            lut = tab.read_port()
+            m.d.comb += lut.addr.eq(Cat(x[:prog.lut_index_bits], w.tab))
+
         # write-back: source, view shift, memory write and output capture
         wbv = Signal(signed(prog.wb_width))
         with m.Switch(w.src):
@@ -179,6 +200,9 @@ class FoldedEvaluator(wiring.Component):
             for j, inp in enumerate(plan.inputs):
                 with m.Case(1 + k + j):
                     m.d.comb += wbv.eq(in_reg[inp.name])
+            if prog.tables:
+                with m.Case(1 + k + len(plan.inputs)):
+                    m.d.comb += wbv.eq(lut.data)
         value = Signal(signed(prog.store_width))
         with m.Switch(w.view):
             for v, (a, b) in enumerate(prog.views):

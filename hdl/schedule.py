@@ -2,26 +2,41 @@
 slot allocation and horizontal microcode for :class:`ikseries.hdl.folded.FoldedEvaluator`.
 
 The machine (see ``folded.py``) has one value memory (constants pre-loaded, intermediates
-written back), two read ports, one write port, one ALU (add / max / min / pass) and ``k``
-multiplier units. Every cycle it executes one microcode word, which says what every stage
-does in that cycle; all timing lives here, in the compiler.
+written back), two read ports, one write port, one ALU (add / max / min / pass / and), ``k``
+multiplier units and, when the plan has ``lut`` nodes, one coefficient-table ROM. Every cycle
+it executes one microcode word, which says what every stage does in that cycle; all timing
+lives here, in the compiler.
 
 Lowering
 --------
-Wiring nodes (``shr``, ``shl``, ``frac``) disappear into *views*: every operand of a
-registered node is ``(base >> a) << b`` of a registered node, an input or a constant
+Wiring nodes (``shr``, ``shl``, ``frac`` and ``index``, which is a ``shr``) disappear into
+*views*: every operand of a registered node (or of a ``mask``) is ``(base >> a) << b`` of a
+registered node, a ``mask``, an input or a constant
 (a chain of shifts always reduces to that form, exactly, with floor semantics). A result
 is transformed into its view on the way into the memory (one shifter on the write port,
 none on the read ports). A base with several views stores ``base >> min(a)`` and derives
 the other views with ALU ``pass`` operations; constants are folded at compile time; each
 input view is written from the input register by a ``load``; ``clamp(x, lo, hi)`` becomes
 ``min(max(x, lo), hi)`` (bounds narrowed to the operand's interval, which changes no
-result).
+result); ``mask(x, s)`` becomes the ALU ``and`` of ``x`` with the constant ``2**s - 1`` (two's
+complement low bits: the exact non-negative remainder); every ``lut`` node becomes one ``lut``
+operation that reads its index from the memory and looks it up in its own table of the ROM.
+
+Coefficient-table ROM
+---------------------
+One entry per (table, index value): the address is the table number (microcode field
+``tab``) above the ``lut_index_bits`` low bits of the index read from the value memory, so
+no adder sits in the address path. Table ``t`` holds ``table[j]`` for every index value ``j``
+its index can take and 0 elsewhere (padding up to ``2**lut_index_bits`` entries per table);
+luts that share an index are simply several tables (one lookup, one write each: the write
+port takes one value per cycle anyway).
 
 Timing (cycle = microcode step, step 0 is the cycle after the input transfer)
 ----------------------------------------------------------------------------
 - an operation *issued* at ``t`` reads its operands at ``t`` (read data at ``t + 1``);
 - ALU: computes at ``t + 1``, result written at ``t + 2``;
+- lut: the ROM address (index read at ``t``, table ``tab`` of the word at ``t + 1``) is
+  registered by the ROM at ``t + 1``, the entry is written at ``t + 2`` (same as the ALU);
 - multiplier: latches its operands at ``t + 1`` (``go``), feeds ``n_limbs`` limb pairs to
   its DSP-sized product on the following cycles, result written at ``t + n_limbs + 4``;
   a unit accepts a new ``go`` ``n_limbs`` cycles after the previous one;
@@ -37,22 +52,25 @@ from .limbmul import _check_dsp, limb_split
 
 __all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "compile_program", "resolve_view"]
 
-ALU_OPS = ("add", "max", "min", "pass")
+ALU_OPS = ("add", "max", "min", "pass", "and")
 #: DSP multiplier sizes (signed operand bits) of common FPGA families
 DSP_SIZES = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
 ALU_LATENCY = 2        # issue -> write
+LUT_LATENCY = 2        # issue -> write: index read, ROM read, write
+VIEW_OPS = ("shr", "shl", "frac", "index")   # wiring folded into views (index is a shr)
 
 
 def resolve_view(plan: Plan, idx: int) -> tuple[int, int, int]:
-    """``(base, a, b)`` with node ``idx`` == ``(base >> a) << b`` and ``base`` not a wiring node."""
+    """``(base, a, b)`` with node ``idx`` == ``(base >> a) << b`` and ``base`` not a wiring
+    node of :data:`VIEW_OPS` (``mask`` is not a view: it is an ALU ``and``)."""
     chain = []
     nodes = plan.nodes
-    while nodes[idx].op in ("shr", "shl", "frac"):
+    while nodes[idx].op in VIEW_OPS:
         chain.append((nodes[idx].op, nodes[idx].param))
         idx = nodes[idx].args[0]
     a = b = 0
     for op, s in reversed(chain):
-        if op == "shr":
+        if op in ("shr", "index"):
             if s <= b:
                 b -= s
             else:
@@ -76,12 +94,13 @@ def _swidth(lo: int, hi: int) -> int:
 @dataclass
 class MicroOp:
     """One lowered operation: writes value ``out`` (view ``view`` of its raw result)."""
-    kind: str                  # "load" | "alu" | "mul"
-    args: tuple[int, ...]      # value ids read (alu: 1-2, mul: 2 with the wider first)
+    kind: str                  # "load" | "alu" | "mul" | "lut"
+    args: tuple[int, ...]      # value ids read (alu: 1-2, mul: 2 with the wider first, lut: index)
     out: int                   # value id written
     view: tuple[int, int]      # (a, b): stored = (raw >> a) << b
-    alu: str | None = None     # add | max | min | pass
+    alu: str | None = None     # add | max | min | pass | and
     input: str | None = None   # load: plan input name
+    table: int = -1            # lut: table number in the ROM (Program.tables)
     raw: tuple[int, int] = (0, 0)  # interval of the raw result
     issue: int = -1            # scheduled cycle (load: write cycle)
     write: int = -1
@@ -98,6 +117,7 @@ class Program:
     values: list[tuple[int, int]]          # interval of every stored value
     const_value: dict[int, int]            # value id -> integer (constants only)
     outputs: dict[str, int]                # output name -> value id
+    tables: list[tuple[int, ...]] = field(default_factory=list)   # lut tables, by index value
     slot: dict[int, int] = field(default_factory=dict)   # value id -> memory address
     views: list[tuple[int, int]] = field(default_factory=list)
     # widths
@@ -107,6 +127,8 @@ class Program:
     limbs: tuple[int, int] = (1, 1)        # limbs per operand (A, B)
     acc_width: int = 1                     # signed width of the product accumulator
     wb_width: int = 1                      # signed width of the write-back path
+    lut_width: int = 0                     # signed width of the table ROM (0: no ROM)
+    lut_index_bits: int = 0                # index bits of a ROM address (below the table)
     steps: int = 0                         # microcode length (cycles per evaluation)
     depth: int = 0                         # value memory depth
     words: list[dict] = field(default_factory=list)
@@ -130,6 +152,11 @@ class Program:
     def mul_busy_cycles(self) -> int:
         """Multiplier-cycles of work (limb products) per evaluation."""
         return self.count("mul") * self.n_limbs
+
+    def lut_init(self) -> list[int]:
+        """Table ROM contents: entry ``(t << lut_index_bits) | j`` is ``tables[t][j]`` (0 past its end)."""
+        n = 1 << self.lut_index_bits
+        return [tab[j] if j < len(tab) else 0 for tab in self.tables for j in range(n)]
 
     def memory_init(self) -> list[int]:
         init = [0] * self.depth
@@ -157,7 +184,7 @@ def _lower(plan: Plan):
 
     operand = {}
     for i, n in enumerate(nodes):
-        if n.op in REGISTERED_OPS:
+        if n.op in REGISTERED_OPS or n.op == "mask":
             operand[i] = [need(x) for x in n.args]
     out_ref = {o.name: need(o.node) for o in plan.outputs}
 
@@ -165,6 +192,7 @@ def _lower(plan: Plan):
     const_value: dict[int, int] = {}
     const_by_int: dict[int, int] = {}
     ops: list[MicroOp] = []
+    tables: list[tuple[int, ...]] = []
     value_of: dict = {}
 
     def new_value(lo, hi):
@@ -201,6 +229,13 @@ def _lower(plan: Plan):
             if w[1] > w[0]:
                 args.reverse()
             ops.append(MicroOp("mul", tuple(args), out, prim, raw=(n.lo, n.hi)))
+        elif n.op == "mask":   # two's complement low bits of x: x & (2**s - 1)
+            ops.append(MicroOp("alu", (args[0], const((1 << n.param) - 1)), out, prim, alu="and",
+                               raw=(n.lo, n.hi)))
+        elif n.op == "lut":    # entries the index never takes are 0 (they may not fit)
+            ilo, ihi = values[args[0]]
+            tables.append(tuple(n.param[j] if j >= ilo else 0 for j in range(ihi + 1)))
+            ops.append(MicroOp("lut", tuple(args), out, prim, table=len(tables) - 1, raw=(n.lo, n.hi)))
         else:  # clamp -> min(max(x, lo'), hi')
             xlo, xhi = values[args[0]]
             clo, chi = n.param
@@ -216,7 +251,7 @@ def _lower(plan: Plan):
                 ops.append(MicroOp("alu", (out,), dv, (v[0] - prim[0], v[1]), alu="pass", raw=values[out]))
                 value_of[(base, v)] = dv
     outputs = {name: value_of[r] for name, r in out_ref.items()}
-    return ops, values, const_value, outputs
+    return ops, values, const_value, outputs, tables
 
 
 def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
@@ -226,7 +261,7 @@ def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
         for a in o.args:
             if a in producer:
                 consumers[producer[a]].append(k)
-    lat = [0 if o.kind == "load" else ALU_LATENCY if o.kind == "alu" else mul_latency for o in ops]
+    lat = [{"load": 0, "alu": ALU_LATENCY, "lut": LUT_LATENCY}.get(o.kind, mul_latency) for o in ops]
     height = [0] * len(ops)
     for k in reversed(range(len(ops))):       # ops are in dependency order
         height[k] = lat[k] + max([height[c] + 1 for c in consumers[k]] + [0])
@@ -299,8 +334,8 @@ def compile_program(plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | Non
     if not plan.outputs:
         raise ValueError("plan must have at least one output")
     _check_params(multipliers, dsp)
-    ops, values, const_value, outputs = _lower(plan)
-    prog = Program(plan, multipliers, dsp, ops, values, const_value, outputs)
+    ops, values, const_value, outputs, tables = _lower(plan)
+    prog = Program(plan, multipliers, dsp, ops, values, const_value, outputs, tables)
 
     muls = [o for o in ops if o.kind == "mul"]
     wa = max([_swidth(*values[o.args[0]]) for o in muls] + [2])
@@ -310,7 +345,10 @@ def compile_program(plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | Non
     prog.acc_width = max([_swidth(*o.raw) for o in muls] + [2])
     prog.store_width = max(_swidth(lo, hi) for lo, hi in values)
     in_w = max(_swidth(*i.port_range) for i in plan.inputs) if plan.inputs else 1
-    prog.wb_width = max(prog.store_width + 1, prog.acc_width, in_w)
+    if tables:
+        prog.lut_width = max(_swidth(min(t), max(t)) for t in tables)
+        prog.lut_index_bits = max(1, max(len(t) - 1 for t in tables).bit_length())
+    prog.wb_width = max(prog.store_width + 1, prog.acc_width, in_w, prog.lut_width)
 
     _schedule(ops, len(values), multipliers, prog.mul_latency, prog.n_limbs)
     _allocate(prog)
@@ -326,8 +364,10 @@ def _assemble(prog: Program):
     k = prog.multipliers
     inputs = [i.name for i in prog.plan.inputs]
     outs = list(prog.outputs)
-    words = [{"rx": 0, "ry": 0, "alu": 0, "go": 0, "we": 0, "wa": 0, "src": 0, "view": 0, "cap": 0}
-             for _ in range(prog.steps)]
+    word = {"rx": 0, "ry": 0, "alu": 0, "go": 0, "we": 0, "wa": 0, "src": 0, "view": 0, "cap": 0}
+    if prog.tables:
+        word["tab"] = 0
+    words = [dict(word) for _ in range(prog.steps)]
     vidx = {v: i for i, v in enumerate(prog.views)}
     written = set()
     for o in prog.ops:
@@ -337,6 +377,8 @@ def _assemble(prog: Program):
             w["ry"] = prog.slot[o.args[-1]]
             if o.kind == "alu":
                 words[o.issue + 1]["alu"] = ALU_OPS.index(o.alu)
+            elif o.kind == "lut":
+                words[o.issue + 1]["tab"] = o.table
             else:
                 words[o.issue + 1]["go"] |= 1 << o.unit
         if o.write in written:
@@ -344,7 +386,7 @@ def _assemble(prog: Program):
         written.add(o.write)
         w = words[o.write]
         w["src"] = (0 if o.kind == "alu" else 1 + o.unit if o.kind == "mul"
-                    else 1 + k + inputs.index(o.input))
+                    else 1 + k + len(inputs) if o.kind == "lut" else 1 + k + inputs.index(o.input))
         w["view"] = vidx[o.view]
         if o.out in prog.slot:
             w["we"], w["wa"] = 1, prog.slot[o.out]

@@ -81,6 +81,7 @@ def render_markdown(r: dict) -> str:
     pl = r["plan"]
     out += ["", f"Whole plan: {pl['nodes']} operations, {pl['multipliers']} multipliers "
             f"(the coordinate stage is shared by all servos), {pl['adders']} adders, "
+            + (f"{pl['lookup_tables']} coefficient tables, " if pl.get("lookup_tables") else "") +
             f"features with {pl['feature_frac_bits']} fractional bits, widest intermediate "
             f"{pl['max_width']} bits.", "",
             "## Timing", "",

@@ -21,10 +21,10 @@ def tiny_plan(seed=0, clamp=(-100, 100), degree=4) -> Plan:
     return b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
 
 
-def tiny_piecewise_plan(seed=0, shift=2, degree=3) -> Plan:
+def tiny_piecewise_plan(seed=0, shift=2, degree=3, clamp=(-100, 100)) -> Plan:
     """``tiny_plan``'s inputs, input a cut into cells of 2**shift port values, a random
     polynomial per cell in the offset inside the cell (centred on [-1, 1)) and b, its
-    coefficients looked up by cell (``lut``)."""
+    coefficients looked up by cell (``lut``), rounded and clamped to ``clamp``."""
     rng = np.random.default_rng(seed)
     inputs = [PlanInput("a", "mm", 2, 0, 12, 4, False), PlanInput("b", "deg", 1, -10, 9, 5, True)]
     b = PlanBuilder(inputs)
@@ -35,8 +35,23 @@ def tiny_piecewise_plan(seed=0, shift=2, degree=3) -> Plan:
     poly = {(i, j): tuple(float(v) for v in rng.normal(size=cells) * 50)
             for i in range(degree + 1) for j in range(3) if i + j <= degree}
     acc = horner(b, poly, [t, b_n], 5, lambda v, f: b.lut(cell, v, f))
-    out = b.clamp(b.round(acc, 0), -100, 100)
+    out = b.clamp(b.round(acc, 0), *clamp)
     return b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
+
+
+def signed_cell_plan() -> Plan:
+    """Cells of the signed input b: ``index`` and ``mask`` of negative values (outputs too),
+    a lut indexed by a computed cell number, and a lut whose index never takes its first
+    entries (which do not fit the node's width)."""
+    b = PlanBuilder([PlanInput("a", "mm", 0, 0, 12, 4, False), PlanInput("b", "deg", 1, -10, 9, 5, True)])
+    cell, off = b.cell(b.input_nodes["b"], 2)                  # [-3, 2], [0, 3] (frac 1)
+    c0 = b.add(cell, b.const(3, 0))                            # [0, 5]
+    c1 = b.add(cell, b.const(4, 0))                            # [1, 6]
+    t0 = b.lut(c0, [-7.5, 3.25, 0.5, -1.0, 6.75, -8.0], 2)
+    t1 = b.lut(c1, [900.0, -3.0, 5.0, 1.0, -2.0, 7.0, 4.0, -6.0], 0)
+    y = b.add(b.mul(t0, off), b.mul(t1, b.input_nodes["a"]))
+    outs = [("y", y), ("cell", cell), ("off", off)]
+    return b.build([PlanOutput(n, v, v, "ticks", 1.0) for n, v in outs])
 
 
 def all_ports(plan):

@@ -143,3 +143,27 @@ def test_build_notes_simulators_auto_skipped(monkeypatch, tmp_path):
     assert res == {}
     assert note == "cocotb skipped on icarus (no icarus here), verilator (no verilator here)"
     assert msgs == ["cocotb on icarus: skipped (no icarus here)", "cocotb on verilator: skipped (no verilator here)"]
+
+
+
+@pytest.mark.parametrize("folded", [False, True])
+def test_piecewise_plan_on_icarus(folded, tmp_path_factory):
+    """A piecewise plan (index / mask, coefficients from lut tables) through the exported leg
+    core, pipelined (one ROM read per pipeline stage, stalling with the others) and folded
+    (table ROM in the microcode machine): all three cocotb tests, bit-exact against the golden
+    model at the latency property. Widths are 0..100 ticks: with the pipelined core's 64-cycle
+    period both pulses and constant high; the folded core needs a period >= 4 II."""
+    from helpers import tiny_piecewise_plan
+    from ikseries.hdl.leg import LegCore
+    _skip_unless_available("icarus")
+    plan = tiny_piecewise_plan(1, clamp=(0, 100))
+    period = 64 if not folded else 256
+    core = LegCore(plan, period, multipliers=1 if folded else None, dsp=(16, 16) if folded else None)
+    d = tmp_path_factory.mktemp(f"cocotb_icarus_piecewise_{'folded' if folded else 'pipelined'}")
+    plan_file = d / "plan.json"
+    plan_file.write_text(plan.dumps())
+    res = run(plan_file, period, "icarus", d / "build", core=core, n_random=80 if folded else 1000)
+    print(res.summary())
+    assert set(res.tests) == COCOTB_TESTS, res.summary()
+    assert res.ok, res.summary()
+    assert (res.latency, res.initiation_interval) == (core.latency, core.initiation_interval)

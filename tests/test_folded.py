@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
-from helpers import all_ports, tiny_plan
+from helpers import all_ports, signed_cell_plan, tiny_piecewise_plan, tiny_plan
 from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
 from ikseries.hdl.evaluator import PlanEvaluator
 from ikseries.hdl.folded import FoldedEvaluator
@@ -64,6 +64,36 @@ def test_folded_exhaustive_tiny_plan(seed, k, dsp):
     if dsp == (4, 4):
         assert core.program.limbs == (4, 2)
     assert core.initiation_interval == core.latency == core.program.steps + 1
+    t = all_ports(plan)
+    assert_bit_exact(plan, run_back_to_back(core, t), t)
+
+
+@pytest.mark.parametrize("seed, k, dsp", [
+    (0, 1, None),        # full-width multiplier
+    (1, 2, (4, 4)),      # limb products
+    (2, 2, (16, 16)),    # products fit one DSP
+])
+def test_folded_piecewise_exhaustive(seed, k, dsp):
+    """A piecewise plan: index as a view, mask as an ALU and, one table-ROM lookup per lut
+    node; every port value, bit for bit, with the exact latency and initiation interval."""
+    plan = tiny_piecewise_plan(seed)
+    core = FoldedEvaluator(plan, multipliers=k, dsp=dsp)
+    prog = core.program
+    assert prog.count("lut") == len(prog.tables) == plan.count("lut") > 1
+    assert sum(o.alu == "and" for o in prog.ops) == plan.count("mask") == 1
+    assert prog.lut_init()[:len(prog.tables[0])] == list(prog.tables[0])
+    assert core.initiation_interval == core.latency == prog.steps + 1
+    t = all_ports(plan)
+    assert_bit_exact(plan, run_back_to_back(core, t), t)
+
+
+def test_folded_signed_cells_exhaustive():
+    """index / mask of a signed input as outputs and lut indices, a table whose first
+    entries its index never takes (stored as 0)."""
+    plan = signed_cell_plan()
+    core = FoldedEvaluator(plan, multipliers=1, dsp=(3, 3))
+    luts = [o for o in core.program.ops if o.kind == "lut"]
+    assert [core.program.tables[o.table][0] for o in luts] == [-30, 0]
     t = all_ports(plan)
     assert_bit_exact(plan, run_back_to_back(core, t), t)
 
@@ -136,10 +166,11 @@ def test_folded_schedule_respects_resources(plan):
     assert compile_program(plan, 2, (16, 16)).steps < compile_program(plan, 1, (16, 16)).steps
 
 
-def test_folded_under_backpressure_and_gaps():
-    plan = tiny_plan(4)
+@pytest.mark.parametrize("make_plan, n", [(tiny_plan, 40), (tiny_piecewise_plan, 30)])
+def test_folded_under_backpressure_and_gaps(make_plan, n):
+    plan = make_plan(4)
     core = FoldedEvaluator(plan, multipliers=2, dsp=(4, 4))
-    t = random_targets(plan, 40, 3)
+    t = random_targets(plan, n, 3)
     res = simulate_leg(core, t, ready_prob=0.3, valid_prob=0.5, seed=9)
     assert_bit_exact(plan, res.outputs, t)
     assert res.latencies.min() == core.latency

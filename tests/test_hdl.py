@@ -1,10 +1,15 @@
 """Amaranth simulation of the generated RTL against the golden model."""
+import os
+import re
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
-from helpers import all_ports, tiny_plan
-from ikseries.hdl.evaluator import PlanEvaluator
+from helpers import all_ports, signed_cell_plan, tiny_piecewise_plan, tiny_plan
+from ikseries.hdl.evaluator import PlanEvaluator, lut_groups, lut_rom_init
 from ikseries.hdl.leg import LegCore
 from ikseries.hdl.pwm import ServoPWM
 from ikseries.sim import golden
@@ -27,6 +32,87 @@ def test_evaluator_exhaustive_at_small_widths(seed):
     core = PlanEvaluator(plan)
     res = _check(core, plan, all_ports(plan))
     assert set(res.latencies.tolist()) == {core.latency}
+
+
+@pytest.mark.parametrize("seed, shift", [(0, 2), (1, 1), (2, 3)])
+def test_evaluator_piecewise_exhaustive(seed, shift):
+    """A piecewise plan (index / mask of input a, its coefficients from lut nodes sharing the
+    cell index: one ROM), every port value, bit for bit, at the latency property; then with
+    random backpressure and input gaps (a stall must hold the ROM read like a register)."""
+    plan = tiny_piecewise_plan(seed, shift)
+    core = PlanEvaluator(plan)
+    assert plan.count("lut") > 1 and len(lut_groups(plan)) == 1
+    t = all_ports(plan)
+    res = _check(core, plan, t)
+    assert set(res.latencies.tolist()) == {core.latency} == {plan.latency}
+    res = _check(core, plan, t, ready_prob=0.5, valid_prob=0.6, seed=seed)
+    assert res.latencies.min() == core.latency
+
+
+def test_evaluator_signed_cells_exhaustive():
+    """index / mask of a signed input (negative cells, low bits of negative values) as outputs
+    and as lut indices; a table whose first entries the index never takes."""
+    plan = signed_cell_plan()
+    core = PlanEvaluator(plan)
+    res = _check(core, plan, all_ports(plan))
+    assert set(res.latencies.tolist()) == {core.latency}
+
+
+def test_lut_rom_init_packs_fields_low_first():
+    """Per index the tables side by side (first lut in the low bits, two's complement fields
+    of each node's width); entries below the index's interval are 0."""
+    plan = signed_cell_plan()
+    groups = lut_groups(plan)
+    assert len(groups) == 2
+    for index, luts in groups.items():
+        init, width = lut_rom_init(plan, index, luts)
+        (li,) = luts
+        n, ix = plan.nodes[li], plan.nodes[index]
+        assert width == n.width and len(init) == ix.hi + 1
+        for j, word in enumerate(init):
+            want = n.param[j] if j >= ix.lo else 0
+            assert word == want & ((1 << n.width) - 1)
+    assert any(plan.nodes[i].lo > 0 for i in groups)   # the 900 entry is never stored
+    plan = tiny_piecewise_plan(0)
+    ((index, luts),) = lut_groups(plan).items()
+    init, width = lut_rom_init(plan, index, luts)
+    assert width == sum(plan.nodes[i].width for i in luts)
+    w0 = plan.nodes[luts[0]].width
+    assert all((word & ((1 << w0) - 1)) == plan.nodes[luts[0]].param[j] & ((1 << w0) - 1)
+               for j, word in enumerate(init))
+
+
+_EXPORT_BOTH = """
+import json, sys
+from ikseries.fit.plan import Plan
+from ikseries.hdl.export import leg_verilog
+from ikseries.hdl.leg import LegCore
+plan = Plan.from_json(json.load(open(sys.argv[1])))
+for name, kw in (("pipelined", {}), ("folded", {"multipliers": 1, "dsp": (16, 16)})):
+    open(sys.argv[2] + name + ".v", "w").write(leg_verilog(LegCore(plan, 128, **kw), "pw_core"))
+"""
+
+
+def test_piecewise_verilog_deterministic(tmp_path):
+    """The exported Verilog of a piecewise leg core (pipelined and folded) is byte-identical
+    when exported again in another process with another hash seed; the pipelined core holds
+    its luts (one shared index) in one memory as wide as their fields together."""
+    from ikseries.hdl.export import leg_verilog
+    plan = tiny_piecewise_plan(0, clamp=(0, 100))
+    (tmp_path / "plan.json").write_text(plan.dumps())
+    env = {**os.environ, "PYTHONHASHSEED": "12345"}
+    subprocess.run([sys.executable, "-c", _EXPORT_BOTH, str(tmp_path / "plan.json"), str(tmp_path / "other_")],
+                   check=True, env=env, cwd=tmp_path)
+    for name, kw in (("pipelined", {}), ("folded", {"multipliers": 1, "dsp": (16, 16)})):
+        text = leg_verilog(LegCore(plan, 128, **kw), "pw_core")
+        assert text == (tmp_path / f"other_{name}.v").read_text(), name
+        mems = re.findall(r"reg \[(\d+):0\] (\w+) \[(\d+):0\];", text)
+        if name == "pipelined":
+            ((index, luts),) = lut_groups(plan).items()
+            assert [(int(w) + 1, int(d) + 1) for w, _, d in mems] == [
+                (sum(plan.nodes[i].width for i in luts), plan.nodes[index].hi + 1)]
+        else:
+            assert {m for _, m, _ in mems} == {"microcode", "tables", "values"}
 
 
 def test_leg_core_bit_exact_and_latency_full_plan(plan):
