@@ -7,6 +7,9 @@ For the cylinder-leg robot, the IK cores alone (no PWM), as flat-port stream top
 ``folded1``    ``FoldedEvaluator`` with 1 multiplier of the device's DSP size
                (iCE40 SB_MAC16 16x16, ECP5 MULT18X18D 18x18: ``hdl.schedule.DSP_SIZES``);
 ``folded2``    the same with 2 multipliers;
+``moduloN``    ``ModuloEvaluator``: the dataflow pipelined, its multiplications shared by a modulo
+               schedule, one target every N cycles (N = 4, 8, 12; products gathered by the device's
+               DSP size);
 ``cordic``     ``CordicLegSolver``, sized with ``size_cordic(margin_pu=0.075)`` (about 1.5 min)
                unless ``--cordic-design JSON`` gives the design;
 
@@ -32,7 +35,7 @@ latency in ns at Fmax on y, Pareto front of the placed cylinder-leg cores marked
 verdicts for the issue's targets.
 
     python bench/pareto.py [--devices ice40-up5k-sg48,ecp5-25f-cabga381]
-                           [--designs pipelined,folded1,folded2,cordic,hexapod] [--jobs 2]
+                           [--designs pipelined,modulo4,modulo8,modulo12,folded1,folded2,cordic,hexapod] [--jobs 2]
                            [--clock-mhz 100] [--cordic-design JSON] [--out build/bench/pareto.json]
 """
 from __future__ import annotations
@@ -48,7 +51,9 @@ from ikseries.pareto import DesignSpec, plot_device, run_matrix
 from ikseries.pnr import PNR_DEVICES
 
 ICE40, ECP5 = "ice40-up5k-sg48", "ecp5-25f-cabga381"
-DESIGNS = ("pipelined", "folded1", "folded2", "cordic", "hexapod")
+MODULO_II = (4, 8, 12)
+DESIGNS = ("pipelined", *(f"modulo{ii}" for ii in MODULO_II), "folded1", "folded2", "cordic", "hexapod")
+POLY_DESIGNS = tuple(d for d in DESIGNS if d not in ("cordic", "hexapod"))
 TARGET_FMAX_MHZ, TARGET_LATENCY_NS, TARGET_THROUGHPUT = 150.0, 200.0, 20e6
 HEXAPOD_DSP, HEXAPOD_LC, HEXAPOD_REFRESH_HZ = 8, 5280, 1000.0
 
@@ -62,12 +67,14 @@ def _family(device: str) -> str:
 
 
 # -- design specs ----------------------------------------------------------------------------------
-def polynomial_specs(plan, max_error_pu: float | None, names=("pipelined", "folded1", "folded2"),
+def polynomial_specs(plan, max_error_pu: float | None, names=POLY_DESIGNS,
                      extra: dict | None = None) -> list[DesignSpec]:
-    """Specs of the pipelined and folded (k = 1, 2; the device's DSP size) evaluators of ``plan``."""
+    """Specs of the pipelined, modulo-scheduled (II = MODULO_II) and folded (k = 1, 2) evaluators
+    of ``plan``, multipliers of the device's DSP size."""
     from ikseries.hdl.evaluator import PlanEvaluator
     from ikseries.hdl.flat import stream_verilog
     from ikseries.hdl.folded import FoldedEvaluator
+    from ikseries.hdl.modulo import ModuloEvaluator
     from ikseries.hdl.schedule import DSP_SIZES
 
     extra = dict(extra or {})
@@ -77,6 +84,16 @@ def polynomial_specs(plan, max_error_pu: float | None, names=("pipelined", "fold
             "pipelined", "polynomial", "polynomial, fully pipelined (PlanEvaluator)",
             lambda dev: (stream_verilog(PlanEvaluator(plan), "poly_pipelined"), "poly_pipelined"),
             lambda dev: PlanEvaluator(plan).latency, lambda dev: 1, max_error_pu, extra=extra))
+    for ii in MODULO_II:
+        if f"modulo{ii}" not in names:
+            continue
+
+        def make_modulo(dev, ii=ii):
+            return ModuloEvaluator(plan, ii, dsp=DSP_SIZES[_family(dev)])
+        specs.append(DesignSpec(
+            f"modulo{ii}", "polynomial", f"polynomial, modulo-scheduled, one target per {ii} cycles",
+            lambda dev, make=make_modulo, ii=ii: (stream_verilog(make(dev), f"poly_modulo{ii}"), f"poly_modulo{ii}"),
+            lambda dev, make=make_modulo: make(dev).latency, lambda dev, ii=ii: ii, max_error_pu, extra=extra))
     for k in (1, 2):
         if f"folded{k}" not in names:
             continue
@@ -265,7 +282,7 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
     info = {"robot": robot.name, "tolerance_pu": robot.tolerance_pu}
     specs: list[DesignSpec] = []
     points = None
-    poly_names = [d for d in designs if d in ("pipelined", "folded1", "folded2")]
+    poly_names = [d for d in designs if d in POLY_DESIGNS]
     if poly_names:
         t0 = time.perf_counter()
         plan, _ = fit_robot(robot)

@@ -8,6 +8,7 @@ from amaranth.lib.wiring import In, Out
 from ..fit.plan import Plan
 from .evaluator import PlanEvaluator, input_layout, output_layout
 from .folded import FoldedEvaluator
+from .modulo import ModuloEvaluator
 from .pwm import ServoPWM, servo_channels
 
 __all__ = ["LegCore"]
@@ -16,9 +17,11 @@ __all__ = ["LegCore"]
 class LegCore(wiring.Component):
     """IK evaluator for one leg feeding a PWM generator per servo.
 
-    The evaluator is the fully pipelined :class:`PlanEvaluator` (one target per cycle) or,
-    with ``multipliers`` given, a :class:`FoldedEvaluator` on that many multipliers (one
-    target per ``initiation_interval`` cycles, far fewer resources); the ports are the same.
+    The evaluator is the fully pipelined :class:`PlanEvaluator` (one target per cycle); with
+    ``multipliers`` given, a :class:`FoldedEvaluator` on that many multipliers (one target per
+    ``initiation_interval`` cycles, far fewer resources); with ``interval`` given, a
+    :class:`ModuloEvaluator` (the dataflow pipelined, its multiplications shared so that one
+    target enters every ``interval`` cycles). The ports are the same.
 
     Parameters
     ----------
@@ -32,8 +35,10 @@ class LegCore(wiring.Component):
         None (default): the pipelined evaluator; an integer k >= 1: a folded evaluator
         with k multipliers.
     dsp : (int, int) or None
-        DSP multiplier operand widths of the folded evaluator (see :class:`FoldedEvaluator`);
-        only with ``multipliers``.
+        DSP multiplier operand widths of the folded or modulo-scheduled evaluator (see
+        :class:`FoldedEvaluator`); only with ``multipliers`` or ``interval``.
+    interval : int, optional
+        Initiation interval of a :class:`ModuloEvaluator` (not with ``multipliers``).
 
     Attributes
     ----------
@@ -55,12 +60,19 @@ class LegCore(wiring.Component):
     Throughput
     ----------
     One target every ``initiation_interval`` cycles while ``o.ready`` is high (1 for the
-    pipelined evaluator, the folded evaluator's latency otherwise).
+    pipelined evaluator, ``interval`` for the modulo-scheduled one, the folded evaluator's
+    latency otherwise).
     """
 
     def __init__(self, plan: Plan, period: int, reset_widths: dict | None = None, *,
-                 multipliers: int | None = None, dsp: tuple[int, int] | None = None):
-        if multipliers is None:
+                 multipliers: int | None = None, dsp: tuple[int, int] | None = None,
+                 interval: int | None = None):
+        if interval is not None:
+            if multipliers is not None:
+                raise ValueError(f"multipliers must be None with interval (a modulo-scheduled evaluator "
+                                 f"sizes its multipliers itself), not {multipliers!r}")
+            self._evaluator = ModuloEvaluator(plan, interval, dsp=dsp or (18, 18))
+        elif multipliers is None:
             if dsp is not None:
                 raise ValueError(f"dsp must be None for the pipelined evaluator (multipliers=None), not {dsp!r}")
             self._evaluator = PlanEvaluator(plan)
@@ -79,12 +91,14 @@ class LegCore(wiring.Component):
         })
 
     @property
-    def evaluator(self) -> PlanEvaluator | FoldedEvaluator:
+    def evaluator(self) -> PlanEvaluator | FoldedEvaluator | ModuloEvaluator:
         return self._evaluator
 
     @property
     def architecture(self) -> str:
-        """"pipelined" or "folded"."""
+        """"pipelined", "folded" or "modulo"."""
+        if isinstance(self._evaluator, ModuloEvaluator):
+            return "modulo"
         return "folded" if isinstance(self._evaluator, FoldedEvaluator) else "pipelined"
 
     @property

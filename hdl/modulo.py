@@ -181,6 +181,9 @@ class ModuloEvaluator(wiring.Component):
         Cycles between accepted targets (>= 1).
     units : int, optional
         Multipliers; default the fewest that fit: ceil(multiplications / initiation_interval).
+    dsp : (int, int)
+        Signed operand widths of the device's DSP multiplier (default ECP5 MULT18X18D 18x18):
+        the schedule gathers products by their size in those blocks.
 
     Attributes
     ----------
@@ -199,7 +202,8 @@ class ModuloEvaluator(wiring.Component):
     ``o.ready`` low, everything, the phase counter included, stalls.
     """
 
-    def __init__(self, plan: Plan, initiation_interval: int, units: int | None = None):
+    def __init__(self, plan: Plan, initiation_interval: int, units: int | None = None,
+                 dsp: tuple[int, int] = (18, 18)):
         if not isinstance(plan, Plan):
             raise TypeError(f"plan must be a Plan, not {plan!r}")
         if isinstance(initiation_interval, bool) or not isinstance(initiation_interval, int) \
@@ -208,7 +212,7 @@ class ModuloEvaluator(wiring.Component):
         if units is not None and (isinstance(units, bool) or not isinstance(units, int) or units < 1):
             raise ValueError(f"units must be None or an integer >= 1, not {units!r}")
         self._plan = plan
-        self._schedule = modulo_schedule(plan, initiation_interval, units)
+        self._schedule = modulo_schedule(plan, initiation_interval, units, dsp)
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),
             "o": Out(stream.Signature(output_layout(plan))),

@@ -69,3 +69,14 @@ def test_real_plan_random_targets_bit_exact(plan):
 def test_bad_parameters(kwargs, words):
     with pytest.raises(ValueError, match=words):
         ModuloEvaluator(tiny_plan(0), **kwargs)
+
+
+def test_leg_core_with_an_interval_is_modulo_scheduled():
+    from ikseries.hdl.leg import LegCore
+    plan = tiny_plan(2, clamp=(0, 100))
+    core = LegCore(plan, 400, interval=3)
+    assert core.architecture == "modulo" and core.initiation_interval == 3
+    assert core.latency == core.evaluator.latency
+    with pytest.raises(ValueError, match="multipliers must be None with interval"):
+        LegCore(plan, 400, interval=3, multipliers=1)
+    _check(core, plan, all_ports(plan))
