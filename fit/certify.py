@@ -22,6 +22,13 @@ whole real input box, not only at sample points:
   bound, until every cell meets the target or the cell budget is spent (the bound is then
   still certified, only above the target).
 
+A piecewise plan cuts inputs into table cells (``index``, ``mask``) and looks its
+coefficients up per cell (``lut``): the initial cells are aligned to the table edges of every
+cut input, cells are half-open along cut inputs with a degenerate last slab at the box's upper
+end, so that on every cell each index is one value, the looked-up coefficients are constants
+and the offset in the cell an exact affine function of the input (see the comment above
+:func:`_dims` for the argument).
+
 The certified total error per servo adds the certified quantization bound of the integer
 accumulator (:meth:`Plan.rounding_bounds`), the rounding from the accumulator to the output
 integer (half a tick for round-half-up) and, if the output is clamped, the largest distance of
@@ -118,7 +125,9 @@ class Certificate:
 
 # -- the plan's ideal function over intervals ----------------------------------------------------
 def _plan_function(plan: Plan, node: int):
-    """``values -> Interval`` of the ideal real value of ``node`` for input Intervals by name."""
+    """``values -> Interval`` of the ideal real value of ``node`` for input Intervals by name
+    (over each cell; half-open along the inputs that index / mask nodes cut, unless degenerate
+    there: see the comment above :func:`_dims`)."""
     order = sorted(plan.cone(node))
     last = {}
     for i in order:
@@ -128,12 +137,13 @@ def _plan_function(plan: Plan, node: int):
 
     def run(values: dict) -> ia.Interval:
         vals: dict = {}
-        for i in order:
-            n = nodes[i]
-            vals[i] = _node_value(n, nodes, vals, values)
-            for a in set(n.args):
-                if last.get(a) == i and a != node:
-                    del vals[a]
+        with np.errstate(invalid="ignore"):     # 0 * inf of an unbounded derivative: NaN, no bound
+            for i in order:
+                n = nodes[i]
+                vals[i] = _node_value(n, nodes, vals, values)
+                for a in set(n.args):
+                    if last.get(a) == i and a != node:
+                        del vals[a]
         return vals[node]
     return run
 
@@ -156,8 +166,145 @@ def _node_value(n, nodes, vals, values) -> ia.Interval:
         return cn.ldexp(a, nodes[n.args[0]].frac - n.frac)
     if op in ("shr", "shl"):
         return a  # exact in the ideal arithmetic
+    if op in ("index", "mask", "lut"):
+        if isinstance(a, cn.Centred):   # the centre point and the whole cell, each on its own
+            return cn.Centred(*(_cut(n, nodes, getattr(a, p), {k: getattr(v, p) for k, v in values.items()},
+                                     a.h.shape[0]) for p in ("c", "x")), a.h, tighten=False)
+        return _cut(n, nodes, a, values, _dims(values))
     raise ValueError(f"plan node operation must be one of input, const, add, mul, clamp, frac, "
-                     f"shr, shl, not {op!r}")
+                     f"shr, shl, index, mask, lut, not {op!r}")
+
+
+# -- piecewise plans: index, mask, lut --------------------------------------------------------------
+# A cell of the certifier is treated as half-open, [lo, hi), along every input that an index or
+# mask node cuts (see :func:`_cut_chain`), unless it is degenerate there (lo == hi: the point
+# lo). The certifier's cells partition the box in that sense: the initial grid of every cut
+# input is [e_0, e_1), ..., [e_m-1, box_hi), {box_hi} (a degenerate last slab, see
+# :func:`_initial_cells`) and bisection splits [lo, hi) into [lo, mid) and [mid, hi); so every
+# point of the box, the upper corner included, lies in the half-open version of some cell and
+# an enclosure over the half-open cell suffices. On such a cell the argument of an index node,
+# a non-decreasing function g of the cut input (additions of constants, clamps, binary point
+# moves), ranges over [g(lo), g(hi)), half-open again unless a clamp acts at the top (then
+# g(hi) itself is reached inside the cell and the range is closed). The index is therefore
+# floor(g(lo) 2**k) .. ceil(g(hi) 2**k) - 1 (k = frac(argument) - shift), or .. floor(g(hi) 2**k)
+# if closed; with the initial grid aligned to the table cells (g(x) 2**k integer at every
+# edge) it is a single value on every cell, and bisection keeps it so. There the lut is a
+# constant (zero derivatives) and the mask the exact affine function argument - index 2**-k,
+# whose derivatives are the argument's. Where the index takes several values (an argument of
+# another form, an edge that is not a float, or a caller's own cells) the lut is the hull of
+# the reachable entries and the mask [0, 2**-k], both with unbounded derivatives (gradient
+# [-inf, inf], Hessian NaN: no mean-value or Taylor form applies), which is sound and makes the
+# refinement split the cell.
+def _dims(values) -> int:
+    """Number of inputs the derivatives are taken along (0 without derivatives)."""
+    v = next(iter(values.values()))
+    if isinstance(v, cn.Centred):
+        return v.h.shape[0]
+    return 0 if v.d is None else v.d[0].shape[0]
+
+
+def _cut_chain(nodes, i):
+    """``(input name, steps)`` if node ``i`` is an input through additions of constants, clamps,
+    binary point moves and (exact in the ideal arithmetic) shifts, else None. The steps, first
+    applied first, are ``("add", c)``, ``("clamp", lo, hi)`` and ``("scale", k)`` (times 2**k):
+    all non-decreasing, so the value is a non-decreasing function of the input."""
+    steps = []
+    while nodes[i].op != "input":
+        n = nodes[i]
+        if n.op == "clamp":
+            steps.append(("clamp", np.ldexp(float(n.param[0]), -n.frac), np.ldexp(float(n.param[1]), -n.frac)))
+        elif n.op == "frac":
+            steps.append(("scale", nodes[n.args[0]].frac - n.frac))
+        elif n.op == "add" and [nodes[a].op for a in n.args].count("const") == 1:
+            c, i = (n.args[0], n.args[1]) if nodes[n.args[0]].op == "const" else (n.args[1], n.args[0])
+            c = nodes[c]
+            steps.append(("add", c.ideal if c.ideal is not None else np.ldexp(float(c.param), -c.frac)))
+            continue
+        elif n.op not in ("shl", "shr"):
+            return None
+        i = n.args[0]
+    return nodes[i].param, steps[::-1]
+
+
+def _add_exact(x, c, side):
+    """x + c rounded towards ``side`` (-inf or inf): exact when the float sum is (TwoSum)."""
+    s = x + c
+    t = s - x
+    err = (x - (s - t)) + (c - t)              # x + c == s + err exactly
+    return np.where(err > 0 if side > 0 else err < 0, np.nextafter(s, side), s)
+
+
+def _through(steps, lo, hi):
+    """Range of a cut chain's value for its input in [lo, hi) (the point lo where lo == hi):
+    ``(lo, hi, open)``, ``open`` where the top ``hi`` itself is excluded."""
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    top_open = lo < hi
+    for step in steps:
+        if step[0] == "add":
+            lo, hi = _add_exact(lo, step[1], -np.inf), _add_exact(hi, step[1], np.inf)
+        elif step[0] == "scale":
+            lo, hi = np.ldexp(lo, step[1]), np.ldexp(hi, step[1])   # exact barring underflow
+        else:   # a clamp reaches its top limit inside the cell unless the top stays within
+            top_open = top_open & (hi > step[1]) & (hi <= step[2])
+            lo, hi = np.clip(lo, step[1], step[2]), np.clip(hi, step[1], step[2])
+    return lo, hi, top_open
+
+
+def _index_range(n, nodes, a: ia.Interval, inputs: dict):
+    """Least and greatest value of index / mask node ``n``'s cell number over the cells."""
+    k = nodes[n.args[0]].frac - n.param
+    chain = _cut_chain(nodes, n.args[0])
+    if chain is None:                            # the argument's enclosure, closed
+        lo, hi, top_open = a.lo, a.hi, False
+    else:
+        x = inputs[chain[0]]
+        lo, hi, top_open = _through(chain[1], x.lo, x.hi)
+    ilo = np.floor(np.ldexp(lo, k))
+    ihi = np.where(top_open, np.ceil(np.ldexp(hi, k)) - 1.0, np.floor(np.ldexp(hi, k)))
+    return ilo, np.maximum(ilo, ihi)
+
+
+def _unbounded_where(x: ia.Interval, jump, dims: int) -> ia.Interval:
+    """``x`` with no derivative bound (gradient [-inf, inf], Hessian NaN) in the cells ``jump``."""
+    if x.order == 0 or not np.any(jump):
+        return x
+    size = jump.size
+    zero = np.zeros((dims, size))
+    dlo, dhi = (zero, zero) if x.d is None else (np.broadcast_to(x.d[0], zero.shape),
+                                                 np.broadcast_to(x.d[1], zero.shape))
+    d = (np.where(jump, -np.inf, dlo), np.where(jump, np.inf, dhi))
+    h = None
+    if x.order >= 2:
+        zero = np.zeros((dims * (dims + 1) // 2, size))
+        hlo, hhi = (zero, zero) if x.h is None else x.h
+        h = (np.where(jump, np.nan, hlo), np.where(jump, np.nan, hhi))
+    return ia.Interval(np.broadcast_to(x.lo, (size,)), np.broadcast_to(x.hi, (size,)), d, h, x.order)
+
+
+def _cut(n, nodes, a: ia.Interval, inputs: dict, dims: int) -> ia.Interval:
+    """Enclosure of an index, mask or lut node (argument enclosure ``a``, input enclosures
+    ``inputs``) over the cells, half-open along the cut inputs (see above)."""
+    if n.op == "lut":
+        table = np.asarray(n.ideal, dtype=np.float64) if n.ideal is not None else np.ldexp(
+            np.asarray(n.param, dtype=np.float64), -n.frac)
+        # the argument is a cell number within the table (the plan's interval analysis); an
+        # enclosure reaching past an end only by widening is clipped back
+        ilo = np.clip(np.ceil(np.atleast_1d(a.lo)), 0, len(table) - 1).astype(np.int64)
+        ihi = np.maximum(ilo, np.clip(np.floor(np.atleast_1d(a.hi)), 0, len(table) - 1).astype(np.int64))
+        lo, hi = table[ilo], table[ihi]
+        jump = ilo != ihi
+        for i, j in set(zip(ilo[jump].tolist(), ihi[jump].tolist())):   # hull of the reachable
+            at = jump & (ilo == i) & (ihi == j)
+            lo[at], hi[at] = table[i:j + 1].min(), table[i:j + 1].max()
+        return _unbounded_where(ia.Interval(lo, hi, order=a.order), jump, dims)
+    ilo, ihi = _index_range(n, nodes, a, inputs)
+    jump = np.atleast_1d(ilo != ihi)
+    if n.op == "index":
+        return _unbounded_where(ia.Interval(ilo, ihi, order=a.order), jump, dims)
+    width = np.ldexp(1.0, n.param - nodes[n.args[0]].frac)
+    off = a - ilo * width                        # exact affine in one table cell
+    off = ia.Interval(np.where(jump, 0.0, off.lo), np.where(jump, width, off.hi), off.d, off.h, off.order)
+    return _unbounded_where(off, jump, dims)
 
 
 # -- the reference --------------------------------------------------------------------------------
@@ -263,19 +410,63 @@ def _cell_bounds(err, names, lo, hi):
     return bound, contrib, e_c, f_cell
 
 
-def _initial_cells(box_lo, box_hi, per_axis):
-    axes = [np.linspace(a, b, m + 1) for a, b, m in zip(box_lo, box_hi, per_axis)]
-    for ax, a, b in zip(axes, box_lo, box_hi):
+def _table_edges(plan: Plan, cone, names, box_lo, box_hi):
+    """Per input, the points strictly inside the box where some index node of ``cone`` (whose
+    argument is a :func:`_cut_chain` of the input) steps to its next cell, and whether any
+    index or mask node cuts the input."""
+    edges = [[] for _ in names]
+    cut = [False] * len(names)
+    for i in sorted(cone):
+        n = plan.nodes[i]
+        chain = _cut_chain(plan.nodes, n.args[0]) if n.op in ("index", "mask") else None
+        if chain is None:
+            continue
+        j = names.index(chain[0])
+        cut[j] = True
+        k = plan.nodes[n.args[0]].frac - n.param
+        g_lo, g_hi, _ = _through(chain[1], box_lo[j], box_hi[j])
+        for m in range(int(np.floor(np.ldexp(g_lo, k))) + 1, int(np.floor(np.ldexp(g_hi, k))) + 1):
+            x = np.ldexp(float(m), -k)            # the argument's value at the step; back to the input
+            for step in reversed(chain[1]):       # (a float nearest the edge if not exact: the
+                if step[0] == "add":              # cells next to it then straddle, soundly)
+                    x = x - step[1]
+                elif step[0] == "scale":
+                    x = np.ldexp(x, -step[1])
+                elif not step[1] < x <= step[2]:  # a clamp: the index does not step inside it
+                    break
+            else:
+                if box_lo[j] < x < box_hi[j]:
+                    edges[j].append(float(x))
+    return [np.array(sorted(set(e))) for e in edges], cut
+
+
+def _initial_cells(box_lo, box_hi, per_axis, edges=None, cut=None):
+    """Grid of ``per_axis`` equal cells per input, further cut at the input's table ``edges``;
+    along every ``cut`` input a last, degenerate slab at the box's upper end (cells are
+    half-open along cut inputs, so that point needs a cell of its own)."""
+    n = len(box_lo)
+    edges = edges or [()] * n
+    cut = cut or [False] * n
+    sides = []
+    for a, b, m, e, c in zip(box_lo, box_hi, per_axis, edges, cut):
+        ax = np.linspace(a, b, m + 1)
         ax[0], ax[-1] = a, b                                   # exact box ends
-    edges_lo = np.meshgrid(*(ax[:-1] for ax in axes), indexing="ij")
-    edges_hi = np.meshgrid(*(ax[1:] for ax in axes), indexing="ij")
-    lo = np.stack([g.ravel() for g in edges_lo], 1)
-    hi = np.stack([g.ravel() for g in edges_hi], 1)
+        ax = np.unique(np.concatenate([ax, e]))
+        lo, hi = ax[:-1], ax[1:]
+        if c:
+            lo, hi = np.append(lo, b), np.append(hi, b)
+        sides.append((lo, hi))
+    idx = np.meshgrid(*(np.arange(len(lo)) for lo, _ in sides), indexing="ij")
+    lo = np.stack([side[0][g.ravel()] for side, g in zip(sides, idx)], 1)
+    hi = np.stack([side[1][g.ravel()] for side, g in zip(sides, idx)], 1)
     return lo, hi
 
 
 def _split(lo, hi, axis):
-    """Bisect every cell along its ``axis``; cells too narrow to split are returned apart."""
+    """Bisect every cell along its ``axis``; cells too narrow to split are returned apart.
+
+    The halves [lo, mid) and [mid, hi) of a cell partition it (half-open along a cut input),
+    so a cell within one table cell has both halves within it: splitting never straddles."""
     rows = np.arange(len(lo))
     mid = 0.5 * (lo[rows, axis] + hi[rows, axis])
     ok = (mid > lo[rows, axis]) & (mid < hi[rows, axis])
@@ -290,15 +481,17 @@ def _split(lo, hi, axis):
 def _split_axis(contrib, lo, hi, box_width):
     """The input with the largest contribution sup|de/dx_k| h_k; the relatively widest side
     where the contributions are not all finite."""
-    axis = np.argmax(contrib, axis=1)
+    flat = hi <= lo                            # a degenerate side cannot be split
+    contrib = np.where(flat, 0.0, contrib)
+    axis = np.argmax(np.where(flat, -1.0, contrib), axis=1)
     wild = ~np.all(np.isfinite(contrib), axis=1)
-    axis[wild] = np.argmax((hi[wild] - lo[wild]) / box_width, axis=1)
+    axis[wild] = np.argmax(np.where(flat, -1.0, (hi - lo) / box_width)[wild], axis=1)
     return axis
 
 
-def _refine(err, names, box_lo, box_hi, target, per_axis, max_cells, progress, label):
+def _refine(err, names, box_lo, box_hi, target, per_axis, max_cells, progress, label, edges=None, cut=None):
     """Adaptive cover of the box; returns the summary of the final cells."""
-    lo, hi = _initial_cells(box_lo, box_hi, per_axis)
+    lo, hi = _initial_cells(box_lo, box_hi, per_axis, edges, cut)
     evaluated, cells = 0, 0
     best = {"bound": -np.inf, "lo": None, "hi": None}
     sampled = 0.0
@@ -387,7 +580,8 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
         Budget of evaluated cells per servo; when spent, the bound is still certified, only
         above the target.
     initial : int
-        Cells per input of the starting grid.
+        Cells per input of the starting grid, which is further cut at the table edges of every
+        input a piecewise plan cuts into cells.
     progress : callable
         Receives one progress message per refinement round.
 
@@ -412,8 +606,10 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
         rounding_pu, out_pu = quant[o.preround] / tpp, out_round / tpp
         target = robot.tolerance_pu - rounding_pu - out_pu if target_pu is None else float(target_pu)
         err = _error_function(plan, robot, k)
+        edges, cut = _table_edges(plan, plan.cone(o.preround), names, box_lo, box_hi)
         best, sampled, cells, evaluated, (f_lo, f_hi) = _refine(
-            err, names, box_lo, box_hi, target * tpp, [initial] * len(names), max_cells, progress, o.name)
+            err, names, box_lo, box_hi, target * tpp, [initial] * len(names), max_cells, progress, o.name,
+            edges, cut)
         clamp = 0.0 if clamp_rng is None else max(0.0, clamp_rng[0] - f_lo, f_hi - clamp_rng[1])
         servos.append(ServoCertificate(
             o.name, best["bound"] / tpp, sampled / tpp, rounding_pu, out_pu, clamp / tpp, target,

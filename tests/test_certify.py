@@ -5,11 +5,16 @@ import numpy as np
 import pytest
 
 from ikseries.accuracy import measure, verification_points
-from ikseries.fit.certify import CertificationError, certify, output_rounding
+from ikseries.fit import centred as cn
+from ikseries.fit import interval as ia
+from ikseries.fit.certify import (CertificationError, _initial_cells, _plan_function, _table_edges, certify,
+                                  output_rounding)
 from ikseries.fit.fitter import fit_robot
+from ikseries.fit.horner import horner
 from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
 from ikseries.kinematics import Calibration
 from ikseries.robot import load_preset
+from ikseries.sim.golden import evaluate_ideal
 
 SIN1 = 1.0 - np.sin(1.0)   # sup over a in [0, 1] of |a - sin(a)|
 
@@ -40,6 +45,121 @@ def _plan(offset=0.0, floor_only=False, clamp=(-10, 10)):
     acc = b.add(b.align(b.add(a_n, b.const(offset, 6)), 12), b.mul(b_n, b_n))
     out = b.align(acc, 0) if floor_only else b.clamp(b.round(acc, 0), *clamp)
     return b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
+
+
+CELL = 1 / 8   # table cell of the piecewise plans, in units of input a
+
+
+def _piecewise_plan(frac=6, offset=0.0, top=None, degree=1, wrong=None):
+    """P(a, b) = p_m(t) + b**2 on a in [0, 1] (``frac`` bits), b in [-1, 1]: a + ``offset``
+    (clamped to at most ``top`` if given) cut into table cells of width CELL, cell m, offset t in
+    the cell, p_m the least-squares polynomial of sin over the cell, its coefficients looked up
+    by cell; in cell ``wrong`` the constant term is 0.75 too large."""
+    inputs = [PlanInput("a", "mm", frac, 0, 1 << frac, frac + 1, False), PlanInput("b", "mm", 6, -64, 64, 8, True)]
+    b = PlanBuilder(inputs)
+    a_n, b_n = b.input_nodes["a"], b.input_nodes["b"]
+    arg = b.add(a_n, b.const(offset, frac)) if offset else a_n
+    if top is not None:
+        arg = b.clamp(arg, 0, int(top * 2 ** frac))
+    cell, t = b.cell(arg, frac - 3)
+    s = np.linspace(0.0, CELL, 33)
+    coef = np.array([np.polynomial.polynomial.polyfit(s, np.sin(m * CELL - offset + s), degree)
+                     for m in range(b.nodes[cell].hi + 1)])
+    if wrong is not None:
+        coef[wrong, 0] += 0.75
+    poly = {(e,): tuple(coef[:, e]) for e in range(degree + 1)}
+    acc = b.add(horner(b, poly, [t], 14, lambda v, f: b.lut(cell, v, f)), b.align(b.mul(b_n, b_n), 14))
+    return b.build([PlanOutput("y", b.clamp(b.round(acc, 0), -10, 10), acc, "ticks", 1.0)])
+
+
+def _sampled_error(plan):
+    """max |P - f| over every port value."""
+    a, bb = np.meshgrid(np.arange(plan.inputs[0].lo, plan.inputs[0].hi + 1), np.arange(-64, 65), indexing="ij")
+    acc = plan.outputs[0].preround
+    p = evaluate_ideal(plan, {"a": a.ravel(), "b": bb.ravel()}, keep=[acc])[acc]
+    return np.abs(p - np.sin(a.ravel() * 2.0 ** -plan.inputs[0].frac) - (bb.ravel() / 64) ** 2).max()
+
+
+@pytest.mark.parametrize("offset", [0.0, 1 / 16])
+def test_piecewise_bound_encloses_the_sampled_error_tightly(offset):
+    """Every table cell converges: the certifier's cells never straddle a table edge (with
+    offset 0 the box's upper end a = 1 is a table cell of its own)."""
+    plan = _piecewise_plan(offset=offset)
+    sampled = _sampled_error(plan)
+    s = certify(_robot(), plan, target_pu=1.03 * sampled).servos[0]
+    assert sampled <= s.approximation_pu <= 1.03 * sampled and s.converged and s.evaluated < 200
+    assert output_rounding(plan, 0)[0] == 0.5 and s.rounding_pu < 1e-3
+
+
+def test_piecewise_initial_cells_follow_the_table():
+    plan = _piecewise_plan(offset=1 / 16)
+    edges, cut = _table_edges(plan, range(len(plan.nodes)), ["a", "b"], [0.0, -1.0], [1.0, 1.0])
+    assert cut == [True, False] and not len(edges[1])
+    assert edges[0].tolist() == [m / 8 - 1 / 16 for m in range(1, 9)]
+    lo, hi = _initial_cells([0.0, -1.0], [1.0, 1.0], [2, 2], edges, cut)
+    a_sides = sorted(set(zip(lo[:, 0], hi[:, 0])))
+    assert a_sides[0] == (0.0, 1 / 16) and a_sides[-2:] == [(15 / 16, 1.0), (1.0, 1.0)] and len(a_sides) == 11
+
+
+@pytest.mark.parametrize("offset, wrong", [(1 / 16, 5), (0.0, 8)])
+def test_piecewise_plan_with_a_wrong_table_entry_is_refused(offset, wrong):
+    """Also the last table cell, which with offset 0 holds the single point a = 1."""
+    bad = certify(_robot(tolerance=1.0), _piecewise_plan(offset=offset, wrong=wrong))
+    with pytest.raises(CertificationError, match=r"servo y: certified error"):
+        bad.check(1.0)
+    s = bad.servos[0]
+    assert s.approximation_pu >= 0.75
+    cell = (wrong * CELL - offset, min(1.0, (wrong + 1) * CELL - offset))
+    assert cell[0] <= s.worst["lo"]["a"] <= s.worst["hi"]["a"] <= cell[1]
+
+
+@pytest.mark.parametrize("offset, top", [(0.0, None), (3 / 64, None), (1 / 16, 0.75)])
+def test_piecewise_enclosures_hold_on_random_sub_boxes(offset, top):
+    """index, mask, lut and the polynomial enclose their ideal values at every port value of
+    random sub-boxes (half-open along a unless degenerate), aligned to the table, straddling it,
+    and degenerate; a clamp of the cell argument at a table edge (top) included. A wrong entry
+    makes the polynomial jump at the edges of cell 3: a derivative bound across them would miss
+    it."""
+    plan = _piecewise_plan(frac=10, offset=offset, top=top, degree=2, wrong=3)
+    rng = np.random.default_rng(7)
+    n = 60
+    edges = np.arange(9) * CELL - offset
+    edges = edges[(edges > 0) & (edges < 1)]
+    lo_a = rng.uniform(0, 0.99, n)
+    hi_a = np.minimum(lo_a + rng.uniform(0.005, 0.3, n), 1.0)
+    i = rng.integers(0, len(edges) - 1, n // 3)                       # aligned to the table
+    lo_a[:n // 3], hi_a[:n // 3] = edges[i], edges[i + 1]
+    lo_a[-5:] = hi_a[-5:] = np.append(rng.integers(0, 1025, 4) / 1024, edges[2])  # degenerate
+    lo_a[-6], hi_a[-6] = 0.75, 1.0
+    b_lo = rng.uniform(-1, 0.8, n)
+    b_hi = np.minimum(b_lo + rng.uniform(0.2, 1, n), 1.0)
+    lo, hi = np.stack([lo_a, b_lo], 1), np.stack([hi_a, b_hi], 1)
+    ports = {"a": np.repeat(np.arange(1025), 33), "b": np.tile(np.arange(-64, 65, 4), 1025)}
+    x = ports["a"] / 1024
+    y = ports["b"] / 64
+    nodes = [k for k, nd in enumerate(plan.nodes) if nd.op in ("index", "mask", "lut")]
+    nodes.append(plan.outputs[0].preround)
+    ideal = evaluate_ideal(plan, ports, keep=nodes)
+    inside = (((x >= lo_a[:, None]) & (x < hi_a[:, None])) | (x == lo_a[:, None])) & (
+        (y >= b_lo[:, None]) & (y <= b_hi[:, None]))
+    assert inside.any(axis=1).all()
+    jumps = 0
+    for values in (dict(zip("ab", cn.variables(lo, hi))), dict(zip("ab", ia.variables(lo, hi, order=2)))):
+        for k in nodes:
+            e = _plan_function(plan, k)(values)
+            encl = [e]
+            if isinstance(e, cn.Centred):   # and the mean-value form of its derivative bounds
+                r = np.sum(np.nan_to_num(e.x.dmag(2), nan=np.inf) * e.h, axis=0)
+                encl = [e.x, SimpleNamespace(lo=e.c.lo - r, hi=e.c.hi + r)]
+            v = np.broadcast_to(ideal[k], x.shape)
+            tol = 1e-12 * (1 + np.abs(v))
+            for e in encl:
+                held = (e.lo[:, None] <= v + tol) & (v - tol <= e.hi[:, None])
+                assert np.all(~inside | held), plan.nodes[k].op
+            if plan.nodes[k].op == "index":
+                assert np.all(e.lo[:n // 3] == e.hi[:n // 3]) and np.all(e.lo[-5:] == e.hi[-5:])
+                jumps += np.sum(e.lo < e.hi)
+    assert jumps > 0                                                  # straddling boxes were seen
 
 
 def test_bound_encloses_a_known_sup_tightly():
