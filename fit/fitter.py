@@ -173,6 +173,13 @@ class FeatureSet:
         """Kind, term set and cells, e.g. ``radial, 3 cells in z`` (for reports)."""
         return self.kind + self.extras().replace(" tensor", ", tensor terms")
 
+    def piecewise_record(self) -> dict | None:
+        """JSON-ready description of the cells (None if not piecewise)."""
+        if self.cut is None:
+            return None
+        return {"input": self.cut.port, "variable": self.names[self.cut.var], "cells": self.cut.cells,
+                "port_values_per_cell": 2 ** self.cut.shift}
+
     def extras(self) -> str:
         return (" tensor" if self.tensor else "") + (f", {self.cut.cells} cells in {self.cut.port}"
                                                       if self.cut else "")
@@ -297,6 +304,22 @@ class _Nodes:
         return self._kinds[kind]
 
 
+def parity_variable(fs: FeatureSet) -> int | None:
+    """The variable whose parity the lowering splits (the first even/odd one), or None."""
+    return next((j for j, a in enumerate(fs.allowed) if a in ("even", "odd")), None)
+
+
+def poly_inputs(b: PlanBuilder, fs: FeatureSet, feats: list[int]) -> tuple[list[int], object]:
+    """The variable nodes of a servo polynomial over ``fs`` and its coefficient builder: for a
+    piecewise polynomial the cut variable becomes the offset in the cell and the coefficients
+    are looked up by cell (``b.lut``); else ``feats`` and None (constants)."""
+    if fs.cut is None:
+        return feats, None
+    port = next(i for i in b.inputs if i.name == fs.cut.port)
+    cell, off = fs.cut.build(b, port)
+    return feats[:fs.cut.var] + [off] + feats[fs.cut.var + 1:], lambda v, f: b.lut(cell, v, f)
+
+
 def _servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], fv: int, frac: int,
                  mixed: bool = False) -> int:
     """Lower one servo polynomial: nested Horner, or with ``mixed`` the Horner/Estrin mix of
@@ -304,13 +327,8 @@ def _servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], f
     (:func:`ikseries.fit.horner.lower_poly`). For the first even/odd variable v,
     ``E(..., v**2, ...) + v * O(..., v**2, ...)``. A piecewise polynomial (``fs.cut``) takes
     the offset in the cell for the cut variable and looks its coefficients up by cell."""
-    coefficient = None
-    if fs.cut is not None:
-        port = next(i for i in b.inputs if i.name == fs.cut.port)
-        cell, off = fs.cut.build(b, port)
-        feats = feats[:fs.cut.var] + [off] + feats[fs.cut.var + 1:]
-        coefficient = lambda v, f: b.lut(cell, v, f)  # noqa: E731
-    k = next((j for j, a in enumerate(fs.allowed) if a in ("even", "odd")), None)
+    feats, coefficient = poly_inputs(b, fs, feats)
+    k = parity_variable(fs)
     if mixed:
         return lower_poly(b, poly, feats, frac, coefficient, parity=k, max_extra_muls=MIX_EXTRA_MULTIPLIERS)
     return estrin(b, poly, feats, frac, coefficient, split=None, parity=k)
@@ -628,9 +646,7 @@ def _lower(robot, inputs, stage, fits, budget, progress) -> Plan:
                     "term_set": "tensor" if sf.features.tensor else "total degree",
                     "powers": dict(zip(sf.features.names, sf.features.allowed)), "total_degree": sf.degree,
                     "terms": len(sf.poly), "multipliers": mults[sf.name], "accumulator_frac_bits": sf.frac,
-                    "piecewise": None if sf.features.cut is None else {
-                        "input": sf.features.cut.port, "variable": sf.features.names[sf.features.cut.var],
-                        "cells": sf.features.cut.cells, "port_values_per_cell": 2 ** sf.features.cut.shift},
+                    "piecewise": sf.features.piecewise_record(),
                     "fit_error_pu": sf.fit_error_ticks / tpp, "certified_rounding_pu": sf.bound_pu,
                     "coefficients": [{"exponents": list(e), "value": c} for e, c in sf.poly.items()]}
                    for sf in fits],

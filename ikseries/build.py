@@ -272,6 +272,7 @@ def make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, t
             "name": sf.name,
             "total_degree": sf.degree,
             "variables": sf.features.structure(),
+            "piecewise": sf.features.piecewise_record(),
             "powers": dict(zip(sf.features.names, sf.features.allowed)),
             "terms": len(sf.poly),
             "accumulator_frac_bits": sf.frac,

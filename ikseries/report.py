@@ -40,6 +40,11 @@ def _throughput_lines(r: dict) -> list[str]:
     return lines
 
 
+def _values(v, fmt: str) -> str:
+    """One coefficient, or a piecewise one's values per cell."""
+    return ", ".join(fmt.format(x) for x in v) if isinstance(v, (list, tuple)) else fmt.format(v)
+
+
 def render_markdown(r: dict) -> str:
     out = [f"# ikseries report: {r['robot']}", "",
            f"ikseries {r['ikseries_version']}; Verilog module `{r['module']}` in `{r['verilog']}`; "
@@ -125,7 +130,12 @@ def render_markdown(r: dict) -> str:
     for s in r["servos"]:
         out += [f"### {s['name']}", "", _row(["powers of " + ", ".join(s["powers"]), "integer", "value"]),
                 _row(["---"] * 3)]
-        out += [_row([" ".join(map(str, c["exponents"])), c["integer"], f"{c['value']:.10g}"])
+        cut = s.get("piecewise")
+        if cut:
+            out[-2:-2] = [f"Piecewise: one coefficient per cell of input {cut['input']} (cells of "
+                          f"{cut['port_values_per_cell']} port values from its lowest value), in cell order; "
+                          f"variable {cut['variable']} is the offset inside the cell, normalised to [-1, 1).", ""]
+        out += [_row([" ".join(map(str, c["exponents"])), _values(c["integer"], "{}"), _values(c["value"], "{:.10g}")])
                 for c in s["coefficients"]]
         out.append("")
     t = r["times_s"]
