@@ -201,7 +201,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
 
     name = module_name(robot.name)
     try:
-        choice = choose_architecture(robot, plan)
+        choice = choose_architecture(robot, plan, progress=progress)
     except ArchitectureError as e:
         raise BuildError(str(e)) from None
     core = choice.core

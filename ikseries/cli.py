@@ -39,13 +39,23 @@ def cmd_presets(args):
 
 
 def _hardware_overrides(robot, args):
-    """``robot`` with the build's --architecture / --multipliers / --dsp applied (validated)."""
-    from .robot import ARCHITECTURES, DSP_CHOICES, with_hardware
+    """``robot`` with the build's --architecture / --multipliers / --dsp / --fit-device applied
+    (validated). --fit-device also sets the DSP size to the device's family unless --dsp is given;
+    --architecture other than fastest drops the description's hardware.fit_device."""
+    from .robot import ARCHITECTURES, DSP_CHOICES, FIT_DEVICES, with_hardware
     opts = {}
     if args.architecture is not None:
         if args.architecture not in ARCHITECTURES:
             raise CliError(f"--architecture must be one of {', '.join(ARCHITECTURES)}, not {args.architecture!r}")
         opts["architecture"] = args.architecture
+        if args.architecture != "fastest" and args.fit_device is None:
+            opts["fit_device"] = None
+    if args.fit_device is not None:
+        if args.fit_device not in FIT_DEVICES:
+            raise CliError(f"--fit-device must be one of {', '.join(FIT_DEVICES)}, not {args.fit_device!r}")
+        opts["fit_device"] = args.fit_device
+        if args.dsp is None:
+            opts["dsp"] = FIT_DEVICES[args.fit_device]
     if args.multipliers is not None:
         try:
             k = int(args.multipliers)
@@ -58,8 +68,12 @@ def _hardware_overrides(robot, args):
         if args.dsp not in DSP_CHOICES:
             raise CliError(f"--dsp must be one of {', '.join(DSP_CHOICES)}, not {args.dsp!r}")
         opts["dsp"] = args.dsp
-    labels = {"architecture": "--architecture", "multipliers": "--multipliers", "dsp": "--dsp"}
-    new = with_hardware(robot, {k: v for k, v in labels.items() if k in opts}, **opts) if opts else robot
+    labels = {"architecture": "--architecture", "multipliers": "--multipliers", "dsp": "--dsp",
+              "fit_device": "--fit-device"}
+    given = {k for k in ("architecture", "multipliers", "dsp", "fit_device") if getattr(args, k) is not None}
+    if given & {"architecture", "fit_device"}:   # either names the other in the error
+        given |= {"architecture", "fit_device"}
+    new = with_hardware(robot, {k: v for k, v in labels.items() if k in given}, **opts) if opts else robot
     if "multipliers" in opts and new.architecture != "folded":
         raise CliError(f"--architecture must be folded when --multipliers is given "
                        f"(auto picks 1 or 2 multipliers itself), not {new.architecture!r}")
@@ -187,6 +201,7 @@ def cmd_report(args):
 
 def main(argv=None):
     from . import __version__
+    from .synth import FIT_DEVICES
     p = argparse.ArgumentParser(prog="ikseries", description=__doc__)
     p.add_argument("--version", action="version", version=f"ikseries {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -202,11 +217,14 @@ def main(argv=None):
                         "installed one, the default), none, or a list such as icarus,verilator")
     b.add_argument("--architecture", metavar="ARCH",
                    help="override hardware.architecture: auto (smallest that meets hardware.min_refresh_hz), "
-                        "pipelined or folded")
+                        "pipelined, folded or fastest (the fastest whose Yosys cell counts fit --fit-device)")
     b.add_argument("--multipliers", metavar="K", help="override hardware.multipliers: multipliers of the folded evaluator (needs architecture "
                         "folded; auto picks 1 or 2 itself)")
     b.add_argument("--dsp", metavar="FAMILY",
                    help="override hardware.dsp: ice40, ecp5, xc7 (DSP multiplier size) or none (full width)")
+    b.add_argument("--fit-device", metavar="DEVICE",
+                   help="override hardware.fit_device (with --architecture fastest): "
+                        f"{', '.join(FIT_DEVICES)}; also sets --dsp to the device's family unless --dsp is given")
     b.add_argument("-q", "--quiet", action="store_true")
     f = sub.add_parser("fit", help="fit only (no hardware) by one method, with a report")
     f.add_argument("robot", nargs="?", help="robot description (TOML); default: --preset cylinder-leg")

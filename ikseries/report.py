@@ -34,7 +34,16 @@ def _throughput_lines(r: dict) -> list[str]:
     a = r.get("architecture")
     if a:
         lines.append(f"- Architecture: **{a['description']}**. Why: {a['reason']}.")
-        if len(a["tried"]) > 1:
+        if a.get("fit_device"):
+            lines += ["", _row(["configuration tried (fastest first)", "II", "refresh Hz",
+                                *(f"{k} (of {v:,})" for k, v in a["fit_device"]["capacity"].items()), "result"]),
+                      _row(["---"] * (4 + len(a["fit_device"]["capacity"])))]
+            for t in a["tried"]:
+                c = t.get("counts")
+                lines.append(_row([t["description"], t["initiation_interval"], f"{t['refresh_hz']:,.0f}",
+                                   *(f"{c.get(k, 0):,}" if c else "-" for k in a["fit_device"]["capacity"]),
+                                   t.get("rejected") or "**chosen**"]))
+        elif len(a["tried"]) > 1:
             lines.append("  Tried: " + "; ".join(f"{t['description']}: II {t['initiation_interval']}, "
                                                   f"{t['refresh_hz']:,.0f} Hz" for t in a["tried"]) + ".")
     return lines

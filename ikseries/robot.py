@@ -14,16 +14,19 @@ from .hexapod_leg import HexapodLeg
 from .kinematics import Calibration, CylinderLeg, UnreachableError
 from .planar_arm import PlanarArm
 from .quadruped import QuadrupedFore, QuadrupedHind
+from .synth import FIT_DEVICES
 
 __all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot",
-           "robot_record", "robot_from_record", "fit_record", "with_hardware", "ARCHITECTURES", "DSP_CHOICES"]
+           "robot_record", "robot_from_record", "fit_record", "with_hardware", "ARCHITECTURES", "DSP_CHOICES",
+           "FIT_DEVICES"]
 
 #: fit.lowering values: "mixed" = per servo the Horner/Estrin mix of least pipeline depth (a few
 #: more multiplications), "horner" = nested Horner (fewest multiplications, deepest)
 LOWERINGS = ("mixed", "horner")
-#: hardware.architecture values: "auto" picks the smallest that meets hardware.min_refresh_hz.
+#: hardware.architecture values: "auto" picks the smallest that meets hardware.min_refresh_hz,
+#: "fastest" the fastest whose Yosys cell counts fit hardware.fit_device (see ikseries.architecture).
 #: Default: "pipelined" (one target per clock, verified by cocotb too) for one leg, "auto" for more.
-ARCHITECTURES = ("auto", "pipelined", "folded")
+ARCHITECTURES = ("auto", "pipelined", "folded", "fastest")
 #: hardware.dsp values: the FPGA family whose DSP multiplier size the folded evaluator uses
 #: (see ikseries.hdl.schedule.DSP_SIZES), or "none" for full-width products
 DSP_CHOICES = ("ice40", "ecp5", "xc7", "none")
@@ -80,6 +83,7 @@ class Robot:
     multipliers: int = 1            # multiplier units of a folded evaluator
     dsp: str = "ice40"              # one of DSP_CHOICES
     min_refresh_hz: float = 1000.0  # every leg's servos re-evaluated at least this often
+    fit_device: str | None = None   # one of FIT_DEVICES: the device "fastest" must fit
     lowering: str = "mixed"         # one of LOWERINGS: how servo polynomials become plan operations
 
     @property
@@ -219,8 +223,8 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
         raise RobotError(f"fit.lowering must be one of {', '.join(LOWERINGS)}, not {lowering!r}")
 
     hw = _table(data, "hardware", "", required=False)
-    _no_extra(hw, ["clock_hz", "pwm_period_us", "architecture", "multipliers", "dsp", "min_refresh_hz"],
-              "hardware.")
+    _no_extra(hw, ["clock_hz", "pwm_period_us", "architecture", "multipliers", "dsp", "min_refresh_hz",
+                   "fit_device"], "hardware.")
     clk = _number(hw, "clock_hz", "hardware.", default=48_000_000, positive=True, integer=True)
     period = float(_number(hw, "pwm_period_us", "hardware.", default=20000.0, positive=True))
     if period <= pmax:
@@ -233,8 +237,9 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
                   tuple(dirs), pmin, pmax, float(tol), int(clk), period,
                   legs=data.get("legs", 1),
                   architecture=hw.get("architecture", "auto" if data.get("legs", 1) != 1 else "pipelined"),
-                  multipliers=hw.get("multipliers", 1), dsp=hw.get("dsp", "ice40"),
-                  min_refresh_hz=hw.get("min_refresh_hz", 1000.0), lowering=lowering)
+                  multipliers=hw.get("multipliers", 1), dsp=hw.get("dsp", _default_dsp(hw.get("fit_device"))),
+                  min_refresh_hz=hw.get("min_refresh_hz", 1000.0), fit_device=hw.get("fit_device"),
+                  lowering=lowering)
     _check_hardware(robot)
     if "multipliers" in hw and robot.architecture != "folded":
         raise RobotError(f"hardware.architecture must be folded when hardware.multipliers is given "
@@ -250,7 +255,12 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
 #: option -> how errors name it (TOML field names; the CLI passes its option names)
 HARDWARE_LABELS = {"legs": "legs", "architecture": "hardware.architecture",
                    "multipliers": "hardware.multipliers", "dsp": "hardware.dsp",
-                   "min_refresh_hz": "hardware.min_refresh_hz"}
+                   "min_refresh_hz": "hardware.min_refresh_hz", "fit_device": "hardware.fit_device"}
+
+
+def _default_dsp(fit_device) -> str:
+    """hardware.dsp when not given: the family of hardware.fit_device (its DSP size), else ice40."""
+    return FIT_DEVICES.get(fit_device, "ice40") if isinstance(fit_device, str) else "ice40"
 
 
 def _check_hardware(robot: Robot, labels: dict | None = None) -> None:
@@ -271,8 +281,17 @@ def _check_hardware(robot: Robot, labels: dict | None = None) -> None:
     if isinstance(r, bool) or not isinstance(r, (int, float)) or not np.isfinite(r) or r <= 0:
         raise RobotError(f"{lab['min_refresh_hz']} must be a number > 0, not {r!r}")
     if robot.legs > 1 and robot.architecture == "pipelined":
-        raise RobotError(f"{lab['architecture']} must be auto or folded for {lab['legs']} = {robot.legs} "
+        raise RobotError(f"{lab['architecture']} must be auto, folded or fastest for {lab['legs']} = {robot.legs} "
                          f"(the legs share one folded evaluator), not 'pipelined'")
+    dev = robot.fit_device
+    if dev is not None and dev not in FIT_DEVICES:
+        raise RobotError(f"{lab['fit_device']} must be one of {', '.join(FIT_DEVICES)}, not {dev!r}")
+    if dev is not None and robot.architecture != "fastest":
+        raise RobotError(f"{lab['architecture']} must be fastest when {lab['fit_device']} is given "
+                         f"(the device the fastest configuration must fit), not {robot.architecture!r}")
+    if dev is None and robot.architecture == "fastest":
+        raise RobotError(f"{lab['fit_device']} must be one of {', '.join(FIT_DEVICES)} when "
+                         f"{lab['architecture']} is fastest (the device to fit), not None")
 
 
 def with_hardware(robot: Robot, labels: dict | None = None, **options) -> Robot:
@@ -308,7 +327,7 @@ def robot_record(robot: Robot) -> dict:
 
 #: Robot fields that do not change the fitted plan (hardware architecture, naming, PWM period)
 NON_FIT_FIELDS = ("name", "description", "legs", "architecture", "multipliers", "dsp", "min_refresh_hz",
-                  "pwm_period_us")
+                  "fit_device", "pwm_period_us")
 
 
 def fit_record(record: dict) -> dict:

@@ -11,7 +11,7 @@ The result of :func:`synth_counts` is a JSON-serialisable dict, one entry per ta
     {"ice40": {
         "target": "ice40", "device": "iCE40UP5K",
         "script": "synth_ice40 -dsp -top core",
-        "counts": {"LUT": 812, "FF": 640, "carry": 301, "DSP": 8, "BRAM": 0,
+        "counts": {"LUT": 812, "FF": 640, "carry": 301, "DSP": 8, "BRAM": 0, "SPRAM": 0,
                    "LUTRAM": 0, "mux": 0, "io": 0, "other": 0},
         "cells": {"SB_LUT4": 812, ...},     # raw stat num_cells_by_type, $scopeinfo dropped
         "other_cells": {},                  # the raw cells counted as "other"
@@ -30,8 +30,8 @@ LUT               SB_LUT4               LUT4                        LUT1..LUT6, 
 FF                SB_DFF*               TRELLIS_FF, FD1P3*/FD1S3*   FD*E, FD*E_1, FDRSE, FDCPE, LD*
 carry             SB_CARRY              CCU2C (2 bits each)         CARRY4 (4 bits each)
 DSP               SB_MAC16              MULT18X18D, ALU54B, ALU24B  DSP48E1
-BRAM              SB_RAM40_4K*,         DP16KD, PDPW16KD            RAMB18E1, RAMB36E1
-                  SB_SPRAM256KA
+BRAM              SB_RAM40_4K* (EBR)    DP16KD, PDPW16KD            RAMB18E1, RAMB36E1
+SPRAM             SB_SPRAM256KA         -                           -
 LUTRAM            -                     TRELLIS_DPR16X4             RAM32M/RAM64M/RAMnnX*, SRL*
 mux               -                     PFUMX, L6MUX21              MUXF7, MUXF8
 io                SB_IO*, SB_GB*        TRELLIS_IO, IB/OB/BB*, DCCA IBUF/OBUF/IOBUF/OBUFT, BUFG*
@@ -57,9 +57,9 @@ from typing import Callable, Iterable, Sequence
 
 from .wasm_cache import warm_yosys
 
-__all__ = ["CATEGORIES", "DEVICES", "TARGETS", "overflows", "SynthError", "categorise", "synth_counts", "yosys_command"]
+__all__ = ["CATEGORIES", "DEVICES", "FIT_DEVICES", "TARGETS", "overflows", "SynthError", "categorise", "synth_counts", "yosys_command"]
 
-CATEGORIES = ("LUT", "FF", "carry", "DSP", "BRAM", "LUTRAM", "mux", "io", "other")
+CATEGORIES = ("LUT", "FF", "carry", "DSP", "BRAM", "SPRAM", "LUTRAM", "mux", "io", "other")
 
 #: target name -> (device description, Yosys synthesis command without -top, cell family)
 TARGETS: dict[str, tuple[str, str, str]] = {
@@ -68,15 +68,24 @@ TARGETS: dict[str, tuple[str, str, str]] = {
     "xc7": ("Xilinx 7-series", "synth_xilinx -family xc7 -flatten", "xilinx"),
 }
 
-#: target -> (reference device, its capacity per category) for the report's "fits" check.
-#: iCE40UP5K: 5280 logic cells (one LUT4 + one FF each), 8 SB_MAC16, 30 EBR;
-#: LFE5U-25F: 24288 LUT4 / FF, 28 MULT18X18D, 56 EBR; XC7A35T: 20800 LUT6, 41600 FF,
-#: 90 DSP48E1, 50 RAMB36 (counted as 100 RAMB18).
+#: target -> (reference device, its capacity per category): the report's "fits" check and the
+#: fit check of ``hardware.architecture = "fastest"`` (:data:`FIT_DEVICES`). Sources, the vendors'
+#: data sheets: iCE40 UltraPlus family (Lattice FPGA-DS-02008): iCE40UP5K 5280 logic cells (one
+#: LUT4 + one FF each, so LUT and FF are each checked against 5280), 8 DSP (SB_MAC16), 30 EBR
+#: (4 kbit), 4 SPRAM (256 kbit); ECP5 family (FPGA-DS-02012): LFE5U-25F 24k LUT4 (24288, one FF
+#: each), 28 18x18 multipliers (MULT18X18D; ALU54B/ALU24B are counted with them), 56 EBR
+#: (18 kbit); 7-series overview (Xilinx DS180): XC7A35T 20800 LUT6, 41600 FF, 90 DSP48E1,
+#: 50 RAMB36 (counted as 100 RAMB18).
 DEVICES: dict[str, tuple[str, dict[str, int]]] = {
-    "ice40": ("iCE40UP5K", {"LUT": 5280, "FF": 5280, "DSP": 8, "BRAM": 30}),
+    "ice40": ("iCE40UP5K", {"LUT": 5280, "FF": 5280, "DSP": 8, "BRAM": 30, "SPRAM": 4}),
     "ecp5": ("LFE5U-25F", {"LUT": 24288, "FF": 24288, "DSP": 28, "BRAM": 56}),
     "xc7": ("XC7A35T", {"LUT": 20800, "FF": 41600, "DSP": 90, "BRAM": 100}),
 }
+
+#: ``hardware.fit_device`` names (``hardware.architecture = "fastest"``) -> synthesis target
+#: (its part and capacities are :data:`DEVICES` of that target; the names are those of
+#: :data:`ikseries.pnr.PNR_DEVICES` without the package)
+FIT_DEVICES: dict[str, str] = {"ice40-up5k": "ice40", "ecp5-25f": "ecp5", "xc7a35t": "xc7"}
 
 
 def overflows(target: str, counts: dict) -> dict[str, tuple[int, int]]:
@@ -92,7 +101,8 @@ _RULES: dict[str, list[tuple[str, str]]] = {
         ("FF", r"SB_DFF\w*"),
         ("carry", r"SB_CARRY"),
         ("DSP", r"SB_MAC16"),
-        ("BRAM", r"SB_RAM40_4K\w*|SB_SPRAM256KA"),
+        ("BRAM", r"SB_RAM40_4K\w*"),
+        ("SPRAM", r"SB_SPRAM256KA"),
         ("io", r"SB_IO\w*|SB_GB\w*"),
     ],
     "ecp5": [

@@ -46,7 +46,7 @@ def test_defaults_and_hexapod_preset():
     ({"legs": 0}, {}, "legs must be an integer >= 1, not 0"),
     ({"legs": 2.0}, {}, "legs must be an integer >= 1, not 2.0"),
     ({"legs": True}, {}, "legs must be an integer >= 1, not True"),
-    ({}, {"architecture": "systolic"}, "hardware.architecture must be one of auto, pipelined, folded, not 'systolic'"),
+    ({}, {"architecture": "systolic"}, "hardware.architecture must be one of auto, pipelined, folded, fastest, not 'systolic'"),
     ({}, {"multipliers": 0}, "hardware.multipliers must be an integer >= 1, not 0"),
     ({}, {"multipliers": 2}, "hardware.architecture must be folded when hardware.multipliers is given "
                              "(auto picks 1 or 2 multipliers itself), not 'pipelined'"),
@@ -54,10 +54,24 @@ def test_defaults_and_hexapod_preset():
     ({}, {"min_refresh_hz": 0}, "hardware.min_refresh_hz must be a number > 0, not 0"),
     ({}, {"min_refresh_hz": "fast"}, "hardware.min_refresh_hz must be a number > 0, not 'fast'"),
     ({"legs": 6}, {"architecture": "pipelined"},
-     "hardware.architecture must be auto or folded for legs = 6 (the legs share one folded evaluator), "
+     "hardware.architecture must be auto, folded or fastest for legs = 6 (the legs share one folded evaluator), "
      "not 'pipelined'"),
     ({}, {"colour": 1}, "unknown field hardware.colour (expected one of: architecture, clock_hz, dsp, "
-                        "min_refresh_hz, multipliers, pwm_period_us)"),
+                        "fit_device, min_refresh_hz, multipliers, pwm_period_us)"),
+    ({}, {"architecture": "fastest", "fit_device": "foo"},
+     "hardware.fit_device must be one of ice40-up5k, ecp5-25f, xc7a35t, not 'foo'"),
+    ({}, {"architecture": "fastest", "fit_device": 3},
+     "hardware.fit_device must be one of ice40-up5k, ecp5-25f, xc7a35t, not 3"),
+    ({}, {"fit_device": "ecp5-25f"}, "hardware.architecture must be fastest when hardware.fit_device is given "
+                                     "(the device the fastest configuration must fit), not 'pipelined'"),
+    ({"legs": 6}, {"architecture": "auto", "fit_device": "ecp5-25f"},
+     "hardware.architecture must be fastest when hardware.fit_device is given "
+     "(the device the fastest configuration must fit), not 'auto'"),
+    ({}, {"architecture": "fastest"}, "hardware.fit_device must be one of ice40-up5k, ecp5-25f, xc7a35t when "
+                                      "hardware.architecture is fastest (the device to fit), not None"),
+    ({}, {"architecture": "fastest", "fit_device": "ecp5-25f", "multipliers": 2},
+     "hardware.architecture must be folded when hardware.multipliers is given "
+     "(auto picks 1 or 2 multipliers itself), not 'fastest'"),
 ])
 def test_bad_hardware_fields_are_one_line_errors(top, hw, message):
     d = base(**top)
@@ -86,7 +100,7 @@ def test_with_hardware_names_the_option():
     r = load_preset("hexapod")
     with pytest.raises(RobotError) as e:
         with_hardware(r, {"architecture": "--architecture"}, architecture="pipelined")
-    assert str(e.value).startswith("--architecture must be auto or folded for legs = 6")
+    assert str(e.value).startswith("--architecture must be auto, folded or fastest for legs = 6")
     assert with_hardware(r, multipliers=2).multipliers == 2
 
 
@@ -127,15 +141,15 @@ def test_auto_takes_the_smallest_configuration_that_meets_the_rate(auto_robot, s
     assert (c.candidate.architecture, c.candidate.multipliers, c.candidate.dsp) == ("folded", 1, "ice40")
     ii = LegCore(small_plan, auto_robot.pwm_period_ticks, multipliers=1, dsp=(16, 16)).initiation_interval
     assert c.core.initiation_interval == ii and c.refresh_hz == auto_robot.clock_hz / ii
-    assert [t.architecture for t, _, _ in c.tried] == ["folded"]
+    assert [t.candidate.architecture for t in c.tried] == ["folded"]
     # too fast for any folded evaluator: falls back to the pipelined one, after trying k = 1 and 2
     fast = dataclasses.replace(auto_robot, min_refresh_hz=auto_robot.clock_hz / 2)
     c = choose_architecture(fast, small_plan)
     assert c.candidate.architecture == "pipelined" and isinstance(c.core, LegCore)
     assert c.core.initiation_interval == 1 and c.refresh_hz == auto_robot.clock_hz
-    assert [(t.architecture, t.multipliers) for t, _, _ in c.tried] == [("folded", 1), ("folded", 2),
-                                                                       ("pipelined", None)]
-    assert all(hz < fast.min_refresh_hz for _, _, hz in c.tried[:2])
+    assert [(t.candidate.architecture, t.candidate.multipliers) for t in c.tried] == [
+        ("folded", 1), ("folded", 2), ("pipelined", None)]
+    assert all(t.refresh_hz < fast.min_refresh_hz for t in c.tried[:2])
     rec = c.record()
     assert rec["architecture"] == "pipelined" and rec["reason"].startswith("auto: the smallest configuration")
 
@@ -191,14 +205,20 @@ def test_flat_robot_top_ports_match_the_manifest(auto_robot, small_plan):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--architecture", "systolic"], "--architecture must be one of auto, pipelined, folded, not 'systolic'"),
+    (["--architecture", "systolic"], "--architecture must be one of auto, pipelined, folded, fastest, not 'systolic'"),
     (["--multipliers", "0"], "--multipliers must be an integer >= 1, not '0'"),
     (["--multipliers", "2"], "--architecture must be folded when --multipliers is given "
                              "(auto picks 1 or 2 multipliers itself), not 'pipelined'"),
     (["--multipliers", "two"], "--multipliers must be an integer >= 1, not 'two'"),
     (["--dsp", "gowin"], "--dsp must be one of ice40, ecp5, xc7, none, not 'gowin'"),
     (["--preset", "hexapod", "--architecture", "pipelined"],
-     "--architecture must be auto or folded for legs = 6 (the legs share one folded evaluator), not 'pipelined'"),
+     "--architecture must be auto, folded or fastest for legs = 6 (the legs share one folded evaluator), "
+     "not 'pipelined'"),
+    (["--fit-device", "foo"], "--fit-device must be one of ice40-up5k, ecp5-25f, xc7a35t, not 'foo'"),
+    (["--fit-device", "ecp5-25f"], "--architecture must be fastest when --fit-device is given "
+                                   "(the device the fastest configuration must fit), not 'pipelined'"),
+    (["--architecture", "fastest"], "--fit-device must be one of ice40-up5k, ecp5-25f, xc7a35t when "
+                                    "--architecture is fastest (the device to fit), not None"),
 ])
 def test_build_option_errors(capsys, tmp_path, argv, message):
     out = tmp_path / "out"

@@ -48,7 +48,7 @@ def tiny_result(tiny_verilog, tmp_path_factory):
     ("ice40", {"SB_LUT4": 5, "SB_DFF": 1, "SB_DFFESR": 2, "SB_DFFNE": 3, "SB_CARRY": 4,
                "SB_MAC16": 6, "SB_RAM40_4K": 7, "SB_RAM40_4KNR": 1, "SB_SPRAM256KA": 8,
                "SB_IO": 2, "SB_GB": 1, "$scopeinfo": 99},
-     {"LUT": 5, "FF": 6, "carry": 4, "DSP": 6, "BRAM": 16, "io": 3}),
+     {"LUT": 5, "FF": 6, "carry": 4, "DSP": 6, "BRAM": 8, "SPRAM": 8, "io": 3}),
     ("ecp5", {"LUT4": 10, "PFUMX": 2, "L6MUX21": 1, "TRELLIS_FF": 20, "CCU2C": 3,
               "MULT18X18D": 4, "ALU54B": 1, "DP16KD": 2, "PDPW16KD": 1, "TRELLIS_DPR16X4": 5,
               "TRELLIS_IO": 7},
