@@ -2,15 +2,16 @@
 
 ``hardware.architecture = "auto"`` takes the smallest configuration that refreshes every
 leg at least ``hardware.min_refresh_hz`` times a second at ``hardware.clock_hz``, trying in
-order of size: a folded evaluator with 1 multiplier, with 2, then (one leg only) the fully
-pipelined evaluator. A robot with ``legs > 1`` always gets a :class:`RobotCore` (one folded
+order of size: a folded evaluator with 1 multiplier, with 2, then (one leg only) the
+modulo-scheduled evaluator with initiation intervals 16, 8, 4, 2 (:class:`ModuloEvaluator`:
+the dataflow pipelined, its multiplications shared) and the fully pipelined evaluator. A robot with ``legs > 1`` always gets a :class:`RobotCore` (one folded
 evaluator time-multiplexed over the legs).
 
 ``hardware.architecture = "fastest"`` takes the fastest configuration whose Yosys cell counts fit
 ``hardware.fit_device`` (:data:`ikseries.synth.FIT_DEVICES`; capacities in
 :data:`ikseries.synth.DEVICES`): it builds every configuration of :data:`FASTEST_ORDER` (the
-pipelined evaluator for one leg; folded, shared by the legs when ``legs > 1``, with 4, 2 and
-1 multipliers), sorts them by refresh rate, fastest first (fewer multipliers first at equal
+pipelined and modulo-scheduled evaluators for one leg; folded, shared by the legs when
+``legs > 1``, with 4, 2 and 1 multipliers), sorts them by refresh rate, fastest first (fewer multipliers first at equal
 rates), and synthesises each in turn for the device until one fits. A configuration slower than
 ``hardware.min_refresh_hz`` is rejected without synthesis. Fitting by cell counts is an estimate
 before place-and-route (routing or packing can still fail on a nearly full device).
@@ -34,10 +35,14 @@ from .synth import DEVICES, FIT_DEVICES, overflows
 __all__ = ["ArchitectureError", "Candidate", "Choice", "Tried", "AUTO_ORDER", "FASTEST_ORDER", "candidates",
            "choose_architecture", "synth_candidate"]
 
-#: what "auto" tries, smallest first: (architecture, multipliers); "pipelined" only for one leg
-AUTO_ORDER = (("folded", 1), ("folded", 2), ("pipelined", None))
-#: what "fastest" tries (then sorted by the built cores' rates): "pipelined" only for one leg
-FASTEST_ORDER = (("pipelined", None), ("folded", 4), ("folded", 2), ("folded", 1))
+#: initiation intervals of the modulo-scheduled evaluator that "auto" and "fastest" try
+MODULO_INTERVALS = (16, 8, 4, 2)
+#: what "auto" tries, smallest first: (architecture, multipliers or initiation interval);
+#: "modulo" and "pipelined" only for one leg
+AUTO_ORDER = (("folded", 1), ("folded", 2), *(("modulo", ii) for ii in MODULO_INTERVALS), ("pipelined", None))
+#: what "fastest" tries (then sorted by the built cores' rates)
+FASTEST_ORDER = (("pipelined", None), *(("modulo", ii) for ii in reversed(MODULO_INTERVALS)),
+                 ("folded", 4), ("folded", 2), ("folded", 1))
 
 #: synthesis for "fastest": (candidate, its core, synthesis target) -> Yosys counts by category
 SynthFunction = Callable[["Candidate", object, str], dict]
@@ -49,15 +54,20 @@ class ArchitectureError(ValueError):
 
 @dataclass(frozen=True)
 class Candidate:
-    """One configuration: ``architecture`` is "pipelined", "folded" (one leg) or "shared"."""
+    """One configuration: ``architecture`` is "pipelined", "modulo", "folded" (one leg) or
+    "shared"; ``interval`` the initiation interval of a "modulo" one."""
     architecture: str
     multipliers: int | None
     dsp: str | None
     legs: int
+    interval: int | None = None
 
     def describe(self) -> str:
         if self.architecture == "pipelined":
             return "pipelined (one target per cycle)"
+        if self.architecture == "modulo":
+            d = "full-width" if self.dsp == "none" else "{} {}x{} DSP".format(self.dsp, *DSP_SIZES[self.dsp])
+            return f"modulo-scheduled pipeline, one target per {self.interval} cycles ({d})"
         k = f"{self.multipliers} multiplier{'s' if self.multipliers != 1 else ''}"
         d = "full-width" if self.dsp == "none" else "{} {}x{} DSP".format(self.dsp, *DSP_SIZES[self.dsp])
         what = f"folded evaluator shared by {self.legs} legs" if self.architecture == "shared" else "folded"
@@ -71,6 +81,8 @@ class Candidate:
                              multipliers=self.multipliers, dsp=dsp)
         if self.architecture == "folded":
             return LegCore(plan, robot.pwm_period_ticks, multipliers=self.multipliers, dsp=dsp)
+        if self.architecture == "modulo":
+            return LegCore(plan, robot.pwm_period_ticks, interval=self.interval, dsp=dsp)
         return LegCore(plan, robot.pwm_period_ticks)
 
 
@@ -103,7 +115,8 @@ class Choice:
     def record(self) -> dict:
         """JSON-ready description for the manifest and the report."""
         c = self.candidate
-        rec = {"architecture": c.architecture, "multipliers": c.multipliers, "dsp": c.dsp, "legs": c.legs,
+        rec = {"architecture": c.architecture, "multipliers": _multipliers(c, self.core), "dsp": c.dsp,
+               "legs": c.legs, "initiation_interval_asked": c.interval,
                "description": c.describe(), "reason": self.reason,
                "latency_cycles": self.core.latency, "initiation_interval": self.core.initiation_interval,
                "refresh_hz": self.refresh_hz, "tried": [t.record() for t in self.tried]}
@@ -126,11 +139,29 @@ def candidates(robot) -> list[Candidate]:
     out = []
     for arch, k in order:
         if robot.legs > 1:
-            if arch == "pipelined":
+            if arch in ("pipelined", "modulo"):
                 continue
             arch = "shared"
-        out.append(Candidate(arch, k, None if arch == "pipelined" else robot.dsp, robot.legs))
+        if arch == "modulo":
+            out.append(Candidate(arch, None, robot.dsp, robot.legs, interval=k))
+        else:
+            out.append(Candidate(arch, k, None if arch == "pipelined" else robot.dsp, robot.legs))
     return out
+
+
+def _size_rank(cand: Candidate) -> tuple:
+    """Orders configurations by size: folded (fewest multipliers first), modulo-scheduled
+    (longest interval first), pipelined."""
+    if cand.architecture == "modulo":
+        return (1, -cand.interval)
+    return (2, 0) if cand.architecture == "pipelined" else (0, cand.multipliers)
+
+
+def _multipliers(cand: Candidate, core) -> int | None:
+    """The multipliers of a configuration (a modulo-scheduled core sizes its own)."""
+    if cand.architecture == "modulo":
+        return core.evaluator.multipliers
+    return cand.multipliers
 
 
 def _discard(obj, seen=None) -> None:
@@ -258,8 +289,7 @@ def _choose_fastest(robot, plan, synth: SynthFunction, progress) -> Choice:
     synthesised = [t for t in tried if t.counts is not None]
     if not synthesised:       # even the fastest is below the rate
         _rate_error(robot, tried[0])
-    # the smallest: fewest multipliers (the pipelined evaluator has one per product of the plan)
-    smallest = min(synthesised, key=lambda t: t.candidate.multipliers or float("inf"))
+    smallest = min(synthesised, key=lambda t: _size_rank(t.candidate))
     over = overflows(target, smallest.counts)
     slower = [t for t in tried if t.counts is None]
     raise ArchitectureError(

@@ -142,14 +142,21 @@ def test_auto_takes_the_smallest_configuration_that_meets_the_rate(auto_robot, s
     ii = LegCore(small_plan, auto_robot.pwm_period_ticks, multipliers=1, dsp=(16, 16)).initiation_interval
     assert c.core.initiation_interval == ii and c.refresh_hz == auto_robot.clock_hz / ii
     assert [t.candidate.architecture for t in c.tried] == ["folded"]
-    # too fast for any folded evaluator: falls back to the pipelined one, after trying k = 1 and 2
-    fast = dataclasses.replace(auto_robot, min_refresh_hz=auto_robot.clock_hz / 2)
+    # too fast for any folded evaluator: the modulo-scheduled one with the longest interval
+    # that meets the rate, after trying k = 1, 2 and the longer intervals
+    half = dataclasses.replace(auto_robot, min_refresh_hz=auto_robot.clock_hz / 2)
+    c = choose_architecture(half, small_plan)
+    assert (c.candidate.architecture, c.candidate.interval) == ("modulo", 2) and c.core.architecture == "modulo"
+    assert c.core.initiation_interval == 2 and c.refresh_hz == auto_robot.clock_hz / 2
+    assert [(t.candidate.architecture, t.candidate.multipliers or t.candidate.interval) for t in c.tried] == [
+        ("folded", 1), ("folded", 2), ("modulo", 16), ("modulo", 8), ("modulo", 4), ("modulo", 2)]
+    assert all(t.refresh_hz < half.min_refresh_hz for t in c.tried[:-1])
+    assert c.record()["multipliers"] == c.core.evaluator.multipliers
+    # one target per cycle: the pipelined evaluator
+    fast = dataclasses.replace(auto_robot, min_refresh_hz=auto_robot.clock_hz)
     c = choose_architecture(fast, small_plan)
     assert c.candidate.architecture == "pipelined" and isinstance(c.core, LegCore)
     assert c.core.initiation_interval == 1 and c.refresh_hz == auto_robot.clock_hz
-    assert [(t.candidate.architecture, t.candidate.multipliers) for t in c.tried] == [
-        ("folded", 1), ("folded", 2), ("pipelined", None)]
-    assert all(t.refresh_hz < fast.min_refresh_hz for t in c.tried[:2])
     rec = c.record()
     assert rec["architecture"] == "pipelined" and rec["reason"].startswith("auto: the smallest configuration")
 

@@ -6,7 +6,7 @@ import tomllib
 
 import pytest
 
-from ikseries.architecture import ArchitectureError, choose_architecture
+from ikseries.architecture import ArchitectureError, _discard, candidates, choose_architecture
 from ikseries.cli import _hardware_overrides
 from ikseries.report import _throughput_lines
 from ikseries.robot import parse_robot, preset_text, robot_from_record, robot_record
@@ -25,18 +25,17 @@ class FakeSynth:
         self.calls = []
 
     def __call__(self, cand, core, target):
-        self.calls.append(((cand.architecture, cand.multipliers), target))
+        self.calls.append(((cand.architecture, cand.multipliers or cand.interval), target))
         return {"LUT": 1000, "FF": 1000, "carry": 100, "DSP": 4, "BRAM": 0, **self.counts(cand)}
 
 
 def _rates(robot, plan):
-    """(architecture, multipliers) -> refresh Hz, from the built cores."""
+    """(architecture, multipliers or initiation interval) -> refresh Hz, from the built cores."""
     out = {}
-    for arch, k in (("pipelined", None), ("folded", 4), ("folded", 2), ("folded", 1)):
-        r = dataclasses.replace(robot, architecture=arch if arch == "pipelined" else "folded",
-                                multipliers=k or 1, fit_device=None)
-        c = choose_architecture(dataclasses.replace(r, min_refresh_hz=1), plan)
-        out[(arch, k)] = c.refresh_hz
+    for c in candidates(robot):
+        core = c.build(robot, plan)
+        out[(c.architecture, c.multipliers or c.interval)] = robot.clock_hz / core.initiation_interval
+        _discard(core)
     return out
 
 
@@ -47,11 +46,12 @@ def test_fastest_fitting_configuration_is_chosen(fastest, small_plan):
     assert order[0] == ("pipelined", None)
     too_big = order[1]
     synth = FakeSynth(lambda c: {"DSP": 40} if c.architecture == "pipelined" else
-                      {"LUT": 30000} if (c.architecture, c.multipliers) == too_big else {})
+                      {"LUT": 30000} if (c.architecture, c.multipliers or c.interval) == too_big else {})
     msgs = []
     c = choose_architecture(fastest, small_plan, synth=synth, progress=msgs.append)
     assert [call for call, _ in synth.calls] == order[:3] and {t for _, t in synth.calls} == {"ecp5"}
-    assert (c.candidate.architecture, c.candidate.multipliers, c.candidate.dsp) == ("folded", order[2][1], "ecp5")
+    cand = c.candidate
+    assert (cand.architecture, cand.multipliers or cand.interval, cand.dsp) == (*order[2], "ecp5")
     assert c.refresh_hz == rates[order[2]] == fastest.clock_hz / c.core.initiation_interval
     rej = [t.rejected for t in c.tried]
     assert rej[0] == ("does not fit LFE5U-25F by Yosys cell counts (before place-and-route): DSP 40 > 28")
@@ -80,7 +80,7 @@ def test_no_configuration_fits_names_the_smallest_and_the_overflow(fastest, smal
     synth = FakeSynth(lambda c: {"DSP": 130 if c.architecture == "pipelined" else 30 + (c.multipliers or 0)})
     with pytest.raises(ArchitectureError) as e:
         choose_architecture(fastest, small_plan, synth=synth)
-    assert len(synth.calls) == 4
+    assert len(synth.calls) == len(candidates(fastest)) == 8   # pipelined, 4 modulo, 3 folded
     rate = _rates(fastest, small_plan)[("folded", 1)]
     assert str(e.value) == (
         "hardware.fit_device = ecp5-25f: no configuration fits LFE5U-25F by Yosys cell counts (before "
@@ -94,7 +94,9 @@ def test_slower_than_min_refresh_is_not_synthesised(fastest, small_plan):
     synth = FakeSynth(lambda c: {"DSP": 130})
     with pytest.raises(ArchitectureError) as e:
         choose_architecture(dataclasses.replace(fastest, min_refresh_hz=slow), small_plan, synth=synth)
-    assert [call for call, _ in synth.calls] == [("pipelined", None)]
+    assert [call for call, _ in synth.calls] == [k for k in sorted(rates, key=lambda k: -rates[k])
+                                                 if rates[k] >= slow]
+    assert [call for call, _ in synth.calls][:2] == [("pipelined", None), ("modulo", 2)]
     assert str(e.value).endswith("needs DSP 130 > 28; slower ones are below hardware.min_refresh_hz "
                                  f"{slow:g}")
     # even the pipelined core is too slow: the rate error, nothing synthesised
