@@ -42,7 +42,7 @@ def rebuild(robot, plan, fits, extra: int | None, horner: bool = False, guard: i
     lo, hi = robot.pulse_limits_ticks()
     outs, splits = [], {}
     for sf in fits:
-        feats, coefficient = fitter.poly_inputs(b, sf.features, nodes[sf.features.kind])
+        feats, coefficient = fitter.poly_inputs(b, sf.features, nodes[sf.features.kind], fv)
         k = fitter.parity_variable(sf.features)
 
         def lower(split, sf=sf, feats=feats, k=k, coefficient=coefficient):

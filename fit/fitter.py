@@ -309,14 +309,16 @@ def parity_variable(fs: FeatureSet) -> int | None:
     return next((j for j, a in enumerate(fs.allowed) if a in ("even", "odd")), None)
 
 
-def poly_inputs(b: PlanBuilder, fs: FeatureSet, feats: list[int]) -> tuple[list[int], object]:
+def poly_inputs(b: PlanBuilder, fs: FeatureSet, feats: list[int], fv: int) -> tuple[list[int], object]:
     """The variable nodes of a servo polynomial over ``fs`` and its coefficient builder: for a
-    piecewise polynomial the cut variable becomes the offset in the cell and the coefficients
-    are looked up by cell (``b.lut``); else ``feats`` and None (constants)."""
+    piecewise polynomial the cut variable becomes the offset in the cell (exact, widened to the
+    features' ``fv`` fractional bits so that its powers keep them) and the coefficients are
+    looked up by cell (``b.lut``); else ``feats`` and None (constants)."""
     if fs.cut is None:
         return feats, None
     port = next(i for i in b.inputs if i.name == fs.cut.port)
     cell, off = fs.cut.build(b, port)
+    off = b.align(off, max(fv, b.frac(off)))
     return feats[:fs.cut.var] + [off] + feats[fs.cut.var + 1:], lambda v, f: b.lut(cell, v, f)
 
 
@@ -327,7 +329,7 @@ def _servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], f
     (:func:`ikseries.fit.horner.lower_poly`). For the first even/odd variable v,
     ``E(..., v**2, ...) + v * O(..., v**2, ...)``. A piecewise polynomial (``fs.cut``) takes
     the offset in the cell for the cut variable and looks its coefficients up by cell."""
-    feats, coefficient = poly_inputs(b, fs, feats)
+    feats, coefficient = poly_inputs(b, fs, feats, fv)
     k = parity_variable(fs)
     if mixed:
         return lower_poly(b, poly, feats, frac, coefficient, parity=k, max_extra_muls=MIX_EXTRA_MULTIPLIERS)

@@ -11,11 +11,14 @@ from amaranth.lib.wiring import In, Out
 from ..fit.plan import Plan
 from .evaluator import input_layout, output_layout
 
-__all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY"]
+__all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY"]
 
 #: cycles from reading a multiplication's operands to reading its product: operand registers at
 #: the multiplier inputs, the product register, the capture into the node's own register
 MUL_LATENCY = 3
+#: the same for a product wider than one DSP block: operand registers, the registered partial
+#: products of the limbs, their registered sum, the capture
+WIDE_MUL_LATENCY = 4
 _WIRING = ("shr", "shl", "frac", "index", "mask")
 
 
@@ -38,6 +41,7 @@ class ModuloSchedule:
     latency: int
     swap: tuple = ()      # per node: the multiplier takes the operands in the other order
     operand_widths: tuple = ()  # per multiplier: signed widths (a, b) of its operands
+    unit_latency: tuple = ()    # per multiplier: MUL_LATENCY, or WIDE_MUL_LATENCY if split in limbs
 
     def last_read(self, plan: Plan) -> list[int]:
         """Per node, the last cycle it is read: by a registered consumer (when that reads its
@@ -66,24 +70,34 @@ def _tiles(wa: int, wb: int, dsp: tuple[int, int]) -> int:
     return min(-(-wa // dsp[0]) * -(-wb // dsp[1]), -(-wa // dsp[1]) * -(-wb // dsp[0]))
 
 
-def modulo_schedule(plan: Plan, initiation_interval: int, units: int | None = None,
-                    dsp: tuple[int, int] = (18, 18)) -> ModuloSchedule:
-    """List-schedule ``plan`` with its multiplications on ``units`` multipliers (default the
-    fewest: ceil(multiplications / initiation_interval)), each free once per phase.
+def _fits(wa: int, wb: int, dsp) -> bool:
+    """A wa x wb signed product fits one ``dsp`` block (either orientation; any if no dsp)."""
+    return dsp is None or (wa <= dsp[0] and wb <= dsp[1]) or (wa <= dsp[1] and wb <= dsp[0])
 
-    Every cycle the ready multiplications take the free multipliers of that phase, the one
-    with the longest path to an output first; additions, clamps and table reads have their
-    own hardware and run as soon as their operands are ready. Of the free multipliers a
-    multiplication takes the one (and the operand order) that its widths grow least, counted
-    in ``dsp``-sized blocks, so wide and narrow products gather on different multipliers.
+
+def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = (18, 18)
+                    ) -> ModuloSchedule:
+    """List-schedule ``plan`` with its multiplications on shared multipliers, each free once
+    per phase (cycle mod ``initiation_interval``).
+
+    Multiplications are of two classes: those whose operands fit one ``dsp`` block (signed
+    widths, either order; all of them when ``dsp`` is None) run on single-block multipliers
+    in ``MUL_LATENCY`` cycles; wider ones on multipliers split into ``dsp``-sized limbs whose
+    partial products are registered, then summed, in ``WIDE_MUL_LATENCY`` cycles. Each class
+    gets the fewest multipliers that fit: ceil(its multiplications / initiation_interval).
+    Every cycle the ready multiplications take the free multipliers of their class at that
+    phase, the one with the longest path to an output first; of those, the multiplier (and the
+    operand order) whose widths grow least. Additions, clamps and table reads have their own
+    hardware and run as soon as their operands are ready.
     """
     ii = initiation_interval
-    muls = [i for i, n in enumerate(plan.nodes) if n.op == "mul"]
-    units = max(1, -(-len(muls) // ii)) if units is None else units
-    if units * ii < len(muls):
-        raise ValueError(f"units must be at least {-(-len(muls) // ii)} for {len(muls)} multiplications "
-                         f"at initiation interval {ii}, not {units}")
     nodes = plan.nodes
+    muls = [i for i, n in enumerate(nodes) if n.op == "mul"]
+    wide = {i for i in muls if not _fits(*(_signed_width(nodes[a]) for a in nodes[i].args), dsp)}
+    n_wide = -(-len(wide) // ii)
+    n_narrow = -(-(len(muls) - len(wide)) // ii)
+    units = n_narrow + n_wide          # narrow multipliers first, then the wide ones
+    latency_of = [WIDE_MUL_LATENCY if u >= n_narrow else MUL_LATENCY for u in range(units)]
     # height: cycles from reading a node's operands to the outputs (priority)
     users = [[] for _ in nodes]
     for i, n in enumerate(nodes):
@@ -91,7 +105,8 @@ def modulo_schedule(plan: Plan, initiation_interval: int, units: int | None = No
             users[a].append(i)
     height = [0] * len(nodes)
     for i in reversed(range(len(nodes))):
-        own = MUL_LATENCY if nodes[i].op == "mul" else (0 if nodes[i].op in _WIRING else 1)
+        own = (WIDE_MUL_LATENCY if i in wide else MUL_LATENCY) if nodes[i].op == "mul" else \
+            (0 if nodes[i].op in _WIRING else 1)
         height[i] = own + max((height[u] for u in users[i]), default=0)
     ready: list = [None] * len(nodes)
     start: list = [None] * len(nodes)
@@ -101,18 +116,27 @@ def modulo_schedule(plan: Plan, initiation_interval: int, units: int | None = No
     swap: list = [False] * len(nodes)
     pending = set(muls)
 
-    def place(i, free):
+    def place(i, cycle):
+        """The free multiplier of i's class (and operand order) whose widths grow least, or None."""
         wa, wb = (_signed_width(nodes[a]) for a in nodes[i].args)
+        pool = range(n_narrow, units) if i in wide else range(n_narrow)
         best = None
-        for u in free:
+        for u in pool:
+            if busy[u][cycle % ii]:
+                continue
             ua, ub = widths[u]
             for sw, (x, y) in ((False, (wa, wb)), (True, (wb, wa))):
                 grown = (max(ua, x), max(ub, y))
-                key = (_tiles(*grown, dsp) - _tiles(ua, ub, dsp), grown[0] * grown[1] - ua * ub, u, sw)
+                if u < n_narrow and not _fits(*grown, dsp):
+                    continue
+                key = (grown[0] * grown[1] - ua * ub, u, sw)
                 if best is None or key < best[0]:
                     best = (key, u, sw, grown)
+        if best is None:
+            return None
         _, u, sw, grown = best
         widths[u], swap[i] = grown, sw
+        busy[u][cycle % ii] = True
         return u
 
     def settle():
@@ -138,21 +162,32 @@ def modulo_schedule(plan: Plan, initiation_interval: int, units: int | None = No
                                                   for a in nodes[i].args)),
                        key=lambda i: (-height[i], i))
         for i in cands:
-            free = [u for u in range(units) if not busy[u][cycle % ii]]
-            if not free:
-                break
-            u = place(i, free)
-            busy[u][cycle % ii] = True
-            start[i], ready[i], unit[i] = cycle, cycle + MUL_LATENCY, u
+            u = place(i, cycle)
+            if u is None:
+                continue
+            start[i], ready[i], unit[i] = cycle, cycle + latency_of[u], u
             pending.discard(i)
         settle()
         cycle += 1
+        if cycle > 64 * (len(nodes) + ii):   # every multiplication fits some phase: cannot happen
+            raise RuntimeError(f"modulo schedule did not converge: {len(pending)} multiplications unplaced")
     settle()
     latency = max([1] + [ready[o.node] for o in plan.outputs])
     return ModuloSchedule(ii, units, tuple(ready), tuple(start), tuple(unit), latency, tuple(swap),
-                          tuple(widths))
+                          tuple(widths), tuple(latency_of))
 
 
+
+
+def _limbs(x, width: int, bits: int) -> list:
+    """``x`` (signed, ``width`` bits) as limbs (value, shift): unsigned ``bits``-bit limbs from
+    the bottom, the rest a signed top limb of at most ``bits + 1`` bits."""
+    out, lo = [], 0
+    while width - lo > bits + 1:
+        out.append((x[lo:lo + bits], lo))
+        lo += bits
+    out.append((x[lo:width].as_signed(), lo))
+    return out
 
 
 def _shape(node):
@@ -166,10 +201,12 @@ class ModuloEvaluator(wiring.Component):
     per cycle, one multiplier per multiplication) and the
     :class:`~ikseries.hdl.folded.FoldedEvaluator` (everything on a few units, one target per
     evaluation): the dataflow keeps its own adders, clamps and table reads, while the
-    multiplications share ``units`` multipliers in a modulo schedule
-    (:func:`modulo_schedule`). A phase counter selects each multiplier's operands; each
-    multiplier has registered operands and a registered product (DSP-friendly), which the
-    node's own register captures. A value read more than ``initiation_interval`` cycles
+    multiplications share multipliers in a modulo schedule (:func:`modulo_schedule`). A phase
+    counter selects each multiplier's operands; each multiplier has registered operands and a
+    registered product (DSP-friendly), which the node's own register captures. Products wider
+    than one DSP block run on multipliers split into DSP-sized limbs (lower limbs unsigned,
+    ``dsp[0] - 1`` bits; the top limb signed), whose partial products are registered and then
+    summed into a registered product. A value read more than ``initiation_interval`` cycles
     after it was computed is kept in a chain of registers that advance once per target.
     Every width comes from the plan's interval analysis, so the outputs equal
     :func:`ikseries.sim.golden.evaluate` bit for bit.
@@ -179,11 +216,9 @@ class ModuloEvaluator(wiring.Component):
     plan : Plan
     initiation_interval : int
         Cycles between accepted targets (>= 1).
-    units : int, optional
-        Multipliers; default the fewest that fit: ceil(multiplications / initiation_interval).
-    dsp : (int, int)
-        Signed operand widths of the device's DSP multiplier (default ECP5 MULT18X18D 18x18):
-        the schedule gathers products by their size in those blocks.
+    dsp : (int, int) or None
+        Signed operand widths of the device's DSP multiplier (default ECP5 MULT18X18D 18x18;
+        iCE40 SB_MAC16 16x16, Xilinx DSP48E1 25x18); None: every product in one piece.
 
     Attributes
     ----------
@@ -193,7 +228,8 @@ class ModuloEvaluator(wiring.Component):
     Latency
     -------
     ``latency`` cycles from an input transfer to its output transfer while ``o.ready`` is
-    high (the schedule's length; a multiplication takes ``MUL_LATENCY`` cycles).
+    high (the schedule's length; a multiplication takes ``MUL_LATENCY`` cycles, one split in
+    limbs ``WIDE_MUL_LATENCY``).
 
     Throughput
     ----------
@@ -202,17 +238,18 @@ class ModuloEvaluator(wiring.Component):
     ``o.ready`` low, everything, the phase counter included, stalls.
     """
 
-    def __init__(self, plan: Plan, initiation_interval: int, units: int | None = None,
-                 dsp: tuple[int, int] = (18, 18)):
+    def __init__(self, plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = (18, 18)):
         if not isinstance(plan, Plan):
             raise TypeError(f"plan must be a Plan, not {plan!r}")
         if isinstance(initiation_interval, bool) or not isinstance(initiation_interval, int) \
                 or initiation_interval < 1:
             raise ValueError(f"initiation_interval must be an integer >= 1, not {initiation_interval!r}")
-        if units is not None and (isinstance(units, bool) or not isinstance(units, int) or units < 1):
-            raise ValueError(f"units must be None or an integer >= 1, not {units!r}")
+        if dsp is not None and not (isinstance(dsp, tuple) and len(dsp) == 2
+                                    and all(isinstance(w, int) and w >= 2 for w in dsp)):
+            raise ValueError(f"dsp must be None or a pair of operand widths >= 2, not {dsp!r}")
         self._plan = plan
-        self._schedule = modulo_schedule(plan, initiation_interval, units, dsp)
+        self._dsp = dsp
+        self._schedule = modulo_schedule(plan, initiation_interval, dsp)
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),
             "o": Out(stream.Signature(output_layout(plan))),
@@ -325,7 +362,19 @@ class ModuloEvaluator(wiring.Component):
             a, b = Signal(signed(wa), name=f"mul{u}_a"), Signal(signed(wb), name=f"mul{u}_b")
             p = Signal(signed(wa + wb), name=f"mul{u}_p")
             with m.If(en):
-                m.d.sync += p.eq(a * b)
+                if sch.unit_latency[u] == MUL_LATENCY:
+                    m.d.sync += p.eq(a * b)
+                else:   # limbs: registered partial products, then their registered sum
+                    terms = []
+                    for j, (xa, sa) in enumerate(_limbs(a, wa, self._dsp[0] - 1)):
+                        for k, (xb, sb) in enumerate(_limbs(b, wb, self._dsp[1] - 1)):
+                            pp = Signal(signed(xa.shape().width + xb.shape().width + 1), name=f"mul{u}_p{j}{k}")
+                            m.d.sync += pp.eq(xa * xb)
+                            terms.append(pp << (sa + sb))
+                    total = terms[0]
+                    for t in terms[1:]:
+                        total = total + t
+                    m.d.sync += p.eq(total)
                 with m.Switch(phase):
                     for i in mine:
                         s = sch.start[i]
@@ -333,7 +382,7 @@ class ModuloEvaluator(wiring.Component):
                         with m.Case(s % ii):
                             m.d.sync += [a.eq(read(x, s)), b.eq(read(y, s))]
             for i in mine:
-                with m.If(at_phase(sch.start[i] + MUL_LATENCY - 1)):
+                with m.If(at_phase(sch.start[i] + sch.unit_latency[u] - 1)):
                     m.d.sync += chains[i][0].eq(p)
 
         valid = Signal(lat, name="valid")    # valid[k]: a target accepted k + 1 cycles ago

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from helpers import TINY_INPUTS, check_exhaustively, tiny_ideal_vars, tiny_lowered_plan, tiny_vars
-from ikseries.fit.horner import choose_split, estrin, horner, lower_poly, poly_degrees
+from ikseries.fit.horner import choose_split, estrin, horner, lower_poly, parity_split, poly_degrees
 from ikseries.fit.plan import PlanBuilder, PlanOutput
 
 
@@ -118,13 +118,21 @@ def test_choose_split_least_depth_then_fewest_multipliers_within_an_allowance():
     assert poly_degrees({(1, 3): 1.0, (4, 1): 2.0}, parity=1) == (4, 1)
 
 
-def test_estrin_parity_without_split_is_the_fitters_lowering():
-    """``estrin(parity=k)`` builds exactly the fitter's ``E(v**2) + v * O(v**2)`` Horner nodes."""
-    from types import SimpleNamespace
+def _parity_horner(b, poly, vs, k, frac):
+    """``E(v**2) + v * O(v**2)`` with nested Horner (the fitter's lowering before the mix)."""
+    v2 = b.mul(vs[k], vs[k], b.frac(vs[k]))
+    even, odd = parity_split(poly, k)
+    vars_ = vs[:k] + [v2] + vs[k + 1:]
+    acc = horner(b, even, vars_, frac) if even else None
+    if odd:
+        o = b.mul(vs[k], horner(b, odd, vars_, frac), frac)
+        acc = o if acc is None else b.add(acc, o)
+    return acc
 
-    from ikseries.fit.fitter import _servo_nodes
+
+def test_estrin_parity_without_split_is_the_fitters_lowering():
+    """``estrin(parity=k)`` builds exactly the ``E(v**2) + v * O(v**2)`` Horner nodes."""
     poly = random_poly(7, 2, 5)
-    fs = SimpleNamespace(allowed=("any", "odd"))
-    fitter_plan = tiny_lowered_plan(lambda b, vs: _servo_nodes(b, fs, poly, vs, b.frac(vs[1]), 5))
+    fitter_plan = tiny_lowered_plan(lambda b, vs: _parity_horner(b, poly, vs, 1, 5))
     ours = tiny_lowered_plan(lambda b, vs: estrin(b, poly, vs, 5, parity=1))
     assert ours.dumps() == fitter_plan.dumps()

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from helpers import all_ports, tiny_piecewise_plan, tiny_plan
-from ikseries.hdl.modulo import MUL_LATENCY, ModuloEvaluator, modulo_schedule
+from ikseries.hdl.modulo import MUL_LATENCY, WIDE_MUL_LATENCY, ModuloEvaluator, modulo_schedule
 from ikseries.sim import golden
 from ikseries.sim.amaranth_sim import simulate_leg
 from ikseries.sim.targets import corner_targets, random_targets
@@ -20,7 +20,7 @@ def _check(core, plan, targets, **kw):
 @pytest.mark.parametrize("ii", [1, 2, 3, 5])
 def test_every_port_value_bit_exact_at_each_initiation_interval(ii):
     plan = tiny_plan(3)
-    core = ModuloEvaluator(plan, ii)
+    core = ModuloEvaluator(plan, ii, dsp=None)
     assert core.initiation_interval == ii
     assert core.multipliers == -(-plan.count("mul") // ii)
     res = _check(core, plan, all_ports(plan))
@@ -36,21 +36,36 @@ def test_piecewise_plan_bit_exact_with_backpressure(seed):
     _check(core, plan, all_ports(plan), ready_prob=0.6, valid_prob=0.7, seed=seed)
 
 
-def test_schedule_respects_the_multipliers_and_dependencies():
+@pytest.mark.parametrize("dsp", [None, (8, 8), (6, 5)])
+def test_schedule_respects_the_multipliers_and_dependencies(dsp):
     plan = tiny_plan(1)
     for ii in (1, 2, 4):
-        sch = modulo_schedule(plan, ii)
+        sch = modulo_schedule(plan, ii, dsp)
         slots = set()
         for i, n in enumerate(plan.nodes):
             if n.op == "mul":
                 key = (sch.unit[i], sch.start[i] % ii)
                 assert key not in slots
                 slots.add(key)
-                assert sch.ready[i] == sch.start[i] + MUL_LATENCY
+                assert sch.ready[i] == sch.start[i] + sch.unit_latency[sch.unit[i]]
+                wa, wb = (plan.nodes[a].width + (not plan.nodes[a].signed) for a in n.args)
+                ua, ub = sch.operand_widths[sch.unit[i]]
+                assert (wb <= ua and wa <= ub) if sch.swap[i] else (wa <= ua and wb <= ub)
             if sch.start[i] is not None:
                 assert all(sch.ready[a] <= sch.start[i] for a in n.args)
-    # more multipliers than needed never lengthen the schedule
-    assert modulo_schedule(plan, 4, units=8).latency <= modulo_schedule(plan, 4).latency
+        for (ua, ub), lat in zip(sch.operand_widths, sch.unit_latency):
+            fits = dsp is None or (ua <= dsp[0] and ub <= dsp[1]) or (ua <= dsp[1] and ub <= dsp[0])
+            assert lat == (MUL_LATENCY if fits else WIDE_MUL_LATENCY)
+
+
+@pytest.mark.parametrize("dsp", [(8, 8), (6, 5), (4, 4)])
+def test_products_split_in_limbs_stay_bit_exact(dsp):
+    """Small DSP sizes force most products onto limb-split multipliers (every port value)."""
+    plan = tiny_plan(2)
+    core = ModuloEvaluator(plan, 3, dsp=dsp)
+    assert WIDE_MUL_LATENCY in core.schedule.unit_latency
+    res = _check(core, plan, all_ports(plan), ready_prob=0.8, seed=3)
+    assert np.all(res.latencies >= core.latency)
 
 
 def test_real_plan_random_targets_bit_exact(plan):
@@ -63,8 +78,7 @@ def test_real_plan_random_targets_bit_exact(plan):
 
 @pytest.mark.parametrize("kwargs, words", [
     ({"initiation_interval": 0}, "initiation_interval must be an integer >= 1, not 0"),
-    ({"initiation_interval": 2, "units": 0}, "units must be None or an integer >= 1, not 0"),
-    ({"initiation_interval": 1, "units": 1}, "units must be at least"),
+    ({"initiation_interval": 2, "dsp": (18,)}, r"dsp must be None or a pair of operand widths >= 2, not \(18,\)"),
 ])
 def test_bad_parameters(kwargs, words):
     with pytest.raises(ValueError, match=words):
