@@ -133,7 +133,7 @@ def test_a_plan_that_fails_certification_is_refitted_then_refused(small_robot, m
     orig_fit = fitter._fit_servo
     monkeypatch.setattr(fitter, "certify", failing)
     monkeypatch.setattr(fitter, "_fit_servo",
-                        lambda *a: refits.append((a[3], a[6])) or orig_fit(*a))
+                        lambda *a: refits.append((a[3], a[7])) or orig_fit(*a))
     with pytest.raises(FitError, match=r"^fit refused: servo s2: certified error [0-9.]+ pu exceeds "
                                        r"the tolerance 4 pu"):
         fit_robot(small_robot)
