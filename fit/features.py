@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .horner import horner
+from .horner import horner, lower_poly
 from .plan import PlanBuilder
 from .polyfit import fit_lawson, total_degree_terms, vander
 
@@ -162,17 +162,22 @@ class CylindricalStage(_Stage):
     def ik_frame(self, x, y, z):
         return self.geometry.ik_cartesian(x, y, z)
 
-    def build(self, b: PlanBuilder, fv: int, fc: int) -> list[int]:
+    def build(self, b: PlanBuilder, fv: int, fc: int, mixed: bool = False) -> list[int]:
         """Add the coordinate stage to ``b``: normalised (x, y, z) with ``fv`` fractional bits.
 
-        ``fc`` is the fractional precision of t**2, cos and sin. Call before
-        :meth:`build_radial` on the same builder.
+        ``fc`` is the fractional precision of t**2, cos and sin; ``mixed``: the series by the
+        Horner/Estrin mix of least depth (at most 2 extra multiplications each), else Horner.
+        Call before :meth:`build_radial` on the same builder.
         """
         rn, thn, zn = (b.input_nodes[n] for n in ("r", "theta", "z"))
         t = b.reinterpret(thn, b.frac(thn) + self.trig.kt)
         u = b.mul(t, t, fc)
-        cos = horner(b, {(k,): c for k, c in enumerate(self.trig.cos_coeffs)}, [u], fc)
-        sin = b.mul(t, horner(b, {(k,): c for k, c in enumerate(self.trig.sin_coeffs)}, [u], fc), fc)
+
+        def series(coeffs):
+            poly = {(k,): c for k, c in enumerate(coeffs)}
+            return lower_poly(b, poly, [u], fc, max_extra_muls=2, guard=4) if mixed else horner(b, poly, [u], fc)
+        cos = series(self.trig.cos_coeffs)
+        sin = b.mul(t, series(self.trig.sin_coeffs), fc)
         # Interval arithmetic on a Horner chain overestimates |cos| and |sin| ~10x, which
         # the servo polynomials would raise to the 8th power. Clamping to the true range
         # (plus the series error, so the clamp never moves a value away from the ideal)
@@ -224,7 +229,7 @@ class CartesianStage(_Stage):
     def ik_frame(self, *coords):
         return self.geometry.ik(*coords)
 
-    def build(self, b: PlanBuilder, fv: int, fc: int) -> list[int]:
+    def build(self, b: PlanBuilder, fv: int, fc: int, mixed: bool = False) -> list[int]:
         self._inputs = [b.input_nodes[n] for n in self.names]
         self._normalised = [nm.build(b, n, fv) for nm, n in zip(self.norms, self._inputs)]
         return list(self._normalised)

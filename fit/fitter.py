@@ -288,13 +288,13 @@ def _features(robot, stage, kind: str, pts) -> np.ndarray:
 class _Nodes:
     """Feature nodes of every kind on one builder, built on first use."""
 
-    def __init__(self, robot, stage, b: PlanBuilder, fv: int):
-        self.robot, self.stage, self.b, self.fv = robot, stage, b, fv
+    def __init__(self, robot, stage, b: PlanBuilder, fv: int, mixed: bool = False):
+        self.robot, self.stage, self.b, self.fv, self.mixed = robot, stage, b, fv, mixed
         self._kinds: dict = {}
 
     def __getitem__(self, kind: str) -> list:
         if "cartesian" not in self._kinds:
-            self._kinds["cartesian"] = self.stage.build(self.b, self.fv, self.fv + 4)
+            self._kinds["cartesian"] = self.stage.build(self.b, self.fv, self.fv + 4, self.mixed)
         if kind not in self._kinds:
             if kind == "radial":
                 self._kinds[kind] = self.stage.build_radial(self.b, self.fv)
@@ -340,7 +340,7 @@ def _build(robot, inputs, stage, fits: list[ServoFit], fv: int, mixed: bool | No
     """The plan of ``fits``; ``mixed`` None: as ``robot.lowering`` says."""
     mixed = getattr(robot, "lowering", "mixed") == "mixed" if mixed is None else mixed
     b = PlanBuilder(inputs)
-    nodes = _Nodes(robot, stage, b, fv)
+    nodes = _Nodes(robot, stage, b, fv, mixed)
     lo, hi = robot.pulse_limits_ticks()
     outs = []
     for sf in fits:
