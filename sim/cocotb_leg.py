@@ -10,6 +10,8 @@ Configuration comes from environment variables set by the runner:
 ``IKSERIES_SEED``      seed of the random targets and handshakes (default 1)
 ``IKSERIES_N_RANDOM``  number of random back-to-back targets (default 3000)
 ``IKSERIES_II``        initiation interval: cycles between input transfers (default 1, pipelined)
+``IKSERIES_ARCH``      stream timing of the core: ``pipelined``, ``folded`` or ``modulo`` (default:
+                       ``pipelined`` for II = 1, else ``folded``)
 ``IKSERIES_TOP``       ``leg`` (default) or ``robot``
 ``IKSERIES_LEGS``      legs of the robot top (default 1)
 
@@ -23,6 +25,25 @@ high exactly when no evaluation is in flight or its output transfers in that cyc
 transfers are at least II cycles apart; the streaming tests check that rule in every cycle
 instead of the pipelined "i_ready high whenever o_ready is high". The robot top gets every
 target with a random leg and must return it on o_leg.
+
+A modulo-scheduled core (``IKSERIES_ARCH=modulo``: several targets in flight, one entering every
+II cycles) has a free-running phase counter (0..II-1, 0 after reset) that advances in every
+cycle with en = !o_valid | o_ready and freezes with the whole pipeline in a stall; i_ready is
+en & (phase == 0), whether i_valid is high or not (an un-offered slot is a bubble). The bench
+keeps its own copy of the phase (0 in the cycle before relative edge 1, advanced after every
+cycle in which it sampled en high) and the streaming tests check i_ready against it in every
+cycle; latency is then exact plus the stall cycles in between, as for the other cores.
+
+The PWM test keeps its output schedule on a modulo core, but not its input schedule (input edges
+depend on the phase): each pair of targets (A B, C D, then F) enters at the first phase-0 edge after
+the previous pair has transferred (the second II edges later) and waits at the output, o_valid high
+and o_ready low, until its scheduled transfer edge, where o_ready is raised for one cycle; a last
+target G (F again) arrives after F and is never accepted. So the scheduled edges are met for any
+period the test accepts, the pipeline is frozen (en low) nearly all the time, which is what makes
+the ~5 simulated periods affordable on Icarus (the running modulo pipeline simulates at a few
+thousand cycles per second there), and o_valid held with o_ready low must not load the PWM
+generators. The bench models the phase through these stalls (:func:`_modulo_timing`) and checks the
+whole o_valid and i_ready waveforms against it.
 
 Timing conventions: the clock starts low at ``t0`` and rises at ``t0 + T/2 + e*T``
 (rising edge ``e``); the falling edge at ``t0 + e*T`` precedes rising edge ``e``. The bench
@@ -46,7 +67,7 @@ from cocotb.triggers import FallingEdge, ReadOnly, Timer, ValueChange
 from ikseries.fit.plan import Plan
 from ikseries.sim import golden
 from ikseries.sim.targets import corner_targets, random_targets
-from ikseries.sim.runner import (ENV_II, ENV_LATENCY, ENV_LEGS, ENV_N_RANDOM, ENV_PERIOD, ENV_PLAN, ENV_SEED,
+from ikseries.sim.runner import (ENV_ARCH, ENV_II, ENV_LATENCY, ENV_LEGS, ENV_N_RANDOM, ENV_PERIOD, ENV_PLAN, ENV_SEED,
                                  ENV_TOP)
 
 CLK_NS = 10
@@ -88,10 +109,13 @@ class Leg:
         self.seed = int(os.environ.get(ENV_SEED, "1"))
         self.n_random = int(os.environ.get(ENV_N_RANDOM, "3000"))
         self.ii = int(os.environ.get(ENV_II, "1"))
+        self.arch = os.environ.get(ENV_ARCH) or ("pipelined" if self.ii == 1 else "folded")
         self.robot = os.environ.get(ENV_TOP, "leg") == "robot"
         self.legs = int(os.environ.get(ENV_LEGS, "1"))
-        assert self.ii >= 1 and self.legs >= 1 and (self.robot or self.legs == 1), \
-            f"bad bench configuration: II {self.ii}, top {os.environ.get(ENV_TOP)}, legs {self.legs}"
+        assert self.ii >= 1 and self.legs >= 1 and (self.robot or self.legs == 1) \
+            and self.arch in ("pipelined", "folded", "modulo"), \
+            (f"bad bench configuration: II {self.ii}, architecture {self.arch}, "
+             f"top {os.environ.get(ENV_TOP)}, legs {self.legs}")
         self.rng = np.random.default_rng([self.seed, test_id])
         self.inputs = list(self.plan.inputs)
         self.servos = [o.name for o in self.plan.outputs]
@@ -198,6 +222,7 @@ class Leg:
         in_e, out_e, stall_e = [], [], []
         hs = Checker("stream handshake")
         k, held, cycle, drain = 0, None, 0, 0
+        phase = None        # modulo core: the bench's copy of the phase counter
         p_valid, p_ready = regimes[0]
         limit = 50 * n * self.ii + 10 * self.latency + 1000
         while drain <= self.latency + 4:
@@ -217,7 +242,15 @@ class Leg:
             if ov:
                 pay = tuple(int(self.o_sig[s].value) for s in self.servos) + (
                     (int(self.o_leg.value),) if self.o_leg is not None else (0,))
-            if self.ii == 1:
+            if self.arch == "modulo":
+                if phase is None:   # nothing sent since reset release: en high in every cycle since
+                    phase = (e - self.e1) % self.ii
+                en = int(not ov or ready)
+                hs(ir == int(en and phase == 0),
+                   lambda: f"edge {e}: i_ready {ir}, expected {int(en and phase == 0)} (modulo schedule: "
+                           f"phase {phase} of II {self.ii}, o_valid {ov}, o_ready {int(ready)})")
+                phase = (phase + en) % self.ii
+            elif self.ii == 1:
                 hs(ir or not ready, lambda: f"edge {e}: i_ready low while o_ready high (stalls the stream)")
                 hs(not (ov and not ready and ir), lambda: f"edge {e}: i_ready high while o_valid & !o_ready")
             else:
@@ -331,8 +364,9 @@ async def test_backpressure(dut):
     """Random i_valid gaps and random o_ready backpressure: outputs bit-exact, in order, none
     dropped or duplicated; o_valid and payload hold while stalled; i_ready high whenever o_ready
     is high and low while o_valid & !o_ready (II > 1: i_ready high exactly when nothing is in
-    flight or the output transfers); inputs >= II cycles apart; robot top: o_leg == the target's
-    random leg; latency == expected + stall cycles in between."""
+    flight or the output transfers; modulo core: i_ready high exactly when en and the phase is 0);
+    inputs >= II cycles apart; robot top: o_leg == the target's random leg; latency == expected +
+    stall cycles in between."""
     leg = Leg(dut, 2)
     try:
         await leg.start()
@@ -375,6 +409,49 @@ def _transitions(values: np.ndarray, first_edge: int = 1, initial: int = 0) -> l
     return [(int(i) + first_edge, int(v[i + 1])) for i in idx]
 
 
+def _modulo_timing(sched_rel: dict, L: int, II: int):
+    """Input edges, output arrival edges and the i_ready model of the PWM test on a modulo core.
+
+    ``sched_rel``: scheduled output transfer edge of A, B, C, D, F (relative edges); o_ready is
+    high only in the cycles before those edges. Pairs (A, B), (C, D), then F and G (F again,
+    never accepted) enter at the first edge with phase 0 after the previous group's last
+    transfer (the second II edges later). The first of a group arrives L - 1 edges after its
+    input (o_valid high after that edge); one behind a waiting output arrives II - 1 edges after
+    that output transfers. A cycle with o_valid high and o_ready low freezes the phase.
+
+    Returns (input edge per name, arrival edge per name, ``ready(r)``: expected i_ready sampled
+    by relative edges ``r`` (an array)).
+    """
+    waits: list = []        # (arrival edge, transfer edge or None) of every output
+
+    def ready(r):
+        r = np.asarray(r, dtype=np.int64)
+        frozen_before = np.zeros_like(r)
+        frozen_now = np.zeros(r.shape, dtype=bool)
+        for arr, t in waits:
+            end = r if t is None else np.minimum(r, t)
+            frozen_before += np.maximum(end - arr - 1, 0)
+            frozen_now |= (r > arr) & ((r < t) if t is not None else True)
+        return (~frozen_now & ((r - 1 - frozen_before) % II == 0)).astype(np.int64)
+
+    in_rel, arrive = {}, {}
+    start = 2                   # relative edge 1 has already been driven by the reset release
+    for group in (("A", "B"), ("C", "D"), ("F",), ("G",)):
+        a = start
+        while not ready(a):
+            a += 1
+        prev = None
+        for j, nm in enumerate(group):
+            in_rel[nm] = a + j * II
+            arrive[nm] = a + L - 1 if prev is None else sched_rel[prev] + II - 1
+            t = sched_rel.get(nm)
+            assert t is None or arrive[nm] < t, f"PWM test: {nm} arrives after edge {arrive[nm]}, due at {t}"
+            waits.append((arrive[nm], t))
+            prev = nm
+        start = sched_rel.get(group[-1], 0) + 1
+    return in_rel, arrive, ready
+
+
 async def _watch(sig, log: list):
     while True:
         await ValueChange(sig)
@@ -395,10 +472,11 @@ async def test_pwm(dut):
     high time == the width last transferred up to that period start; the exact list of pwm
     (and o_valid, i_ready) transitions equals the model's; reset at the end forces every output low.
 
-    With an initiation interval II > 1, B and D come II edges after A and C (B's input transfers
-    at A's output edge). The robot top gets every target for its last leg: that leg's pwm
-    outputs are checked as above, o_leg must name it, every other leg's pwm outputs must stay
-    low, and period_start must be high exactly after relative edges k*P + 1.
+    With an initiation interval II > 1, B and D come II edges after A and C (folded core: B's input
+    transfers at A's output edge). A modulo core gets its inputs early and o_ready only at the
+    scheduled edges (see the module docstring). The robot top gets every target for its last leg:
+    that leg's pwm outputs are checked as above, o_leg must name it, every other leg's pwm outputs
+    must stay low, and period_start must be high exactly after relative edges k*P + 1.
     """
     leg = Leg(dut, 3)
     P, L, II = leg.period, leg.latency, leg.ii
@@ -429,7 +507,14 @@ async def test_pwm(dut):
             leg.log.info("no target has a width >= the period %d: constant-high case not covered", P)
         names = "ABCDF"
         sched_rel = {"A": P // 2, "B": P // 2 + II, "C": P, "D": P + II, "F": 2 * P + 5}  # output edges
+        modulo = leg.arch == "modulo"
+        in_rel = {nm: sched_rel[nm] - L for nm in names}   # input transfer edges
+        if modulo:
+            assert P // 2 >= L + 2 * II + 1 and II < L, \
+                f"PWM test of a modulo core needs a period of at least {2 * (L + 2 * II + 1)} cycles and II < latency"
+            in_rel, arrive, ir_model = _modulo_timing(sched_rel, L, II)
         tgt = {nm: {i.name: int(pool[i.name][j]) for i in leg.inputs} for nm, j in zip(names, picks)}
+        tgt["G"] = tgt["F"]
         wid = {nm: {s: int(W[j, c]) for c, s in enumerate(leg.servos)} for nm, j in zip(names, picks)}
         for nm in names:
             leg.log.info("target %s %s at relative output edge %d: widths %s", nm, tgt[nm],
@@ -438,7 +523,7 @@ async def test_pwm(dut):
         n_end = 4 * P + 1 + (max(f_short) if f_short else 0) + 8   # last relative edge observed
 
         await leg.start()
-        dut.o_ready.value = 1
+        dut.o_ready.value = int(not modulo)
         rel0 = leg.e1 - 1                       # absolute edge = rel0 + relative edge
         await ReadOnly()
         chk = Checker("PWM at reset release")
@@ -460,12 +545,18 @@ async def test_pwm(dut):
         if leg.robot:
             cocotb.start_soon(_watch(dut.period_start, ps_log))
 
-        # drive: input at (output edge - L); sample the output payload before its transfer edge
+        # drive: input at in_rel (pipelined, folded: output edge - L); sample the output payload
+        # before its transfer edge; modulo: o_ready high only in the cycles before transfer edges
         actions: dict = {}
+        for nm, r in in_rel.items():
+            actions.setdefault(rel0 + r, {})["drive"] = nm
         for nm in names:
-            e_out = rel0 + sched_rel[nm]
-            actions.setdefault(e_out - L, {})["drive"] = nm
-            actions.setdefault(e_out, {}).setdefault("sample", []).append(nm)
+            actions.setdefault(rel0 + sched_rel[nm], {}).setdefault("sample", []).append(nm)
+            if modulo:
+                actions[rel0 + sched_rel[nm]]["ready"] = 1
+        if modulo:
+            for nm in names:
+                actions.setdefault(rel0 + sched_rel[nm] + 1, {}).setdefault("ready", 0)
         for e in [e for e, a in actions.items() if a.get("drive")]:
             if not actions.get(e + 1, {}).get("drive"):
                 actions.setdefault(e + 1, {})["drive"] = ""        # i_valid low again
@@ -476,6 +567,8 @@ async def test_pwm(dut):
             if "drive" in act:
                 dut.i_valid.value = int(bool(act["drive"]))
                 leg.drive_inputs(tgt[act["drive"]] if act["drive"] else None, sel)
+            if "ready" in act:
+                dut.o_ready.value = act["ready"]
             await ReadOnly()
             if act.get("drive"):
                 io(int(dut.i_ready.value) == 1, f"i_ready low at the input edge of {act['drive']}")
@@ -539,19 +632,25 @@ async def test_pwm(dut):
         ov_vals = np.zeros(n_end, dtype=np.int64)
         for nm in names:
             ov_vals[sched_rel[nm] - 2] = 1      # high after relative edge (transfer edge - 1)
+            if modulo:                          # and from its arrival on (waiting, o_ready low)
+                ov_vals[arrive[nm] - 1:sched_rel[nm] - 1] = 1
+        if modulo:
+            ov_vals[arrive["G"] - 1:] = 1       # G waits until the final reset
         ov_exp = _transitions(ov_vals)
         wave([x for x in ov_rec if x[0] <= n_end] == ov_exp,
              lambda: f"o_valid: recorded {ov_rec[:12]} expected {ov_exp}")
-        # i_ready (o_ready high): II = 1 always high; II > 1 low after an input transfer edge
-        # until one cycle before its output transfer edge
+        # i_ready (o_ready high): II = 1 always high; folded: low after an input transfer edge
+        # until one cycle before its output transfer edge; modulo: en & phase 0 (the model)
         ir_vals = np.ones(n_end, dtype=np.int64)
-        if II > 1:
+        if modulo:
+            ir_vals = ir_model(np.arange(2, n_end + 2))     # after edge n: what edge n + 1 sees
+        elif II > 1:
             for nm in names:
                 ir_vals[sched_rel[nm] - L - 1:sched_rel[nm] - 2] = 0   # relative edges in .. out-2
         ir_rec = [(leg.edge_at(t) - rel0, v) for t, v in ir_log]
         ir_exp = _transitions(ir_vals, initial=1)
         wave([x for x in ir_rec if x[0] <= n_end] == ir_exp,
-             lambda: f"i_ready (o_ready high): recorded {ir_rec[:12]} expected {ir_exp[:12]}")
+             lambda: f"i_ready: recorded {ir_rec[:12]} expected {ir_exp[:12]}")
         for (g, s), lg in other_logs.items():
             wave(not [x for x in lg if leg.edge_at(x[0]) - rel0 <= n_end],
                  lambda: f"pwm_l{g}_{s} (no target sent to leg {g}) changed: {lg[:6]}")

@@ -4,8 +4,8 @@ The Verilog is exported from ``LegCore(plan, period)`` (or from a given leg or r
 a folded :class:`~ikseries.hdl.leg.LegCore`, a shared :class:`~ikseries.hdl.shared.RobotCore`)
 into ``build_dir``, built with :func:`cocotb_tools.runner.get_runner` and simulated with the
 cocotb test module :mod:`ikseries.sim.cocotb_leg`. The plan file, the PWM period, the expected
-latency, the initiation interval and the top (leg or robot, with its number of legs) reach that
-module through environment variables (see ``ENV_*``).
+latency, the initiation interval, the core's architecture (its stream timing) and the top (leg or
+robot, with its number of legs) reach that module through environment variables (see ``ENV_*``).
 
 Example::
 
@@ -26,7 +26,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 __all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_PLAN", "ENV_PERIOD", "ENV_LATENCY", "ENV_SEED",
-           "ENV_N_RANDOM", "ENV_II", "ENV_TOP", "ENV_LEGS", "VERILATOR_OPT", "default_n_random", "Result",
+           "ENV_N_RANDOM", "ENV_II", "ENV_ARCH", "ENV_TOP", "ENV_LEGS", "VERILATOR_OPT", "default_n_random", "Result",
            "simulator_available", "verilator_bin_dir", "export", "run"]
 
 SIMULATORS = ("icarus", "verilator")
@@ -39,6 +39,7 @@ ENV_LATENCY = "IKSERIES_LATENCY"    # expected input-transfer -> output-transfer
 ENV_SEED = "IKSERIES_SEED"          # seed of the bench's random targets and handshakes
 ENV_N_RANDOM = "IKSERIES_N_RANDOM"  # number of random back-to-back targets
 ENV_II = "IKSERIES_II"              # initiation interval: cycles between input transfers (1: pipelined)
+ENV_ARCH = "IKSERIES_ARCH"          # stream timing: "pipelined", "folded" or "modulo" (core.architecture)
 ENV_TOP = "IKSERIES_TOP"            # "leg" (FlatLegTop) or "robot" (FlatRobotTop)
 ENV_LEGS = "IKSERIES_LEGS"          # legs of the robot top (1 for the leg top)
 
@@ -198,6 +199,7 @@ class Result:
     top: str = "leg"
     legs: int = 1
     n_random: int | None = None
+    architecture: str = "pipelined"
 
     @property
     def ok(self) -> bool:
@@ -254,6 +256,8 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
         ``RobotCore`` gets its initiation interval (and legs) passed to the bench; None: the
         pipelined ``LegCore(plan, period)``.
     initiation_interval : initiation interval told to the bench (default: the core's).
+        The bench's stream timing follows the core's architecture: ``LegCore.architecture``
+        (``"pipelined"``, ``"folded"`` or ``"modulo"``), ``"folded"`` for a ``RobotCore``.
     """
     from cocotb_tools.runner import get_runner
 
@@ -267,6 +271,7 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
     vfile, core = export(plan_path, period, build_dir, name, core)
     from ikseries.hdl.shared import RobotCore
     robot = isinstance(core, RobotCore)
+    arch = "folded" if robot else core.architecture
     ii = core.initiation_interval if initiation_interval is None else initiation_interval
     if n_random is None:
         n_random = default_n_random(ii)
@@ -280,7 +285,7 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
 
     env = {ENV_PLAN: str(plan_path), ENV_PERIOD: str(period),
            ENV_LATENCY: str(core.latency if latency is None else latency), ENV_SEED: str(seed),
-           ENV_N_RANDOM: str(n_random), ENV_II: str(ii), ENV_TOP: "robot" if robot else "leg",
+           ENV_N_RANDOM: str(n_random), ENV_II: str(ii), ENV_ARCH: arch, ENV_TOP: "robot" if robot else "leg",
            ENV_LEGS: str(core.legs if robot else 1)}
     xml = build_dir / "results.xml"
     path = makeflags = None
@@ -316,4 +321,4 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
         wave_file = build_dir / (f"{name}.vcd" if simulator == "icarus" else "dump.vcd")
     return Result(simulator, build_dir, xml, _parse_results(xml), int(env[ENV_LATENCY]),
                   t1 - t0, t2 - t1, exit_code or 0, wave_file, ii, env[ENV_TOP], int(env[ENV_LEGS]),
-                  n_random)
+                  n_random, arch)

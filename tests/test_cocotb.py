@@ -18,6 +18,12 @@ The same three tests also run on cores with an initiation interval II > 1: the f
 both simulators and the shared robot top (``RobotCore`` over the small plan, three legs) on
 Icarus; with II = 239 the runner's default is 251 random targets (plus 20 corners) back to back
 and half as many with backpressure, ~15-25 s per simulator.
+
+The modulo-scheduled leg top (``LegCore(small_plan, PWM_PERIOD, interval=4)``: several targets
+in flight, i_ready high when the phase counter is 0) runs them too on both simulators, with 1000
+random targets: ~30 s on Icarus (which simulates the running modulo pipeline at a few thousand
+cycles per second; the PWM test keeps it frozen while outputs wait for their edges), ~45 s on
+Verilator (mostly the C++ build).
 """
 from __future__ import annotations
 
@@ -123,14 +129,55 @@ def test_cocotb_bench_detects_wrong_folded_timing(wrong, small_plan, small_plan_
     from ikseries.hdl.leg import LegCore
     _skip_unless_available("icarus")
     core = LegCore(small_plan, PWM_PERIOD, multipliers=1, dsp=(16, 16))
-    build_dir = tmp_path_factory.mktemp(f"cocotb_icarus_folded_wrong_{wrong}")
+    passed, msg, summary = _back_to_back_told_wrong(core, wrong, small_plan_file,
+                                                    tmp_path_factory.mktemp(f"cocotb_icarus_folded_wrong_{wrong}"))
+    assert not passed and ("latency" if wrong == "latency" else "initiation interval") in msg, summary
+
+
+def _back_to_back_told_wrong(core, wrong, plan_file, build_dir):
+    """(passed, message, summary) of the back-to-back test on Icarus (4 random targets) told a
+    latency (``wrong="latency"``) or an initiation interval (``"ii"``) one cycle too long."""
     told = ({"latency": core.latency + 1} if wrong == "latency"
             else {"initiation_interval": core.initiation_interval + 1})
-    bad = run(small_plan_file, PWM_PERIOD, "icarus", build_dir, core=core, n_random=4,
+    bad = run(plan_file, PWM_PERIOD, "icarus", build_dir, core=core, n_random=4,
               testcase="test_back_to_back", **told)
     assert set(bad.tests) == {"test_back_to_back"}, bad.summary()
-    passed, msg = bad.tests["test_back_to_back"]
-    assert not passed and ("latency" if wrong == "latency" else "initiation interval") in msg, bad.summary()
+    return (*bad.tests["test_back_to_back"], bad.summary())
+
+
+def _modulo_core(small_plan, interval: int = 4):
+    """The modulo-scheduled leg top over the small plan (II = ``interval`` < latency)."""
+    from ikseries.hdl.leg import LegCore
+    core = LegCore(small_plan, PWM_PERIOD, interval=interval)
+    assert core.architecture == "modulo" and 1 < core.initiation_interval < core.latency
+    return core
+
+
+@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+def test_modulo_leg_core_cocotb(simulator, small_plan, small_plan_file, tmp_path_factory):
+    """The modulo-scheduled leg top (II = 4, several targets in flight): every cocotb test with
+    the phase rule (i_ready == en & phase 0, checked every cycle), 1000 random targets (plus
+    corners) one every II cycles back to back at the exact latency, half as many with
+    backpressure (latency + stalls), PWM waveforms (outputs held at o until their scheduled edge)."""
+    _skip_unless_available(simulator)
+    core = _modulo_core(small_plan)
+    build_dir = tmp_path_factory.mktemp(f"cocotb_{simulator}_modulo")
+    res = run(small_plan_file, PWM_PERIOD, simulator, build_dir, core=core, n_random=1000)
+    print(res.summary())
+    assert set(res.tests) == COCOTB_TESTS, res.summary()
+    assert res.ok, res.summary()
+    assert (res.latency, res.initiation_interval, res.architecture, res.top) == \
+        (core.latency, core.initiation_interval, "modulo", "leg")
+
+
+@pytest.mark.parametrize("wrong", ["latency", "ii"])
+def test_cocotb_bench_detects_wrong_modulo_timing(wrong, small_plan, small_plan_file, tmp_path_factory):
+    """Not vacuous for the modulo core: told a latency one cycle off, the back-to-back test fails
+    on latency; told an initiation interval one cycle off, on the bench's phase (i_ready)."""
+    _skip_unless_available("icarus")
+    passed, msg, summary = _back_to_back_told_wrong(_modulo_core(small_plan), wrong, small_plan_file,
+                                                    tmp_path_factory.mktemp(f"cocotb_icarus_modulo_wrong_{wrong}"))
+    assert not passed and ("latency (expected" if wrong == "latency" else "i_ready") in msg, summary
 
 
 def test_build_notes_simulators_auto_skipped(monkeypatch, tmp_path):
