@@ -10,6 +10,10 @@ For the cylinder-leg robot, the IK cores alone (no PWM), as flat-port stream top
 ``moduloN``    ``ModuloEvaluator``: the dataflow pipelined, its multiplications shared by a modulo
                schedule, one target every N cycles (N = 4, 8, 12; products gathered by the device's
                DSP size);
+``moduloNr``   the same on the ECP5 only (N = 8, 12) with every block product an instantiated
+               MULT18X18D using its own input and output registers (Yosys leaves them in the
+               fabric); a place-and-route experiment: the primitive has no simulation model here,
+               so this variant is not simulated (its accuracy column is the plan's);
 ``cordic``     ``CordicLegSolver``, sized with ``size_cordic(margin_pu=0.075)`` (about 1.5 min)
                unless ``--cordic-design JSON`` gives the design;
 
@@ -35,7 +39,7 @@ latency in ns at Fmax on y, Pareto front of the placed cylinder-leg cores marked
 verdicts for the issue's targets.
 
     python bench/pareto.py [--devices ice40-up5k-sg48,ecp5-25f-cabga381]
-                           [--designs pipelined,modulo4,modulo8,modulo12,folded1,folded2,cordic,hexapod] [--jobs 2]
+                           [--designs pipelined,modulo4,modulo8,modulo12,modulo8r,modulo12r,folded1,folded2,cordic,hexapod] [--jobs 2]
                            [--clock-mhz 100] [--cordic-design JSON] [--out build/bench/pareto.json]
 """
 from __future__ import annotations
@@ -52,8 +56,11 @@ from ikseries.pnr import PNR_DEVICES
 
 ICE40, ECP5 = "ice40-up5k-sg48", "ecp5-25f-cabga381"
 MODULO_II = (4, 8, 12)
-DESIGNS = ("pipelined", *(f"modulo{ii}" for ii in MODULO_II), "folded1", "folded2", "cordic", "hexapod")
+MODULO_DSPREG_II = (8, 12)   # ECP5 only: MULT18X18D with its own registers (not simulated)
+DESIGNS = ("pipelined", *(f"modulo{ii}" for ii in MODULO_II), *(f"modulo{ii}r" for ii in MODULO_DSPREG_II),
+           "folded1", "folded2", "cordic", "hexapod")
 POLY_DESIGNS = tuple(d for d in DESIGNS if d not in ("cordic", "hexapod"))
+UNVERIFIED = tuple(f"modulo{ii}r" for ii in MODULO_DSPREG_II)   # not simulated: out of the verdicts
 TARGET_FMAX_MHZ, TARGET_LATENCY_NS, TARGET_THROUGHPUT = 150.0, 200.0, 20e6
 HEXAPOD_DSP, HEXAPOD_LC, HEXAPOD_REFRESH_HZ = 8, 5280, 1000.0
 
@@ -94,6 +101,18 @@ def polynomial_specs(plan, max_error_pu: float | None, names=POLY_DESIGNS,
             f"modulo{ii}", "polynomial", f"polynomial, modulo-scheduled, one target per {ii} cycles",
             lambda dev, make=make_modulo, ii=ii: (stream_verilog(make(dev), f"poly_modulo{ii}"), f"poly_modulo{ii}"),
             lambda dev, make=make_modulo: make(dev).latency, lambda dev, ii=ii: ii, max_error_pu, extra=extra))
+    for ii in MODULO_DSPREG_II:
+        if f"modulo{ii}r" not in names:
+            continue
+
+        def make_reg(dev, ii=ii):
+            return ModuloEvaluator(plan, ii, dsp=(18, 18), dsp_registers="ecp5")
+        specs.append(DesignSpec(
+            f"modulo{ii}r", "polynomial", f"polynomial, modulo-scheduled, one target per {ii} cycles, "
+            "MULT18X18D registers (not simulated)",
+            lambda dev, make=make_reg, ii=ii: (stream_verilog(make(dev), f"poly_modulo{ii}r"), f"poly_modulo{ii}r"),
+            lambda dev, make=make_reg: make(dev).latency, lambda dev, ii=ii: ii, max_error_pu,
+            devices=(ECP5,), extra=extra))
     for k in (1, 2):
         if f"folded{k}" not in names:
             continue
@@ -154,7 +173,22 @@ def _certified(cert: dict) -> dict | None:
 
 # -- verdicts --------------------------------------------------------------------------------------
 def _by(records, device, kind=None):
-    return [r for r in records if r["device"] == device and (kind is None or r["kind"] == kind)]
+    """Records of ``device`` (and ``kind``), the unverified experiments left out."""
+    return [r for r in records if r["device"] == device and (kind is None or r["kind"] == kind)
+            and r["design"] not in UNVERIFIED]
+
+
+def verdict_experiments(records) -> list[str]:
+    """The unverified place-and-route experiments, apart from the verdicts."""
+    lines = []
+    for r in records:
+        if r["design"] in UNVERIFIED and r["status"] == "placed":
+            lines.append(f"experiment (not simulated, not in the verdicts): {r['design']} on {r['device']}: "
+                         f"Fmax {r['fmax_mhz']:.1f} MHz, latency {r['latency_ns']:.0f} ns, "
+                         f"{r['throughput_per_s'] / 1e6:.3g} M/s, LUT {r['LUT']}, DSP {r['DSP']}")
+        elif r["design"] in UNVERIFIED:
+            lines.append(f"experiment {r['design']} on {r['device']}: {r['status']}")
+    return lines
 
 
 def verdict_ecp5_speed(records) -> list[str]:
@@ -358,7 +392,7 @@ def main(argv=None):
         front = plot_device([r for r in records if r["kind"] != "robot"], d, png)
         plots[d] = {"png": str(png), "pareto_front": front}
     verdicts = {"ecp5_speed": verdict_ecp5_speed(records), "hexapod": verdict_hexapod(records),
-                "poly_vs_cordic": verdict_poly_vs_cordic(records)}
+                "poly_vs_cordic": verdict_poly_vs_cordic(records), "experiments": verdict_experiments(records)}
     result = {**info, "clock_target_mhz": args.clock_mhz, "seed": args.seed, "devices": devices,
               "area_metric": "LUT + FF - harness_ffs (Yosys counts)", "records": records, "plots": plots,
               "verdicts": verdicts, "seconds": round(time.perf_counter() - t0, 1)}

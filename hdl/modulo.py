@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Array, Cat, ClockSignal, Const, Instance, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -219,6 +219,13 @@ class ModuloEvaluator(wiring.Component):
     dsp : (int, int) or None
         Signed operand widths of the device's DSP multiplier (default ECP5 MULT18X18D 18x18;
         iCE40 SB_MAC16 16x16, Xilinx DSP48E1 25x18); None: every product in one piece.
+    dsp_registers : None or "ecp5"
+        None (default): the operand and product registers are fabric flip-flops (Yosys maps
+        the product to a DSP block without absorbing them, so every product path runs fabric
+        -> DSP -> fabric). "ecp5": each block product is an instantiated MULT18X18D with its own
+        input and output registers (clock enable = the pipeline enable), same timing. For
+        place-and-route experiments only: neither the Amaranth simulator nor Icarus/Verilator
+        has a model of the primitive, so this variant is not simulated.
 
     Attributes
     ----------
@@ -238,7 +245,8 @@ class ModuloEvaluator(wiring.Component):
     ``o.ready`` low, everything, the phase counter included, stalls.
     """
 
-    def __init__(self, plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = (18, 18)):
+    def __init__(self, plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = (18, 18),
+                 dsp_registers: str | None = None):
         if not isinstance(plan, Plan):
             raise TypeError(f"plan must be a Plan, not {plan!r}")
         if isinstance(initiation_interval, bool) or not isinstance(initiation_interval, int) \
@@ -247,8 +255,11 @@ class ModuloEvaluator(wiring.Component):
         if dsp is not None and not (isinstance(dsp, tuple) and len(dsp) == 2
                                     and all(isinstance(w, int) and w >= 2 for w in dsp)):
             raise ValueError(f"dsp must be None or a pair of operand widths >= 2, not {dsp!r}")
+        if dsp_registers not in (None, "ecp5") or (dsp_registers and dsp != (18, 18)):
+            raise ValueError(f"dsp_registers must be None, or 'ecp5' with dsp=(18, 18), not {dsp_registers!r}")
         self._plan = plan
         self._dsp = dsp
+        self._dsp_registers = dsp_registers
         self._schedule = modulo_schedule(plan, initiation_interval, dsp)
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),
@@ -274,6 +285,31 @@ class ModuloEvaluator(wiring.Component):
     @property
     def multipliers(self) -> int:
         return self._schedule.units
+
+    def _product(self, m, a, b, en, name):
+        """``a * b`` two enabled clock edges later: operand registers, then a product register
+        (in the fabric; with ``dsp_registers="ecp5"`` the MULT18X18D's own input and output
+        registers)."""
+        wa, wb = len(a), len(b)
+        p = Signal(signed(wa + wb + 1), name=f"{name}_p")   # + 1: unsigned limb x unsigned limb
+        if self._dsp_registers is None:
+            ar, br = Signal(a.shape(), name=f"{name}_a"), Signal(b.shape(), name=f"{name}_b")
+            with m.If(en):
+                m.d.sync += [ar.eq(a), br.eq(b), p.eq(ar * br)]
+            return p
+        sa, sb, out = Signal(signed(18)), Signal(signed(18)), Signal(36)
+        m.d.comb += [sa.eq(a), sb.eq(b), p.eq(out.as_signed())]
+        regs = {f"p_REG_{r}_{f}": v for r in ("INPUTA", "INPUTB", "OUTPUT")
+                for f, v in (("CLK", "CLK0"), ("CE", "CE0"), ("RST", "RST0"))}
+        m.submodules[f"{name}_dsp"] = Instance(
+            "MULT18X18D", **regs, p_REG_INPUTC_CLK="NONE", p_REG_PIPELINE_CLK="NONE", p_GSR="DISABLED",
+            p_CLK0_DIV="ENABLED", p_SOURCEB_MODE="B_SHIFT", p_RESETMODE="SYNC",
+            **{f"i_A{k}": sa[k] for k in range(18)}, **{f"i_B{k}": sb[k] for k in range(18)},
+            **{f"i_C{k}": Const(0, 1) for k in range(18)},
+            i_SIGNEDA=Const(1, 1), i_SIGNEDB=Const(1, 1), i_SOURCEA=Const(0, 1), i_SOURCEB=Const(0, 1),
+            i_CLK0=ClockSignal(), i_CE0=en, i_RST0=Const(0, 1),
+            **{f"o_P{k}": out[k] for k in range(36)})
+        return p
 
     def elaborate(self, platform):
         m = Module()
@@ -359,28 +395,25 @@ class ModuloEvaluator(wiring.Component):
             if not mine:
                 continue
             wa, wb = sch.operand_widths[u]
-            a, b = Signal(signed(wa), name=f"mul{u}_a"), Signal(signed(wb), name=f"mul{u}_b")
-            p = Signal(signed(wa + wb), name=f"mul{u}_p")
-            with m.If(en):
-                if sch.unit_latency[u] == MUL_LATENCY:
-                    m.d.sync += p.eq(a * b)
-                else:   # limbs: registered partial products, then their registered sum
-                    terms = []
-                    for j, (xa, sa) in enumerate(_limbs(a, wa, self._dsp[0] - 1)):
-                        for k, (xb, sb) in enumerate(_limbs(b, wb, self._dsp[1] - 1)):
-                            pp = Signal(signed(xa.shape().width + xb.shape().width + 1), name=f"mul{u}_p{j}{k}")
-                            m.d.sync += pp.eq(xa * xb)
-                            terms.append(pp << (sa + sb))
-                    total = terms[0]
-                    for t in terms[1:]:
-                        total = total + t
+            a, b = Signal(signed(wa), name=f"mul{u}_a_next"), Signal(signed(wb), name=f"mul{u}_b_next")
+            with m.Switch(phase):
+                for i in mine:
+                    s = sch.start[i]
+                    x, y = nodes[i].args[::-1] if sch.swap[i] else nodes[i].args
+                    with m.Case(s % ii):
+                        m.d.comb += [a.eq(read(x, s)), b.eq(read(y, s))]
+            if sch.unit_latency[u] == MUL_LATENCY:
+                p = self._product(m, a, b, en, f"mul{u}")
+            else:   # limbs: registered partial products, then their registered sum
+                terms = [self._product(m, xa, xb, en, f"mul{u}_{j}{k}") << (sa + sb)
+                         for j, (xa, sa) in enumerate(_limbs(a, wa, self._dsp[0] - 1))
+                         for k, (xb, sb) in enumerate(_limbs(b, wb, self._dsp[1] - 1))]
+                p = Signal(signed(wa + wb), name=f"mul{u}_p")
+                total = terms[0]
+                for t in terms[1:]:
+                    total = total + t
+                with m.If(en):
                     m.d.sync += p.eq(total)
-                with m.Switch(phase):
-                    for i in mine:
-                        s = sch.start[i]
-                        x, y = nodes[i].args[::-1] if sch.swap[i] else nodes[i].args
-                        with m.Case(s % ii):
-                            m.d.sync += [a.eq(read(x, s)), b.eq(read(y, s))]
             for i in mine:
                 with m.If(at_phase(sch.start[i] + sch.unit_latency[u] - 1)):
                     m.d.sync += chains[i][0].eq(p)

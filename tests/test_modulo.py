@@ -94,3 +94,21 @@ def test_leg_core_with_an_interval_is_modulo_scheduled():
     with pytest.raises(ValueError, match="multipliers must be None with interval"):
         LegCore(plan, 400, interval=3, multipliers=1)
     _check(core, plan, all_ports(plan))
+
+
+def test_ecp5_dsp_registers_instantiate_the_primitive_with_its_registers():
+    """The place-and-route variant: every block product a MULT18X18D with input and output
+    registers on the pipeline enable (not simulated: no model of the primitive)."""
+    from amaranth.back import verilog
+    plan = tiny_plan(2)
+    core = ModuloEvaluator(plan, 2, dsp_registers="ecp5")
+    text = verilog.convert(core, name="m", emit_src=False)
+    n = text.count("MULT18X18D")
+    assert n == core.multipliers and n > 0
+    for reg in ("INPUTA", "INPUTB", "OUTPUT"):
+        assert text.count(f'.REG_{reg}_CLK("CLK0")') == n
+    assert ".CE0(en)" in text.replace(" ", "")
+    with pytest.raises(ValueError, match="dsp_registers must be None, or 'ecp5' with dsp=.18, 18., not 'ice40'"):
+        ModuloEvaluator(plan, 2, dsp_registers="ice40")
+    with pytest.raises(ValueError, match="dsp_registers must be None"):
+        ModuloEvaluator(plan, 2, dsp=(16, 16), dsp_registers="ecp5")
