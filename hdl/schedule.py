@@ -50,13 +50,16 @@ from dataclasses import dataclass, field
 from ..fit.plan import REGISTERED_OPS, Plan, bits_for
 from .limbmul import _check_dsp, limb_split
 
-__all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "compile_program", "resolve_view"]
+__all__ = ["ALU_OPS", "DSP_SIZES", "READ_DELAY", "WRITE_DELAY", "MicroOp", "Program", "compile_program", "resolve_view"]
 
 ALU_OPS = ("add", "max", "min", "pass", "and")
 #: DSP multiplier sizes (signed operand bits) of common FPGA families
 DSP_SIZES = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
-ALU_LATENCY = 2        # issue -> write
-LUT_LATENCY = 2        # issue -> write: index read, ROM read, write
+READ_DELAY = 2         # issue -> cycle the units see the (registered) read data
+ALU_LATENCY = READ_DELAY + 2   # issue -> write: read, read register, ALU compare/add, ALU select
+LUT_LATENCY = READ_DELAY + 1   # issue -> write: index read, read register, ROM read
+WRITE_DELAY = 2        # written at w (source selected and registered), shifted into its view and
+                       # registered at w + 1 (fields view/we/wa/cap), in the memory at w + 2
 VIEW_OPS = ("shr", "shl", "frac", "index")   # wiring folded into views (index is a shr)
 
 
@@ -139,7 +142,8 @@ class Program:
 
     @property
     def mul_latency(self) -> int:
-        return self.n_limbs + 4
+        """Issue -> write of a product: ``go`` at ``READ_DELAY``, then the unit's ``n_limbs + 3``."""
+        return READ_DELAY + self.n_limbs + 3
 
     @property
     def n_consts(self) -> int:
@@ -264,7 +268,7 @@ def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
     lat = [{"load": 0, "alu": ALU_LATENCY, "lut": LUT_LATENCY}.get(o.kind, mul_latency) for o in ops]
     height = [0] * len(ops)
     for k in reversed(range(len(ops))):       # ops are in dependency order
-        height[k] = lat[k] + max([height[c] + 1 for c in consumers[k]] + [0])
+        height[k] = lat[k] + max([height[c] + 1 + WRITE_DELAY for c in consumers[k]] + [0])
     ready_at = {}                             # value id -> first cycle it can be read
     wport: set[int] = set()
     unit_free = [0] * multipliers             # first cycle a unit may take a new go
@@ -276,7 +280,7 @@ def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
             k = loads.pop(0)
             ops[k].issue = ops[k].write = t
             wport.add(t)
-            ready_at[ops[k].out] = t + 1
+            ready_at[ops[k].out] = t + 1 + WRITE_DELAY
         cands = [k for k in waiting
                  if all(a not in producer or ready_at.get(a, 1 << 30) <= t for a in ops[k].args)]
         cands.sort(key=lambda k: (-height[k], k))
@@ -286,14 +290,14 @@ def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
             if w in wport:
                 continue
             if o.kind == "mul":
-                free = [u for u in range(multipliers) if unit_free[u] <= t + 1]
+                free = [u for u in range(multipliers) if unit_free[u] <= t + READ_DELAY]
                 if not free:
                     continue
                 o.unit = free[0]
-                unit_free[o.unit] = t + 1 + n_limbs
+                unit_free[o.unit] = t + READ_DELAY + n_limbs
             o.issue, o.write = t, w
             wport.add(w)
-            ready_at[o.out] = w + 1
+            ready_at[o.out] = w + 1 + WRITE_DELAY
             waiting.remove(k)
             break
         t += 1
@@ -303,7 +307,8 @@ def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
 
 def _allocate(prog: Program):
     """Memory addresses: constants first (pre-loaded), then intermediates, reusing a slot
-    once the last read of its value has been issued (strictly before the next write)."""
+    once the last read of its value has been issued (strictly before the cycle the next
+    value enters the memory, ``write + WRITE_DELAY``)."""
     last_read: dict[int, int] = {}
     for o in prog.ops:
         for a in o.args:
@@ -316,7 +321,7 @@ def _allocate(prog: Program):
         if o.out not in last_read:             # only captured as an output: not stored
             continue
         for s, f in enumerate(free_after):
-            if f < o.write:
+            if f < o.write + WRITE_DELAY:    # last read before the memory write
                 free_after[s] = last_read[o.out]
                 prog.slot[o.out] = base + s
                 break
@@ -354,7 +359,7 @@ def compile_program(plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | Non
     _allocate(prog)
     prog.views = sorted({o.view for o in ops})
     writes = [o.write for o in ops]
-    prog.steps = max(writes) + 1 if writes else 1
+    prog.steps = max(writes) + 1 + WRITE_DELAY if writes else 1
     _assemble(prog)
     return prog
 
@@ -376,17 +381,18 @@ def _assemble(prog: Program):
             w["rx"] = prog.slot[o.args[0]]
             w["ry"] = prog.slot[o.args[-1]]
             if o.kind == "alu":
-                words[o.issue + 1]["alu"] = ALU_OPS.index(o.alu)
+                words[o.issue + READ_DELAY + 1]["alu"] = ALU_OPS.index(o.alu)
             elif o.kind == "lut":
-                words[o.issue + 1]["tab"] = o.table
+                words[o.issue + READ_DELAY]["tab"] = o.table
             else:
-                words[o.issue + 1]["go"] |= 1 << o.unit
+                words[o.issue + READ_DELAY]["go"] |= 1 << o.unit
         if o.write in written:
             raise RuntimeError(f"write port conflict at step {o.write} (internal error)")
         written.add(o.write)
-        w = words[o.write]
-        w["src"] = (0 if o.kind == "alu" else 1 + o.unit if o.kind == "mul"
-                    else 1 + k + len(inputs) if o.kind == "lut" else 1 + k + inputs.index(o.input))
+        words[o.write]["src"] = (0 if o.kind == "alu" else 1 + o.unit if o.kind == "mul"
+                                 else 1 + k + len(inputs) if o.kind == "lut"
+                                 else 1 + k + inputs.index(o.input))
+        w = words[o.write + 1]                 # after the source register
         w["view"] = vidx[o.view]
         if o.out in prog.slot:
             w["we"], w["wa"] = 1, prog.slot[o.out]
