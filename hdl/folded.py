@@ -21,13 +21,15 @@ def _bits(n: int) -> int:
 def microcode_layout(prog: Program) -> data.StructLayout:
     """Fields of one microcode word (everything the machine does in one cycle).
 
-    ``rx``/``ry``: value-memory read addresses; ``alu``: ALU operation on the data read
-    the cycle before; ``go``: one bit per multiplier, latch the data read the cycle before;
-    ``we``/``wa``: write the write-back value at address ``wa``; ``src``: write-back source
-    (0 ALU, 1..k multipliers, k+1.. input registers, then the table ROM if any); ``view``:
-    index of the write-back shift ``(x >> a) << b``; ``cap``: one bit per output, capture the
-    write-back value; ``tab`` (only when the plan has ``lut`` nodes): table number of the ROM
-    lookup of the index read the cycle before.
+    ``rx``/``ry``: value-memory read addresses; ``go``: one bit per multiplier, latch the
+    read register (data read two words before); ``tab`` (only when the plan has ``lut``
+    nodes): table number of the ROM lookup of the index in the read register; ``alu``: ALU
+    selection (operation) of the operands read three words before; ``src``: write-back
+    source, registered (0 ALU, 1..k multipliers, k+1.. input registers, then the table ROM
+    if any); ``view``: index of the shift ``(x >> a) << b`` applied to the source registered
+    the word before; ``we``/``wa``: write that shifted value at address ``wa`` (one word
+    later); ``cap``: one bit per output, capture it (one word later). The exact offsets are
+    in :mod:`ikseries.hdl.schedule` (Timing).
     """
     k = prog.multipliers
     fields = {
@@ -77,11 +79,20 @@ class FoldedEvaluator(wiring.Component):
     program : Program
         The schedule and microcode.
 
+    The long paths are registered for clock speed: the microcode ROM's word (the ROM reads
+    two words ahead; word 0 is a constant loaded while idle), the memory's read data before
+    the ALU, multipliers and table ROM, the ALU between its sum/comparison and its selection,
+    and the write-back between the source selection and the view shift, and again before the
+    memory write port and the output registers. The compiler's timing model
+    (:mod:`ikseries.hdl.schedule`, Timing) accounts for every stage: an operation's result is
+    written ``ALU_LATENCY`` (4), ``LUT_LATENCY`` (3) or ``program.mul_latency`` cycles after
+    its issue and can be read ``WRITE_DELAY + 1`` (3) cycles after that.
+
     Latency
     -------
-    ``latency`` = ``program.steps + 1`` cycles from an input transfer to ``o.valid``. A
-    ``lut`` lookup occupies one issue slot and is written 2 cycles after its issue (like an
-    ALU operation); the schedule, hence ``program.steps``, includes it.
+    ``latency`` = ``program.steps + 1`` cycles from an input transfer to ``o.valid``
+    (``program.steps``: last write + ``WRITE_DELAY`` + 1, the length of the schedule,
+    every pipeline stage included).
 
     Throughput
     ----------

@@ -33,15 +33,30 @@ port takes one value per cycle anyway).
 
 Timing (cycle = microcode step, step 0 is the cycle after the input transfer)
 ----------------------------------------------------------------------------
-- an operation *issued* at ``t`` reads its operands at ``t`` (read data at ``t + 1``);
-- ALU: computes at ``t + 1``, result written at ``t + 2``;
-- lut: the ROM address (index read at ``t``, table ``tab`` of the word at ``t + 1``) is
-  registered by the ROM at ``t + 1``, the entry is written at ``t + 2`` (same as the ALU);
-- multiplier: latches its operands at ``t + 1`` (``go``), feeds ``n_limbs`` limb pairs to
-  its DSP-sized product on the following cycles, result written at ``t + n_limbs + 4``;
-  a unit accepts a new ``go`` ``n_limbs`` cycles after the previous one;
-- a value written at ``w`` can be read by an operation issued at ``w + 1`` or later;
-- one issue per cycle (two read ports), one write per cycle.
+Every long path of the machine is cut by a register (memory read -> read register -> ALU
+compare/add -> ALU select -> source select -> view shift -> memory write), so the timing is
+stated in these constants: ``READ_DELAY`` = 2, ``ALU_LATENCY`` = 4, ``LUT_LATENCY`` = 3,
+``WRITE_DELAY`` = 2.
+
+- an operation *issued* at ``t`` presents its read addresses at ``t``; the memory's data
+  is registered at ``t + 1`` and seen by the units at ``t + READ_DELAY``;
+- ALU: sum and comparison at ``t + 2``, selection (field ``alu`` of the word at ``t + 3``)
+  registered at ``t + 3``, result written at ``t + ALU_LATENCY``;
+- lut: the ROM address (index from the read register at ``t + 2``, table ``tab`` of the
+  word at ``t + 2``) is registered by the ROM, the entry is written at ``t + LUT_LATENCY``;
+- multiplier: latches its operands at ``t + READ_DELAY`` (``go``), feeds ``n_limbs`` limb
+  pairs to its DSP-sized product on the following cycles, result written at
+  ``t + READ_DELAY + n_limbs + 3`` (``Program.mul_latency``); a unit accepts a new ``go``
+  ``n_limbs`` cycles after the previous one;
+- *written* at ``w`` means: source selected (field ``src`` of the word at ``w``) and
+  registered; at ``w + 1`` the view shift, memory address and write enable, output capture
+  (fields ``view``, ``we``, ``wa``, ``cap`` of the word at ``w + 1``) are registered; the
+  memory write happens at ``w + WRITE_DELAY``, so the value can be read by an operation
+  issued at ``w + WRITE_DELAY + 1`` or later, and its slot can be reused by a value whose
+  memory write comes after the last read (see ``_allocate``);
+- one issue per cycle (two read ports), one write per cycle;
+- ``steps`` = last write + ``WRITE_DELAY`` + 1: the last value's capture is done in the
+  last step.
 """
 from __future__ import annotations
 
@@ -50,7 +65,8 @@ from dataclasses import dataclass, field
 from ..fit.plan import REGISTERED_OPS, Plan, bits_for
 from .limbmul import _check_dsp, limb_split
 
-__all__ = ["ALU_OPS", "DSP_SIZES", "READ_DELAY", "WRITE_DELAY", "MicroOp", "Program", "compile_program", "resolve_view"]
+__all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "READ_DELAY", "WRITE_DELAY", "compile_program",
+           "resolve_view"]
 
 ALU_OPS = ("add", "max", "min", "pass", "and")
 #: DSP multiplier sizes (signed operand bits) of common FPGA families
