@@ -21,13 +21,15 @@ def _bits(n: int) -> int:
 def microcode_layout(prog: Program) -> data.StructLayout:
     """Fields of one microcode word (everything the machine does in one cycle).
 
-    ``rx``/``ry``: value-memory read addresses; ``alu``: ALU operation on the data read
-    the cycle before; ``go``: one bit per multiplier, latch the data read the cycle before;
-    ``we``/``wa``: write the write-back value at address ``wa``; ``src``: write-back source
-    (0 ALU, 1..k multipliers, k+1.. input registers, then the table ROM if any); ``view``:
-    index of the write-back shift ``(x >> a) << b``; ``cap``: one bit per output, capture the
-    write-back value; ``tab`` (only when the plan has ``lut`` nodes): table number of the ROM
-    lookup of the index read the cycle before.
+    ``rx``/``ry``: value-memory read addresses; ``go``: one bit per multiplier, latch the
+    read register (data read two words before); ``tab`` (only when the plan has ``lut``
+    nodes): table number of the ROM lookup of the index in the read register; ``alu``: ALU
+    selection (operation) of the operands read three words before; ``src``: write-back
+    source, registered (0 ALU, 1..k multipliers, k+1.. input registers, then the table ROM
+    if any); ``view``: index of the shift ``(x >> a) << b`` applied to the source registered
+    the word before; ``we``/``wa``: write that shifted value at address ``wa`` (one word
+    later); ``cap``: one bit per output, capture it (one word later). The exact offsets are
+    in :mod:`ikseries.hdl.schedule` (Timing).
     """
     k = prog.multipliers
     fields = {
@@ -77,11 +79,20 @@ class FoldedEvaluator(wiring.Component):
     program : Program
         The schedule and microcode.
 
+    The long paths are registered for clock speed: the microcode ROM's word (the ROM reads
+    two words ahead; word 0 is a constant loaded while idle), the memory's read data before
+    the ALU, multipliers and table ROM, the ALU between its sum/comparison and its selection,
+    and the write-back between the source selection and the view shift, and again before the
+    memory write port and the output registers. The compiler's timing model
+    (:mod:`ikseries.hdl.schedule`, Timing) accounts for every stage: an operation's result is
+    written ``ALU_LATENCY`` (4), ``LUT_LATENCY`` (3) or ``program.mul_latency`` cycles after
+    its issue and can be read ``WRITE_DELAY + 1`` (3) cycles after that.
+
     Latency
     -------
-    ``latency`` = ``program.steps + 1`` cycles from an input transfer to ``o.valid``. A
-    ``lut`` lookup occupies one issue slot and is written 2 cycles after its issue (like an
-    ALU operation); the schedule, hence ``program.steps``, includes it.
+    ``latency`` = ``program.steps + 1`` cycles from an input transfer to ``o.valid``
+    (``program.steps``: last write + ``WRITE_DELAY`` + 1, the length of the schedule,
+    every pipeline stage included).
 
     Throughput
     ----------
@@ -135,7 +146,9 @@ class FoldedEvaluator(wiring.Component):
         code = rom.read_port()
         rx, ry = mem.read_port(), mem.read_port()
         wr = mem.write_port()
-        w = code.data
+        # microcode register after the ROM's read: the ROM reads two words ahead, word 0
+        # comes from a constant (the machine is idle, or in its last step, before step 0)
+        w = Signal(layout, init=prog.words[0])
 
         # sequencer
         running = Signal()
@@ -145,7 +158,11 @@ class FoldedEvaluator(wiring.Component):
         accept = Signal()
         m.d.comb += [self.i.ready.eq(~running & (~self.o.valid | self.o.ready)),
                      accept.eq(self.i.valid & self.i.ready),
-                     code.addr.eq(Mux(running & ~last, pc + 1, 0))]
+                     code.addr.eq(Mux(accept, 1 % steps, Mux(running & (pc + 2 < steps), pc + 2, 0)))]
+        with m.If(running & ~last):
+            m.d.sync += w.eq(code.data)
+        with m.Else():
+            m.d.sync += w.eq(layout.const(prog.words[0]))
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
         with m.If(accept):
@@ -155,22 +172,28 @@ class FoldedEvaluator(wiring.Component):
             with m.If(last):
                 m.d.sync += [running.eq(0), pc.eq(0), self.o.valid.eq(1)]
 
+        # read register: the units see the data read two cycles before (memory, register)
         m.d.comb += [rx.addr.eq(w.rx), ry.addr.eq(w.ry)]
-        x, y = rx.data, ry.data
+        x, y = Signal.like(rx.data), Signal.like(ry.data)
+        m.d.sync += [x.eq(rx.data), y.eq(ry.data)]
 
-        # ALU: operates on the data read in the previous cycle
+        # ALU, two stages: sum and comparison of the read register, then the selection
+        # (operation from the word after the one that saw the operands)
+        sx, sy = Signal.like(x), Signal.like(y)
+        s_sum, s_lt = Signal(signed(prog.store_width + 1)), Signal()
+        m.d.sync += [sx.eq(x), sy.eq(y), s_sum.eq(x + y), s_lt.eq(x < y)]
         alu = Signal(signed(prog.store_width + 1))
         with m.Switch(w.alu):
             with m.Case(ALU_OPS.index("add")):
-                m.d.sync += alu.eq(x + y)
+                m.d.sync += alu.eq(s_sum)
             with m.Case(ALU_OPS.index("max")):
-                m.d.sync += alu.eq(Mux(x > y, x, y))
+                m.d.sync += alu.eq(Mux(s_lt, sy, sx))
             with m.Case(ALU_OPS.index("min")):
-                m.d.sync += alu.eq(Mux(x < y, x, y))
+                m.d.sync += alu.eq(Mux(s_lt, sx, sy))
             with m.Case(ALU_OPS.index("and")):
-                m.d.sync += alu.eq(x & y)
+                m.d.sync += alu.eq(sx & sy)
             with m.Default():
-                m.d.sync += alu.eq(x)
+                m.d.sync += alu.eq(sx)
 
         # multipliers
         wa, wb = prog.mul_widths
@@ -182,33 +205,39 @@ class FoldedEvaluator(wiring.Component):
                          mu.i.payload.a.eq(x), mu.i.payload.b.eq(y)]
             muls.append(mu)
 
-        # coefficient tables: the ROM registers the address (index read the cycle before)
+        # coefficient tables: the ROM registers the address (index from the read register)
         if prog.tables:
             m.submodules.tables = tab = Memory(shape=signed(prog.lut_width), depth=len(prog.lut_init()),
                                                init=prog.lut_init())
             lut = tab.read_port()
             m.d.comb += lut.addr.eq(Cat(x[:prog.lut_index_bits], w.tab))
 
-        # write-back: source, view shift, memory write and output capture
+        # write-back, two registered stages: the source (field src of the word at w), then
+        # the view shift with the memory write and output capture fields of the word at w + 1;
+        # the memory write happens at w + 2
         wbv = Signal(signed(prog.wb_width))
         with m.Switch(w.src):
             with m.Case(0):
-                m.d.comb += wbv.eq(alu)
+                m.d.sync += wbv.eq(alu)
             for u, mu in enumerate(muls):
                 with m.Case(1 + u):
-                    m.d.comb += wbv.eq(mu.o.payload)
+                    m.d.sync += wbv.eq(mu.o.payload)
             for j, inp in enumerate(plan.inputs):
                 with m.Case(1 + k + j):
-                    m.d.comb += wbv.eq(in_reg[inp.name])
+                    m.d.sync += wbv.eq(in_reg[inp.name])
             if prog.tables:
                 with m.Case(1 + k + len(plan.inputs)):
-                    m.d.comb += wbv.eq(lut.data)
+                    m.d.sync += wbv.eq(lut.data)
         value = Signal(signed(prog.store_width))
         with m.Switch(w.view):
             for v, (a, b) in enumerate(prog.views):
                 with m.Case(v):
                     m.d.comb += value.eq((wbv >> a) << b)
-        m.d.comb += [wr.en.eq(running & w.we), wr.addr.eq(w.wa), wr.data.eq(value)]
+        wb_en, wb_addr = Signal(), Signal.like(w.wa)
+        wb_data, wb_cap = Signal.like(value), Signal.like(w.cap)
+        m.d.sync += [wb_en.eq(running & w.we), wb_addr.eq(w.wa), wb_data.eq(value),
+                     wb_cap.eq(Mux(running, w.cap, 0))]
+        m.d.comb += [wr.en.eq(wb_en), wr.addr.eq(wb_addr), wr.data.eq(wb_data)]
 
         outs = Signal(output_layout(plan))
         for j, o in enumerate(plan.outputs):
@@ -216,7 +245,7 @@ class FoldedEvaluator(wiring.Component):
             if vid in prog.const_value:
                 m.d.comb += self.o.payload[o.name].eq(prog.const_value[vid])
             else:
-                with m.If(running & w.cap[j]):
-                    m.d.sync += outs[o.name].eq(value)
+                with m.If(wb_cap[j]):
+                    m.d.sync += outs[o.name].eq(wb_data)
                 m.d.comb += self.o.payload[o.name].eq(outs[o.name])
         return m

@@ -33,15 +33,30 @@ port takes one value per cycle anyway).
 
 Timing (cycle = microcode step, step 0 is the cycle after the input transfer)
 ----------------------------------------------------------------------------
-- an operation *issued* at ``t`` reads its operands at ``t`` (read data at ``t + 1``);
-- ALU: computes at ``t + 1``, result written at ``t + 2``;
-- lut: the ROM address (index read at ``t``, table ``tab`` of the word at ``t + 1``) is
-  registered by the ROM at ``t + 1``, the entry is written at ``t + 2`` (same as the ALU);
-- multiplier: latches its operands at ``t + 1`` (``go``), feeds ``n_limbs`` limb pairs to
-  its DSP-sized product on the following cycles, result written at ``t + n_limbs + 4``;
-  a unit accepts a new ``go`` ``n_limbs`` cycles after the previous one;
-- a value written at ``w`` can be read by an operation issued at ``w + 1`` or later;
-- one issue per cycle (two read ports), one write per cycle.
+Every long path of the machine is cut by a register (memory read -> read register -> ALU
+compare/add -> ALU select -> source select -> view shift -> memory write), so the timing is
+stated in these constants: ``READ_DELAY`` = 2, ``ALU_LATENCY`` = 4, ``LUT_LATENCY`` = 3,
+``WRITE_DELAY`` = 2.
+
+- an operation *issued* at ``t`` presents its read addresses at ``t``; the memory's data
+  is registered at ``t + 1`` and seen by the units at ``t + READ_DELAY``;
+- ALU: sum and comparison at ``t + 2``, selection (field ``alu`` of the word at ``t + 3``)
+  registered at ``t + 3``, result written at ``t + ALU_LATENCY``;
+- lut: the ROM address (index from the read register at ``t + 2``, table ``tab`` of the
+  word at ``t + 2``) is registered by the ROM, the entry is written at ``t + LUT_LATENCY``;
+- multiplier: latches its operands at ``t + READ_DELAY`` (``go``), feeds ``n_limbs`` limb
+  pairs to its DSP-sized product on the following cycles, result written at
+  ``t + READ_DELAY + n_limbs + 3`` (``Program.mul_latency``); a unit accepts a new ``go``
+  ``n_limbs`` cycles after the previous one;
+- *written* at ``w`` means: source selected (field ``src`` of the word at ``w``) and
+  registered; at ``w + 1`` the view shift, memory address and write enable, output capture
+  (fields ``view``, ``we``, ``wa``, ``cap`` of the word at ``w + 1``) are registered; the
+  memory write happens at ``w + WRITE_DELAY``, so the value can be read by an operation
+  issued at ``w + WRITE_DELAY + 1`` or later, and its slot can be reused by a value whose
+  memory write comes after the last read (see ``_allocate``);
+- one issue per cycle (two read ports), one write per cycle;
+- ``steps`` = last write + ``WRITE_DELAY`` + 1: the last value's capture is done in the
+  last step.
 """
 from __future__ import annotations
 
@@ -50,13 +65,17 @@ from dataclasses import dataclass, field
 from ..fit.plan import REGISTERED_OPS, Plan, bits_for
 from .limbmul import _check_dsp, limb_split
 
-__all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "compile_program", "resolve_view"]
+__all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "READ_DELAY", "WRITE_DELAY", "compile_program",
+           "resolve_view"]
 
 ALU_OPS = ("add", "max", "min", "pass", "and")
 #: DSP multiplier sizes (signed operand bits) of common FPGA families
 DSP_SIZES = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
-ALU_LATENCY = 2        # issue -> write
-LUT_LATENCY = 2        # issue -> write: index read, ROM read, write
+READ_DELAY = 2         # issue -> cycle the units see the (registered) read data
+ALU_LATENCY = READ_DELAY + 2   # issue -> write: read, read register, ALU compare/add, ALU select
+LUT_LATENCY = READ_DELAY + 1   # issue -> write: index read, read register, ROM read
+WRITE_DELAY = 2        # written at w (source selected and registered), shifted into its view and
+                       # registered at w + 1 (fields view/we/wa/cap), in the memory at w + 2
 VIEW_OPS = ("shr", "shl", "frac", "index")   # wiring folded into views (index is a shr)
 
 
@@ -139,7 +158,8 @@ class Program:
 
     @property
     def mul_latency(self) -> int:
-        return self.n_limbs + 4
+        """Issue -> write of a product: ``go`` at ``READ_DELAY``, then the unit's ``n_limbs + 3``."""
+        return READ_DELAY + self.n_limbs + 3
 
     @property
     def n_consts(self) -> int:
@@ -264,7 +284,7 @@ def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
     lat = [{"load": 0, "alu": ALU_LATENCY, "lut": LUT_LATENCY}.get(o.kind, mul_latency) for o in ops]
     height = [0] * len(ops)
     for k in reversed(range(len(ops))):       # ops are in dependency order
-        height[k] = lat[k] + max([height[c] + 1 for c in consumers[k]] + [0])
+        height[k] = lat[k] + max([height[c] + 1 + WRITE_DELAY for c in consumers[k]] + [0])
     ready_at = {}                             # value id -> first cycle it can be read
     wport: set[int] = set()
     unit_free = [0] * multipliers             # first cycle a unit may take a new go
@@ -276,7 +296,7 @@ def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
             k = loads.pop(0)
             ops[k].issue = ops[k].write = t
             wport.add(t)
-            ready_at[ops[k].out] = t + 1
+            ready_at[ops[k].out] = t + 1 + WRITE_DELAY
         cands = [k for k in waiting
                  if all(a not in producer or ready_at.get(a, 1 << 30) <= t for a in ops[k].args)]
         cands.sort(key=lambda k: (-height[k], k))
@@ -286,14 +306,14 @@ def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
             if w in wport:
                 continue
             if o.kind == "mul":
-                free = [u for u in range(multipliers) if unit_free[u] <= t + 1]
+                free = [u for u in range(multipliers) if unit_free[u] <= t + READ_DELAY]
                 if not free:
                     continue
                 o.unit = free[0]
-                unit_free[o.unit] = t + 1 + n_limbs
+                unit_free[o.unit] = t + READ_DELAY + n_limbs
             o.issue, o.write = t, w
             wport.add(w)
-            ready_at[o.out] = w + 1
+            ready_at[o.out] = w + 1 + WRITE_DELAY
             waiting.remove(k)
             break
         t += 1
@@ -303,7 +323,8 @@ def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):
 
 def _allocate(prog: Program):
     """Memory addresses: constants first (pre-loaded), then intermediates, reusing a slot
-    once the last read of its value has been issued (strictly before the next write)."""
+    once the last read of its value has been issued (strictly before the cycle the next
+    value enters the memory, ``write + WRITE_DELAY``)."""
     last_read: dict[int, int] = {}
     for o in prog.ops:
         for a in o.args:
@@ -316,7 +337,7 @@ def _allocate(prog: Program):
         if o.out not in last_read:             # only captured as an output: not stored
             continue
         for s, f in enumerate(free_after):
-            if f < o.write:
+            if f < o.write + WRITE_DELAY:    # last read before the memory write
                 free_after[s] = last_read[o.out]
                 prog.slot[o.out] = base + s
                 break
@@ -354,7 +375,7 @@ def compile_program(plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | Non
     _allocate(prog)
     prog.views = sorted({o.view for o in ops})
     writes = [o.write for o in ops]
-    prog.steps = max(writes) + 1 if writes else 1
+    prog.steps = max(writes) + 1 + WRITE_DELAY if writes else 1
     _assemble(prog)
     return prog
 
@@ -376,17 +397,18 @@ def _assemble(prog: Program):
             w["rx"] = prog.slot[o.args[0]]
             w["ry"] = prog.slot[o.args[-1]]
             if o.kind == "alu":
-                words[o.issue + 1]["alu"] = ALU_OPS.index(o.alu)
+                words[o.issue + READ_DELAY + 1]["alu"] = ALU_OPS.index(o.alu)
             elif o.kind == "lut":
-                words[o.issue + 1]["tab"] = o.table
+                words[o.issue + READ_DELAY]["tab"] = o.table
             else:
-                words[o.issue + 1]["go"] |= 1 << o.unit
+                words[o.issue + READ_DELAY]["go"] |= 1 << o.unit
         if o.write in written:
             raise RuntimeError(f"write port conflict at step {o.write} (internal error)")
         written.add(o.write)
-        w = words[o.write]
-        w["src"] = (0 if o.kind == "alu" else 1 + o.unit if o.kind == "mul"
-                    else 1 + k + len(inputs) if o.kind == "lut" else 1 + k + inputs.index(o.input))
+        words[o.write]["src"] = (0 if o.kind == "alu" else 1 + o.unit if o.kind == "mul"
+                                 else 1 + k + len(inputs) if o.kind == "lut"
+                                 else 1 + k + inputs.index(o.input))
+        w = words[o.write + 1]                 # after the source register
         w["view"] = vidx[o.view]
         if o.out in prog.slot:
             w["we"], w["wa"] = 1, prog.slot[o.out]

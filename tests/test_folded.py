@@ -8,7 +8,7 @@ from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
 from ikseries.hdl.evaluator import PlanEvaluator
 from ikseries.hdl.folded import FoldedEvaluator
 from ikseries.hdl.limbmul import LimbMultiplier, limb_split
-from ikseries.hdl.schedule import compile_program, resolve_view
+from ikseries.hdl.schedule import WRITE_DELAY, compile_program, resolve_view
 from ikseries.sim import golden
 from ikseries.sim.amaranth_sim import simulate_leg
 from ikseries.sim.targets import corner_targets, random_targets
@@ -137,8 +137,15 @@ def test_folded_real_plan_bit_exact(plan):
     core = FoldedEvaluator(plan, multipliers=2, dsp=(16, 16))
     prog = core.program
     assert prog.limbs == (2, 2) and prog.acc_width >= max(n.width for n in plan.nodes if n.op == "mul")
-    # one issue per cycle: never faster than the operation count, close to it
-    assert prog.count("mul") + prog.count("alu") <= prog.steps < 1.2 * len(prog.ops)
+    # one issue per cycle: never faster than the operation count nor than the dependence
+    # chains (operation latencies, write-back delay), close to the larger of the two
+    done, chain = {}, 0
+    for o in prog.ops:                     # dependency order; ASAP with the same latencies
+        start = max([done[a] + 1 + WRITE_DELAY for a in o.args if a in done] + [0])
+        done[o.out] = start + o.write - o.issue
+        chain = max(chain, done[o.out] + 1 + WRITE_DELAY)
+    assert prog.count("mul") + prog.count("alu") <= prog.steps
+    assert chain <= prog.steps < 1.2 * max(len(prog.ops), chain)
     corners = corner_targets(plan)
     rnd = random_targets(plan, 8, 7)
     t = {k: np.concatenate([corners[k], rnd[k]]) for k in corners}
@@ -159,7 +166,7 @@ def test_folded_schedule_respects_resources(plan):
         producer = {o.out: o for o in prog.ops}
         for o in prog.ops:
             for a in o.args:
-                assert a in prog.const_value or producer[a].write < o.issue
+                assert a in prog.const_value or producer[a].write + WRITE_DELAY < o.issue
         if k == 1 and dsp == (16, 16):
             assert prog.steps >= prog.mul_busy_cycles   # one DSP: limb products bound the time
         # more multipliers never beyond one issue per cycle; folding is far smaller than a pipeline
