@@ -199,12 +199,17 @@ def test_piecewise_plan_on_icarus(folded, tmp_path_factory):
     core, pipelined (one ROM read per pipeline stage, stalling with the others) and folded
     (table ROM in the microcode machine): all three cocotb tests, bit-exact against the golden
     model at the latency property. Widths are 0..100 ticks: with the pipelined core's 64-cycle
-    period both pulses and constant high; the folded core needs a period >= 4 II."""
+    period both pulses and constant high; the folded core needs a period >= 4 II (and
+    >= 2 latency + 4), taken from its properties."""
     from helpers import tiny_piecewise_plan
+    from ikseries.hdl.folded import FoldedEvaluator
     from ikseries.hdl.leg import LegCore
     _skip_unless_available("icarus")
     plan = tiny_piecewise_plan(1, clamp=(0, 100))
-    period = 64 if not folded else 256
+    period = 64
+    if folded:
+        probe = FoldedEvaluator(plan, 1, (16, 16))
+        period = max(256, 4 * probe.initiation_interval, 2 * probe.latency + 4)
     core = LegCore(plan, period, multipliers=1 if folded else None, dsp=(16, 16) if folded else None)
     d = tmp_path_factory.mktemp(f"cocotb_icarus_piecewise_{'folded' if folded else 'pipelined'}")
     plan_file = d / "plan.json"
