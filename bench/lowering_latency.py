@@ -35,7 +35,8 @@ def rebuild(robot, plan, fits, extra: int | None, horner: bool = False, guard: i
     """The plan of ``fits`` (formats as fitted) with Horner or the mix; also the splits."""
     inputs = fitter.plan_inputs(robot)
     rmax = max(abs(robot.inputs[0].min), abs(robot.inputs[0].max))   # as fit_robot
-    stage = coordinate_stage(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)))
+    stage = coordinate_stage(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)),
+                             table=robot.lowering == "mixed")
     fv = plan.meta["features"]["frac_bits"]
     b = PlanBuilder(inputs)
     nodes = fitter._Nodes(robot, stage, b, fv)

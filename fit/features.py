@@ -25,13 +25,45 @@ from .horner import horner, lower_poly
 from .plan import PlanBuilder
 from .polyfit import fit_lawson, total_degree_terms, vander
 
-__all__ = ["TrigSeries", "fit_trig", "pow2_scale", "Normaliser", "CylindricalStage", "CartesianStage",
+__all__ = ["Cut", "TrigSeries", "TrigTable", "fit_trig", "fit_trig_table", "pow2_scale", "Normaliser", "CylindricalStage", "CartesianStage",
            "coordinate_stage"]
 
 
 def pow2_scale(half_range: float) -> int:
     """Smallest k >= 0 with 2**k >= half_range."""
     return max(0, math.ceil(math.log2(half_range))) if half_range > 0 else 0
+
+
+@dataclass(frozen=True)
+class Cut:
+    """Cells of 2**shift integers of input port ``port`` (from its lowest value); variable
+    ``var`` of the polynomial is the offset inside the cell, normalised to [-1, 1)."""
+    var: int
+    port: str
+    shift: int
+    cells: int
+
+    def rows(self, port, values, cell: int) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of real input values of ``port`` (a PlanInput) that cell ``cell`` is fitted on,
+        and their normalised offsets from the cell. The last cell, which may hold fewer port
+        values, is fitted on the last full cell width of the range (offsets below -1), so its
+        polynomial is never fitted on a sliver."""
+        u = np.asarray(values, dtype=np.float64) * 2.0 ** port.frac - port.lo
+        width, top = 2 ** self.shift, port.hi - port.lo
+        start = min(cell * width, max(0, top + 1 - width))
+        sel = np.flatnonzero((u >= start) & (u <= min((cell + 1) * width, top)))
+        half = width / 2
+        return sel, (u[sel] - cell * width - half) / half
+
+    def build(self, b: PlanBuilder, port) -> tuple[int, int]:
+        """(cell, offset) nodes: the offset has ``shift - 1`` fractional bits, in [-1, 1)."""
+        node = b.input_nodes[port.name]
+        if port.lo:
+            node = b.add(node, b.const(-port.lo * 2.0 ** -port.frac, port.frac))
+        u = b.reinterpret(node, 0)
+        cell, off = b.cell(u, self.shift)
+        f = self.shift - 1
+        return cell, b.add(b.reinterpret(off, f), b.const(-1.0, f))
 
 
 @dataclass(frozen=True)
@@ -61,6 +93,47 @@ def fit_trig(theta_min: float, theta_max: float, tol: float) -> TrigSeries:
             raise RuntimeError(f"no {kind} series reaches {tol:g}")
         out.append((tuple(float(x) for x in c), err))
     return TrigSeries(kt, out[0][0], out[1][0], max(out[0][1], out[1][1]))
+
+
+@dataclass(frozen=True)
+class TrigTable:
+    """cos(theta), sin(theta) per cell of the theta port (``cut``): polynomials of ``degree``
+    in the offset inside the cell (normalised to [-1, 1)); ``cos[k][c]`` is the coefficient
+    of offset**k in cell c."""
+    cut: Cut
+    degree: int
+    cos: tuple[tuple[float, ...], ...]
+    sin: tuple[tuple[float, ...], ...]
+    max_error: float
+
+
+def fit_trig_table(port, tol: float, max_degree: int = 5, max_cells: int = 64) -> TrigTable | None:
+    """The lowest degree (<= ``max_degree``), then the coarsest cells (<= ``max_cells``), of the
+    theta port ``port`` (a PlanInput in degrees) whose per-cell near-minimax cos/sin
+    polynomials stay within ``tol``; None if none does. The last cell is fitted on a full cell
+    width, as :meth:`Cut.rows` defines."""
+    span = port.hi - port.lo
+    for degree in range(2, max_degree + 1):
+        for shift in range(max(1, span.bit_length() - 2), 0, -1):
+            cut = Cut(0, port.name, shift, (span >> shift) + 1)
+            if cut.cells > max_cells:
+                break
+            terms = [(k,) for k in range(degree + 1)]
+            coefs, err = {"cos": [], "sin": []}, 0.0
+            for c in range(cut.cells):
+                width = 2 ** shift
+                u = np.linspace(c * width, (c + 1) * width, 257)
+                u = u[u <= span] if c < cut.cells - 1 else np.linspace(span + 1 - width, span, 257)
+                sel, off = cut.rows(port, (u + port.lo) * 2.0 ** -port.frac, c)
+                th = np.radians((u[sel] + port.lo) * 2.0 ** -port.frac)
+                for name, f in (("cos", np.cos), ("sin", np.sin)):
+                    cf, e = fit_lawson(vander(off[:, None], terms), f(th), 20)
+                    coefs[name].append(cf)
+                    err = max(err, float(e))
+            if err <= tol:
+                return TrigTable(cut, degree, *(tuple(tuple(float(v) for v in np.array(coefs[k])[:, j])
+                                                      for j in range(degree + 1)) for k in ("cos", "sin")), err)
+    return None
 
 
 @dataclass(frozen=True)
@@ -145,12 +218,14 @@ class CylindricalStage(_Stage):
     kind = "cylindrical"
     names = ("x", "y", "z")
 
-    def __init__(self, robot, trig_tol: float):
+    def __init__(self, robot, trig_tol: float, table: bool = False):
         g = robot.geometry
         r, th, z = robot.inputs
         self.geometry = g
         self.offset = g.neutral_distance
         self.trig = fit_trig(th.min, th.max, trig_tol)
+        port = next(i for i in _plan_inputs(robot) if i.name == "theta")
+        self.table = fit_trig_table(port, trig_tol) if table else None
         kx = pow2_scale(r.max)
         self.norms = (Normaliser(self.offset, kx), Normaliser(0.0, kx),
                       Normaliser.for_range(z.min, z.max, z.frac_bits))
@@ -170,19 +245,32 @@ class CylindricalStage(_Stage):
         Call before :meth:`build_radial` on the same builder.
         """
         rn, thn, zn = (b.input_nodes[n] for n in ("r", "theta", "z"))
-        t = b.reinterpret(thn, b.frac(thn) + self.trig.kt)
-        u = b.mul(t, t, fc)
+        if self.table is not None:     # per cell of theta: polynomials in the offset, table coefficients
+            tab = self.table
+            port = next(i for i in b.inputs if i.name == "theta")
+            cell, off = tab.cut.build(b, port)
+            off = b.align(off, max(fc, b.frac(off)))
 
-        def series(coeffs):
-            poly = {(k,): c for k, c in enumerate(coeffs)}
-            return lower_poly(b, poly, [u], fc, max_extra_muls=2, guard=4) if mixed else horner(b, poly, [u], fc)
-        cos = series(self.trig.cos_coeffs)
-        sin = b.mul(t, series(self.trig.sin_coeffs), fc)
+            def table(coeffs):
+                return lower_poly(b, {(k,): c for k, c in enumerate(coeffs)}, [off], fc,
+                                  lambda v, f: b.lut(cell, v, f), max_extra_muls=2, guard=4)
+            cos, sin = table(tab.cos), table(tab.sin)
+            trig_error = tab.max_error
+        else:
+            t = b.reinterpret(thn, b.frac(thn) + self.trig.kt)
+            u = b.mul(t, t, fc)
+
+            def series(coeffs):
+                poly = {(k,): c for k, c in enumerate(coeffs)}
+                return lower_poly(b, poly, [u], fc, max_extra_muls=2, guard=4) if mixed else horner(b, poly, [u], fc)
+            cos = series(self.trig.cos_coeffs)
+            sin = b.mul(t, series(self.trig.sin_coeffs), fc)
+            trig_error = self.trig.max_error
         # Interval arithmetic on a Horner chain overestimates |cos| and |sin| ~10x, which
         # the servo polynomials would raise to the 8th power. Clamping to the true range
         # (plus the series error, so the clamp never moves a value away from the ideal)
         # keeps every later width tight.
-        lim = int(np.ceil((1.0 + max(1.5 * self.trig.max_error, 2.0 ** -10)) * 2 ** fc))
+        lim = int(np.ceil((1.0 + max(1.5 * trig_error, 2.0 ** -10)) * 2 ** fc))
         cos, sin = (b.clamp(v, -lim, lim) for v in (cos, sin))
         self._rcos = b.mul(rn, cos)
         rsin = b.mul(rn, sin)
@@ -203,11 +291,22 @@ class CylindricalStage(_Stage):
         return b.add(acc, b.const(self.offset ** 2, f))
 
     def meta(self) -> dict:
+        if self.table is not None:
+            t = self.table
+            return {"kind": self.kind, **self.base_meta(),
+                    "trig_table": {"input": t.cut.port, "cells": t.cut.cells,
+                                   "port_values_per_cell": 2 ** t.cut.shift, "degree": t.degree,
+                                   "cos": [list(c) for c in t.cos], "sin": [list(c) for c in t.sin],
+                                   "max_error": t.max_error}}
         return {"kind": self.kind, **self.base_meta(),
                 "trig": {"kt": self.trig.kt, "cos": list(self.trig.cos_coeffs),
                          "sin": list(self.trig.sin_coeffs), "max_error": self.trig.max_error}}
 
     def describe(self) -> str:
+        if self.table is not None:
+            t = self.table
+            return (f"coordinate stage: cos/sin per cell of theta ({t.cut.cells} cells of "
+                    f"{2 ** t.cut.shift} port values), degree {t.degree}, max error {t.max_error:.2e}")
         return (f"coordinate stage: cos/sin series of degree {2 * len(self.trig.cos_coeffs) - 2} / "
                 f"{2 * len(self.trig.sin_coeffs) - 1}, max error {self.trig.max_error:.2e}")
 
@@ -245,8 +344,15 @@ class CartesianStage(_Stage):
         return "coordinate stage: Cartesian inputs (normalising only)"
 
 
-def coordinate_stage(robot, trig_tol: float):
-    """The coordinate stage for ``robot``'s kind of target."""
+def _plan_inputs(robot):
+    from .fitter import plan_inputs   # the port formats (fitter imports this module)
+    return plan_inputs(robot)
+
+
+def coordinate_stage(robot, trig_tol: float, table: bool = False):
+    """The coordinate stage for ``robot``'s kind of target; ``table``: a cylindrical target's
+    cos/sin from per-cell tables of theta (:class:`TrigTable`, shallower) when one meets
+    ``trig_tol``, else series."""
     if getattr(robot.geometry, "coordinates", "cartesian") == "cylindrical":
-        return CylindricalStage(robot, trig_tol)
+        return CylindricalStage(robot, trig_tol, table)
     return CartesianStage(robot)

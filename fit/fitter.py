@@ -19,7 +19,7 @@ import numpy as np
 
 from ..kinematics import UnreachableError
 from .certify import CertificationError, certify
-from .features import Normaliser, coordinate_stage
+from .features import Cut, Normaliser, coordinate_stage
 from .horner import estrin, lower_poly
 from .plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for, quantize
 from .polyfit import fit_least_squares, lawson, total_degree_terms, vander
@@ -114,38 +114,6 @@ def workspace_samples(robot, n_random: int, n_face: int, seed: int, edges: bool 
     pts.append(corners)
     p = np.concatenate(pts)
     return tuple(p[:, k] for k in range(len(lo)))
-
-
-@dataclass(frozen=True)
-class Cut:
-    """Cells of 2**shift integers of input port ``port`` (from its lowest value); variable
-    ``var`` of the polynomial is the offset inside the cell, normalised to [-1, 1)."""
-    var: int
-    port: str
-    shift: int
-    cells: int
-
-    def rows(self, port, values, cell: int) -> tuple[np.ndarray, np.ndarray]:
-        """Rows of real input values of ``port`` (a PlanInput) that cell ``cell`` is fitted on,
-        and their normalised offsets from the cell. The last cell, which may hold fewer port
-        values, is fitted on the last full cell width of the range (offsets below -1), so its
-        polynomial is never fitted on a sliver."""
-        u = np.asarray(values, dtype=np.float64) * 2.0 ** port.frac - port.lo
-        width, top = 2 ** self.shift, port.hi - port.lo
-        start = min(cell * width, max(0, top + 1 - width))
-        sel = np.flatnonzero((u >= start) & (u <= min((cell + 1) * width, top)))
-        half = width / 2
-        return sel, (u[sel] - cell * width - half) / half
-
-    def build(self, b: PlanBuilder, port) -> tuple[int, int]:
-        """(cell, offset) nodes: the offset has ``shift - 1`` fractional bits, in [-1, 1)."""
-        node = b.input_nodes[port.name]
-        if port.lo:
-            node = b.add(node, b.const(-port.lo * 2.0 ** -port.frac, port.frac))
-        u = b.reinterpret(node, 0)
-        cell, off = b.cell(u, self.shift)
-        f = self.shift - 1
-        return cell, b.add(b.reinterpret(off, f), b.const(-1.0, f))
 
 
 @dataclass(frozen=True)
@@ -670,7 +638,8 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tu
     inputs = plan_inputs(robot)
     # cos/sin error e moves the tip by up to R_max * e; keep that to ~1 % of the budget
     rmax = max(abs(robot.inputs[0].min), abs(robot.inputs[0].max))
-    stage = coordinate_stage(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)))
+    stage = coordinate_stage(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)),
+                             table=getattr(robot, "lowering", "mixed") == "mixed")
     progress(stage.describe())
     fit_pts = workspace_samples(robot, *FIT_SAMPLES, FIT_SEED)
     check_pts = workspace_samples(robot, *CHECK_SAMPLES, FIT_SEED + 1, edges=True)

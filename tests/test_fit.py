@@ -204,3 +204,32 @@ def test_piecewise_cells_of_the_fit_are_the_cells_of_the_plan():
         covered[sel[mine]] += 1
         assert len(sel) >= 2 ** fs.cut.shift        # the last cell too: a full width of data
     assert np.all(covered == 1)
+
+
+def test_trig_table_meets_its_tolerance_at_every_theta_port_value(robot):
+    """The cylindrical stage's per-cell cos/sin tables (fit.lowering = mixed): lowest degree,
+    coarsest cells within the tolerance, at every theta port value; the plan's cell / offset
+    nodes pick the same cell and offset."""
+    from ikseries.fit.features import fit_trig_table
+    from ikseries.fit.fitter import plan_inputs
+    port = next(i for i in plan_inputs(robot) if i.name == "theta")
+    tab = fit_trig_table(port, 2e-5)
+    assert tab is not None and tab.max_error <= 2e-5 and tab.cut.cells <= 64
+    coarser = fit_trig_table(port, 2e-5, max_degree=tab.degree - 1) if tab.degree > 2 else None
+    assert coarser is None
+    ints = np.arange(port.lo, port.hi + 1)
+    th = np.radians(ints * 2.0 ** -port.frac)
+    worst = 0.0
+    for c in range(tab.cut.cells):
+        sel, off = tab.cut.rows(port, ints * 2.0 ** -port.frac, c)
+        mine = (ints[sel] - port.lo) >> tab.cut.shift == c
+        for coeffs, f in ((tab.cos, np.cos), (tab.sin, np.sin)):
+            v = sum(np.asarray(coeffs[k])[c] * off[mine] ** k for k in range(tab.degree + 1))
+            worst = max(worst, float(np.max(np.abs(v - f(th[sel][mine])))))
+    assert worst <= tab.max_error * (1 + 1e-9) + 1e-12
+
+
+def test_default_plan_takes_cos_and_sin_from_theta_tables(plan):
+    meta = plan.meta["features"]
+    assert meta["kind"] == "cylindrical" and "trig_table" in meta
+    assert meta["trig_table"]["cells"] == len(meta["trig_table"]["cos"][0])
