@@ -214,7 +214,7 @@ def test_trig_table_meets_its_tolerance_at_every_theta_port_value(robot):
     from ikseries.fit.fitter import plan_inputs
     port = next(i for i in plan_inputs(robot) if i.name == "theta")
     tab = fit_trig_table(port, 2e-5)
-    assert tab is not None and tab.max_error <= 2e-5 and tab.cut.cells <= 64
+    assert tab is not None and tab.max_error <= 2e-5 and tab.cut.cells <= 32
     coarser = fit_trig_table(port, 2e-5, max_degree=tab.degree - 1) if tab.degree > 2 else None
     assert coarser is None
     ints = np.arange(port.lo, port.hi + 1)
