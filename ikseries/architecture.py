@@ -134,6 +134,8 @@ def candidates(robot) -> list[Candidate]:
         order = FASTEST_ORDER
     elif robot.architecture == "folded":
         order = (("folded", robot.multipliers),)
+    elif robot.architecture == "modulo":
+        order = (("modulo", robot.interval),)
     else:
         order = (("pipelined", None),)
     out = []
@@ -221,7 +223,7 @@ def choose_architecture(robot, plan, *, synth: SynthFunction | None = None,
 
 
 def _rate_error(robot, best: Tried):
-    what = ("the rate of hardware.architecture" if robot.architecture in ("pipelined", "folded")
+    what = ("the rate of hardware.architecture" if robot.architecture in ("pipelined", "folded", "modulo")
             else "the best rate of any architecture")
     raise ArchitectureError(
         f"hardware.min_refresh_hz must be at most {best.refresh_hz:.6g} Hz, {what} for {robot.name} at "

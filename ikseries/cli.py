@@ -39,7 +39,7 @@ def cmd_presets(args):
 
 
 def _hardware_overrides(robot, args):
-    """``robot`` with the build's --architecture / --multipliers / --dsp / --fit-device applied
+    """``robot`` with the build's --architecture / --multipliers / --interval / --dsp / --fit-device applied
     (validated). --fit-device also sets the DSP size to the device's family unless --dsp is given;
     --architecture other than fastest drops the description's hardware.fit_device."""
     from .robot import ARCHITECTURES, DSP_CHOICES, FIT_DEVICES, with_hardware
@@ -64,19 +64,31 @@ def _hardware_overrides(robot, args):
         if k is None or k < 1:
             raise CliError(f"--multipliers must be an integer >= 1, not {args.multipliers!r}")
         opts["multipliers"] = k
+    if getattr(args, "interval", None) is not None:
+        try:
+            ii = int(args.interval)
+        except ValueError:
+            ii = None
+        if ii is None or ii < 1:
+            raise CliError(f"--interval must be an integer >= 1, not {args.interval!r}")
+        opts["interval"] = ii
     if args.dsp is not None:
         if args.dsp not in DSP_CHOICES:
             raise CliError(f"--dsp must be one of {', '.join(DSP_CHOICES)}, not {args.dsp!r}")
         opts["dsp"] = args.dsp
-    labels = {"architecture": "--architecture", "multipliers": "--multipliers", "dsp": "--dsp",
-              "fit_device": "--fit-device"}
-    given = {k for k in ("architecture", "multipliers", "dsp", "fit_device") if getattr(args, k) is not None}
+    labels = {"architecture": "--architecture", "multipliers": "--multipliers", "interval": "--interval",
+              "dsp": "--dsp", "fit_device": "--fit-device"}
+    given = {k for k in ("architecture", "multipliers", "interval", "dsp", "fit_device")
+             if getattr(args, k, None) is not None}
     if given & {"architecture", "fit_device"}:   # either names the other in the error
         given |= {"architecture", "fit_device"}
     new = with_hardware(robot, {k: v for k, v in labels.items() if k in given}, **opts) if opts else robot
     if "multipliers" in opts and new.architecture != "folded":
         raise CliError(f"--architecture must be folded when --multipliers is given "
                        f"(auto picks 1 or 2 multipliers itself), not {new.architecture!r}")
+    if "interval" in opts and new.architecture != "modulo":
+        raise CliError(f"--architecture must be modulo when --interval is given "
+                       f"(auto and fastest pick the interval themselves), not {new.architecture!r}")
     return new
 
 
@@ -217,9 +229,12 @@ def main(argv=None):
                         "installed one, the default), none, or a list such as icarus,verilator")
     b.add_argument("--architecture", metavar="ARCH",
                    help="override hardware.architecture: auto (smallest that meets hardware.min_refresh_hz), "
-                        "pipelined, folded or fastest (the fastest whose Yosys cell counts fit --fit-device)")
+                        "pipelined, folded, modulo (a pipeline whose multipliers are shared: one target every "
+                        "--interval cycles) or fastest (the fastest whose Yosys cell counts fit --fit-device)")
     b.add_argument("--multipliers", metavar="K", help="override hardware.multipliers: multipliers of the folded evaluator (needs architecture "
                         "folded; auto picks 1 or 2 itself)")
+    b.add_argument("--interval", metavar="N", help="override hardware.interval: initiation interval of the "
+                   "modulo-scheduled evaluator (needs architecture modulo; default 8)")
     b.add_argument("--dsp", metavar="FAMILY",
                    help="override hardware.dsp: ice40, ecp5, xc7 (DSP multiplier size) or none (full width)")
     b.add_argument("--fit-device", metavar="DEVICE",

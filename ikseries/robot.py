@@ -26,7 +26,7 @@ LOWERINGS = ("mixed", "horner")
 #: hardware.architecture values: "auto" picks the smallest that meets hardware.min_refresh_hz,
 #: "fastest" the fastest whose Yosys cell counts fit hardware.fit_device (see ikseries.architecture).
 #: Default: "pipelined" (one target per clock, verified by cocotb too) for one leg, "auto" for more.
-ARCHITECTURES = ("auto", "pipelined", "folded", "fastest")
+ARCHITECTURES = ("auto", "pipelined", "folded", "modulo", "fastest")
 #: hardware.dsp values: the FPGA family whose DSP multiplier size the folded evaluator uses
 #: (see ikseries.hdl.schedule.DSP_SIZES), or "none" for full-width products
 DSP_CHOICES = ("ice40", "ecp5", "xc7", "none")
@@ -85,6 +85,7 @@ class Robot:
     min_refresh_hz: float = 1000.0  # every leg's servos re-evaluated at least this often
     fit_device: str | None = None   # one of FIT_DEVICES: the device "fastest" must fit
     lowering: str = "mixed"         # one of LOWERINGS: how servo polynomials become plan operations
+    interval: int = 8               # initiation interval of a modulo-scheduled evaluator
 
     @property
     def servos(self) -> tuple[str, ...]:
@@ -223,7 +224,7 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
         raise RobotError(f"fit.lowering must be one of {', '.join(LOWERINGS)}, not {lowering!r}")
 
     hw = _table(data, "hardware", "", required=False)
-    _no_extra(hw, ["clock_hz", "pwm_period_us", "architecture", "multipliers", "dsp", "min_refresh_hz",
+    _no_extra(hw, ["clock_hz", "pwm_period_us", "architecture", "multipliers", "interval", "dsp", "min_refresh_hz",
                    "fit_device"], "hardware.")
     clk = _number(hw, "clock_hz", "hardware.", default=48_000_000, positive=True, integer=True)
     period = float(_number(hw, "pwm_period_us", "hardware.", default=20000.0, positive=True))
@@ -239,11 +240,14 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
                   architecture=hw.get("architecture", "auto" if data.get("legs", 1) != 1 else "pipelined"),
                   multipliers=hw.get("multipliers", 1), dsp=hw.get("dsp", _default_dsp(hw.get("fit_device"))),
                   min_refresh_hz=hw.get("min_refresh_hz", 1000.0), fit_device=hw.get("fit_device"),
-                  lowering=lowering)
+                  lowering=lowering, interval=hw.get("interval", 8))
     _check_hardware(robot)
     if "multipliers" in hw and robot.architecture != "folded":
         raise RobotError(f"hardware.architecture must be folded when hardware.multipliers is given "
                          f"(auto picks 1 or 2 multipliers itself), not {robot.architecture!r}")
+    if "interval" in hw and robot.architecture != "modulo":
+        raise RobotError(f"hardware.architecture must be modulo when hardware.interval is given "
+                         f"(auto and fastest pick the interval themselves), not {robot.architecture!r}")
     robot = dataclasses.replace(robot, min_refresh_hz=float(robot.min_refresh_hz))
     if robot.ticks_per_pu < 1:
         raise RobotError(f"hardware.clock_hz must give at least one PWM tick per pulse unit "
@@ -254,7 +258,7 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
 
 #: option -> how errors name it (TOML field names; the CLI passes its option names)
 HARDWARE_LABELS = {"legs": "legs", "architecture": "hardware.architecture",
-                   "multipliers": "hardware.multipliers", "dsp": "hardware.dsp",
+                   "multipliers": "hardware.multipliers", "interval": "hardware.interval", "dsp": "hardware.dsp",
                    "min_refresh_hz": "hardware.min_refresh_hz", "fit_device": "hardware.fit_device"}
 
 
@@ -273,6 +277,7 @@ def _check_hardware(robot: Robot, labels: dict | None = None) -> None:
             raise RobotError(f"{lab[key]} must be an integer >= 1, not {v!r}")
     pos_int("legs")
     pos_int("multipliers")
+    pos_int("interval")
     for key, choices in (("architecture", ARCHITECTURES), ("dsp", DSP_CHOICES)):
         v = getattr(robot, key)
         if v not in choices:
@@ -280,9 +285,9 @@ def _check_hardware(robot: Robot, labels: dict | None = None) -> None:
     r = robot.min_refresh_hz
     if isinstance(r, bool) or not isinstance(r, (int, float)) or not np.isfinite(r) or r <= 0:
         raise RobotError(f"{lab['min_refresh_hz']} must be a number > 0, not {r!r}")
-    if robot.legs > 1 and robot.architecture == "pipelined":
+    if robot.legs > 1 and robot.architecture in ("pipelined", "modulo"):
         raise RobotError(f"{lab['architecture']} must be auto, folded or fastest for {lab['legs']} = {robot.legs} "
-                         f"(the legs share one folded evaluator), not 'pipelined'")
+                         f"(the legs share one folded evaluator), not {robot.architecture!r}")
     dev = robot.fit_device
     if dev is not None and dev not in FIT_DEVICES:
         raise RobotError(f"{lab['fit_device']} must be one of {', '.join(FIT_DEVICES)}, not {dev!r}")
@@ -326,7 +331,7 @@ def robot_record(robot: Robot) -> dict:
 
 
 #: Robot fields that do not change the fitted plan (hardware architecture, naming, PWM period)
-NON_FIT_FIELDS = ("name", "description", "legs", "architecture", "multipliers", "dsp", "min_refresh_hz",
+NON_FIT_FIELDS = ("name", "description", "legs", "architecture", "multipliers", "interval", "dsp", "min_refresh_hz",
                   "fit_device", "pwm_period_us")
 
 

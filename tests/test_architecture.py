@@ -46,7 +46,14 @@ def test_defaults_and_hexapod_preset():
     ({"legs": 0}, {}, "legs must be an integer >= 1, not 0"),
     ({"legs": 2.0}, {}, "legs must be an integer >= 1, not 2.0"),
     ({"legs": True}, {}, "legs must be an integer >= 1, not True"),
-    ({}, {"architecture": "systolic"}, "hardware.architecture must be one of auto, pipelined, folded, fastest, not 'systolic'"),
+    ({}, {"architecture": "systolic"},
+     "hardware.architecture must be one of auto, pipelined, folded, modulo, fastest, not 'systolic'"),
+    ({}, {"architecture": "modulo", "interval": 0}, "hardware.interval must be an integer >= 1, not 0"),
+    ({}, {"interval": 4}, "hardware.architecture must be modulo when hardware.interval is given "
+                          "(auto and fastest pick the interval themselves), not 'pipelined'"),
+    ({"legs": 6}, {"architecture": "modulo"},
+     "hardware.architecture must be auto, folded or fastest for legs = 6 (the legs share one folded evaluator), "
+     "not 'modulo'"),
     ({}, {"multipliers": 0}, "hardware.multipliers must be an integer >= 1, not 0"),
     ({}, {"multipliers": 2}, "hardware.architecture must be folded when hardware.multipliers is given "
                              "(auto picks 1 or 2 multipliers itself), not 'pipelined'"),
@@ -57,7 +64,7 @@ def test_defaults_and_hexapod_preset():
      "hardware.architecture must be auto, folded or fastest for legs = 6 (the legs share one folded evaluator), "
      "not 'pipelined'"),
     ({}, {"colour": 1}, "unknown field hardware.colour (expected one of: architecture, clock_hz, dsp, "
-                        "fit_device, min_refresh_hz, multipliers, pwm_period_us)"),
+                        "fit_device, interval, min_refresh_hz, multipliers, pwm_period_us)"),
     ({}, {"architecture": "fastest", "fit_device": "foo"},
      "hardware.fit_device must be one of ice40-up5k, ecp5-25f, xc7a35t, not 'foo'"),
     ({}, {"architecture": "fastest", "fit_device": 3},
@@ -161,6 +168,15 @@ def test_auto_takes_the_smallest_configuration_that_meets_the_rate(auto_robot, s
     assert rec["architecture"] == "pipelined" and rec["reason"].startswith("auto: the smallest configuration")
 
 
+def test_explicit_modulo_configuration(auto_robot, small_plan):
+    c = choose_architecture(dataclasses.replace(auto_robot, architecture="modulo", interval=5, dsp="ecp5",
+                                                min_refresh_hz=1.0), small_plan)
+    assert (c.candidate.architecture, c.candidate.interval) == ("modulo", 5)
+    assert c.core.architecture == "modulo" and c.core.initiation_interval == 5
+    assert c.record()["multipliers"] == c.core.evaluator.multipliers
+    assert c.reason.startswith("hardware.architecture = modulo:")
+
+
 def test_explicit_and_shared_configurations(auto_robot, small_plan):
     c = choose_architecture(dataclasses.replace(auto_robot, architecture="folded", multipliers=2, dsp="none"),
                             small_plan)
@@ -212,7 +228,11 @@ def test_flat_robot_top_ports_match_the_manifest(auto_robot, small_plan):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--architecture", "systolic"], "--architecture must be one of auto, pipelined, folded, fastest, not 'systolic'"),
+    (["--architecture", "systolic"],
+     "--architecture must be one of auto, pipelined, folded, modulo, fastest, not 'systolic'"),
+    (["--interval", "0"], "--interval must be an integer >= 1, not '0'"),
+    (["--interval", "4"], "--architecture must be modulo when --interval is given "
+                          "(auto and fastest pick the interval themselves), not 'pipelined'"),
     (["--multipliers", "0"], "--multipliers must be an integer >= 1, not '0'"),
     (["--multipliers", "2"], "--architecture must be folded when --multipliers is given "
                              "(auto picks 1 or 2 multipliers itself), not 'pipelined'"),
