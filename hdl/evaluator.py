@@ -53,6 +53,27 @@ def output_layout(plan: Plan) -> data.StructLayout:
     return data.StructLayout({o.name: _shape(plan.nodes[o.node]) for o in plan.outputs})
 
 
+def node_expression(n, ops):
+    """The value of plan node ``n`` (any operation but input, const and lut) as an Amaranth
+    expression of its operands' values ``ops``; the caller registers it or not."""
+    if n.op == "add":
+        return ops[0] + ops[1]
+    if n.op == "mul":
+        return ops[0] * ops[1]
+    if n.op == "clamp":
+        lo, hi = n.param
+        return Mux(ops[0] < lo, lo, Mux(ops[0] > hi, hi, ops[0]))
+    if n.op in ("shr", "index"):
+        return ops[0] >> n.param
+    if n.op == "mask":   # two's complement low bits: non-negative, zero-extended
+        return ops[0] & Const((1 << n.param) - 1, unsigned(n.param))
+    if n.op == "shl":
+        return ops[0] << n.param
+    if n.op == "frac":   # same integer
+        return ops[0]
+    raise ValueError(f"plan node operation {n.op!r} has no expression here")
+
+
 class PlanEvaluator(wiring.Component):
     """Evaluates every output of ``plan`` for a stream of inputs.
 
@@ -152,25 +173,12 @@ class PlanEvaluator(wiring.Component):
                 continue
             s = stages[idx]
             ops = [at(a, s - 1 if n.op in REGISTERED_OPS else s) for a in n.args]
-            if n.op == "add":
-                expr = ops[0] + ops[1]
-            elif n.op == "mul":
-                expr = ops[0] * ops[1]
-            elif n.op == "clamp":
-                lo, hi = n.param
-                expr = Mux(ops[0] < lo, lo, Mux(ops[0] > hi, hi, ops[0]))
-            elif n.op in ("shr", "index"):
-                expr = ops[0] >> n.param
-            elif n.op == "mask":   # two's complement low bits: non-negative, zero-extended
-                expr = ops[0] & Const((1 << n.param) - 1, unsigned(n.param))
-            elif n.op == "lut":
+            if n.op == "lut":
                 if idx not in lut_field:
                     lut_field.update(self._lut_rom(m, en, n.args[0], groups[n.args[0]], ops[0]))
                 expr = lut_field[idx]
-            elif n.op == "shl":
-                expr = ops[0] << n.param
-            else:  # frac: same integer
-                expr = ops[0]
+            else:
+                expr = node_expression(n, ops)
             if n.op in REGISTERED_OPS and n.op != "lut":   # lut: the ROM port registers
                 with m.If(en):
                     m.d.sync += sig.eq(expr)

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Array, Cat, ClockSignal, Const, Instance, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Array, Cat, ClockSignal, Const, Instance, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from ..fit.plan import Plan
-from .evaluator import input_layout, output_layout
+from .evaluator import _shape, input_layout, node_expression, output_layout
+from .limbmul import _check_dsp
+from .schedule import _swidth
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY"]
 
@@ -60,14 +62,7 @@ class ModuloSchedule:
 
 
 def _signed_width(node) -> int:
-    return node.width + (not node.signed)
-
-
-def _tiles(wa: int, wb: int, dsp: tuple[int, int]) -> int:
-    """DSP blocks of a wa x wb signed product (either orientation), 0 for no product."""
-    if not wa or not wb:
-        return 0
-    return min(-(-wa // dsp[0]) * -(-wb // dsp[1]), -(-wa // dsp[1]) * -(-wb // dsp[0]))
+    return _swidth(node.lo, node.hi)
 
 
 def _fits(wa: int, wb: int, dsp) -> bool:
@@ -190,10 +185,6 @@ def _limbs(x, width: int, bits: int) -> list:
     return out
 
 
-def _shape(node):
-    return signed(node.width) if node.signed else unsigned(node.width)
-
-
 class ModuloEvaluator(wiring.Component):
     """Evaluates every output of ``plan``, one target every ``initiation_interval`` cycles.
 
@@ -252,9 +243,7 @@ class ModuloEvaluator(wiring.Component):
         if isinstance(initiation_interval, bool) or not isinstance(initiation_interval, int) \
                 or initiation_interval < 1:
             raise ValueError(f"initiation_interval must be an integer >= 1, not {initiation_interval!r}")
-        if dsp is not None and not (isinstance(dsp, tuple) and len(dsp) == 2
-                                    and all(isinstance(w, int) and w >= 2 for w in dsp)):
-            raise ValueError(f"dsp must be None or a pair of operand widths >= 2, not {dsp!r}")
+        _check_dsp(dsp)
         if dsp_registers not in (None, "ecp5") or (dsp_registers and dsp != (18, 18)):
             raise ValueError(f"dsp_registers must be None, or 'ecp5' with dsp=(18, 18), not {dsp_registers!r}")
         self._plan = plan
@@ -337,17 +326,7 @@ class ModuloEvaluator(wiring.Component):
             if n.op in _WIRING:
                 if (i, c) in wires:
                     return wires[i, c]
-                a = read(n.args[0], c)
-                if n.op == "shr":
-                    v = a >> n.param
-                elif n.op == "shl":
-                    v = a << n.param
-                elif n.op == "index":
-                    v = a >> n.param
-                elif n.op == "mask":
-                    v = a.as_unsigned()[:n.param]
-                else:
-                    v = a
+                v = node_expression(n, [read(n.args[0], c)])
                 w = wires[i, c] = Signal(_shape(n), name=f"n{i}_{n.op}_c{c}")
                 m.d.comb += w.eq(v)
                 return w
@@ -376,15 +355,10 @@ class ModuloEvaluator(wiring.Component):
                 continue
             s = sch.start[i]
             ops = [read(a, s) for a in n.args]
-            if n.op == "add":
-                v = ops[0] + ops[1]
-            elif n.op == "clamp":
-                lo, hi = n.param
-                v = Mux(ops[0] < lo, lo, Mux(ops[0] > hi, hi, ops[0]))
-            elif n.op == "lut":
+            if n.op == "lut":
                 v = Array(Const(x, _shape(n)) for x in n.param)[ops[0]]
             else:
-                raise ValueError(f"plan node operation {n.op!r} is not supported")
+                v = node_expression(n, ops)
             with m.If(at_phase(s)):
                 m.d.sync += reg.eq(v)
 

@@ -65,11 +65,10 @@ class Candidate:
     def describe(self) -> str:
         if self.architecture == "pipelined":
             return "pipelined (one target per cycle)"
+        d = "full-width" if self.dsp == "none" else "{} {}x{} DSP".format(self.dsp, *DSP_SIZES[self.dsp])
         if self.architecture == "modulo":
-            d = "full-width" if self.dsp == "none" else "{} {}x{} DSP".format(self.dsp, *DSP_SIZES[self.dsp])
             return f"modulo-scheduled pipeline, one target per {self.interval} cycles ({d})"
         k = f"{self.multipliers} multiplier{'s' if self.multipliers != 1 else ''}"
-        d = "full-width" if self.dsp == "none" else "{} {}x{} DSP".format(self.dsp, *DSP_SIZES[self.dsp])
         what = f"folded evaluator shared by {self.legs} legs" if self.architecture == "shared" else "folded"
         return f"{what}, {k} ({d})"
 

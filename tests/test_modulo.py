@@ -78,7 +78,7 @@ def test_real_plan_random_targets_bit_exact(plan):
 
 @pytest.mark.parametrize("kwargs, words", [
     ({"initiation_interval": 0}, "initiation_interval must be an integer >= 1, not 0"),
-    ({"initiation_interval": 2, "dsp": (18,)}, r"dsp must be None or a pair of operand widths >= 2, not \(18,\)"),
+    ({"initiation_interval": 2, "dsp": (18,)}, r"dsp must be None or a pair of signed operand widths >= 2 such as \(16, 16\), not \(18,\)"),
 ])
 def test_bad_parameters(kwargs, words):
     with pytest.raises(ValueError, match=words):
