@@ -172,6 +172,18 @@ class OperatorOps:
     """The datapath operations that are plain Python operators on the value type (shared by
     the numpy golden model and the Amaranth back end)."""
 
+    def add(self, a, b):
+        return a + b
+
+    def sub(self, a, b):
+        return a - b
+
+    def neg(self, a):
+        return -a
+
+    def mul(self, a, b):
+        return a * b
+
     def shr(self, a, k):
         return a >> k
 
@@ -309,27 +321,41 @@ def _norm_bound(x: Iv, y: Iv) -> float:
     return math.hypot(ax, ay)
 
 
+def _micro_rotations(ops, live, n, table, cordics, tag, steer, hint):
+    """``n`` CORDIC micro-rotations of every ``(x, y, a)`` in ``cordics`` (register names), one
+    pipeline stage each: with ``s, ns = steer(ops, x, y, a)`` (the step direction and its
+    negation), ``x -= y >> i`` where ``s`` (else ``+=``), ``y -= x >> i`` where ``ns``, ``a -= t_i``
+    where ``s``. ``hint(xn, i)`` gives the interval hints of ``(x, y)`` in analysis mode."""
+    for i in range(n):
+        new, hints = dict(live), {}
+        for xn, yn, an in cordics:
+            x, y, a = live[xn], live[yn], live[an]
+            s, ns = steer(ops, x, y, a)
+            dx, dy, t = ops.shr(y, i), ops.shr(x, i), ops.c(table[i])
+            new[xn] = ops.addsub(x, dx, s)
+            new[yn] = ops.addsub(y, dy, ns)
+            new[an] = ops.addsub(a, t, s)
+            if ops.analysis:
+                hints[xn], hints[yn] = hint(xn, i)
+        live = ops.stage(f"{tag}{i}", new, hints)
+    return live
+
+
 def _rotate(ops, live, n, table, cordics, tag):
     """Rotation CORDICs: drive each angle ``a`` to 0 rotating ``(x, y)`` by it.
     ``cordics`` = [(x, y, a) register names]; one pipeline stage per iteration."""
     bounds = {}
     if ops.analysis:
         bounds = {xn: _cordic_bounds(_norm_bound(live[xn], live[yn]), n) for xn, yn, _ in cordics}
-    for i in range(n):
-        new, hints = dict(live), {}
-        for xn, yn, an in cordics:
-            x, y, a = live[xn], live[yn], live[an]
-            neg = ops.lt(a, ops.c(0))       # a < 0: rotate clockwise
-            pos = ops.not_(neg)
-            dx, dy, t = ops.shr(y, i), ops.shr(x, i), ops.c(table[i])
-            new[xn] = ops.addsub(x, dx, pos)
-            new[yn] = ops.addsub(y, dy, neg)
-            new[an] = ops.addsub(a, t, pos)
-            if ops.analysis:
-                b = bounds[xn][i]
-                hints[xn] = hints[yn] = (-b, b)
-        live = ops.stage(f"{tag}{i}", new, hints)
-    return live
+
+    def steer(ops, x, y, a):
+        neg = ops.lt(a, ops.c(0))       # a < 0: rotate clockwise
+        return ops.not_(neg), neg
+
+    def hint(xn, i):
+        b = bounds[xn][i]
+        return (-b, b), (-b, b)
+    return _micro_rotations(ops, live, n, table, cordics, tag, steer, hint)
 
 
 def _vector_prerotate(ops, x, y, deg90):
@@ -350,21 +376,15 @@ def _vectoring(ops, live, n, table, cordics, tag):
     if ops.analysis:
         bounds = {xn: (live[xn].lo, _cordic_bounds(_norm_bound(live[xn], live[yn]), n))
                   for xn, yn, _ in cordics}
-    for i in range(n):
-        new, hints = dict(live), {}
-        for xn, yn, an in cordics:
-            x, y, a = live[xn], live[yn], live[an]
-            neg = ops.lt(y, ops.c(0))       # y >= 0: rotate clockwise
-            pos = ops.not_(neg)
-            dx, dy, t = ops.shr(y, i), ops.shr(x, i), ops.c(table[i])
-            new[xn] = ops.addsub(x, dx, neg)
-            new[yn] = ops.addsub(y, dy, pos)
-            new[an] = ops.addsub(a, t, neg)
-            if ops.analysis:
-                x0lo, b = bounds[xn][0], bounds[xn][1][i]
-                hints[xn], hints[yn] = (max(0, x0lo), b), (-b, b)
-        live = ops.stage(f"{tag}{i}", new, hints)
-    return live
+
+    def steer(ops, x, y, a):
+        neg = ops.lt(y, ops.c(0))       # y >= 0: rotate clockwise
+        return neg, ops.not_(neg)
+
+    def hint(xn, i):
+        x0lo, b = bounds[xn][0], bounds[xn][1][i]
+        return (max(0, x0lo), b), (-b, b)
+    return _micro_rotations(ops, live, n, table, cordics, tag, steer, hint)
 
 
 def _isqrt(ops, live, xname, rname, xhi, tag):

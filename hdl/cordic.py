@@ -45,18 +45,6 @@ class AmaranthOps(OperatorOps):
     def c(self, v):
         return Const(v)
 
-    def add(self, a, b):
-        return a + b
-
-    def sub(self, a, b):
-        return a - b
-
-    def neg(self, a):
-        return -a
-
-    def mul(self, a, b):
-        return a * b
-
     def mulc(self, a, c: int):
         """a * c: a shift-add over the CSD digits of c when it has few, else ``*``."""
         digits = csd(c)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..fit.cordic import CordicDesign, CordicPlan, OperatorOps, datapath
+from .golden import port_values
 
 __all__ = ["NumpyOps", "evaluate", "outputs", "errors_pu"]
 
@@ -35,18 +36,6 @@ class NumpyOps(OperatorOps):
 
     def c(self, v):
         return np.int64(v)
-
-    def add(self, a, b):
-        return a + b
-
-    def sub(self, a, b):
-        return a - b
-
-    def neg(self, a):
-        return -a
-
-    def mul(self, a, b):
-        return a * b
 
     def mulc(self, a, c):
         return a * np.int64(c)
@@ -84,23 +73,11 @@ class NumpyOps(OperatorOps):
         return vals
 
 
-def _ports(cp: CordicPlan, ints: dict) -> dict:
-    out = {}
-    for i in cp.inputs:
-        v = np.asarray(ints[i.name], dtype=np.int64)
-        lo, hi = i.port_range
-        if v.size and (v.min() < lo or v.max() > hi):
-            raise ValueError(f"input {i.name} must fit its {i.width}-bit port "
-                             f"[{lo}, {hi}], not {int(v.min() if v.min() < lo else v.max())}")
-        out[i.name] = v
-    return out
-
-
 def evaluate(cp: CordicPlan, ints: dict, check: bool = True) -> tuple[dict, list[dict]]:
     """Output ticks per servo and the observed (min, max) of every register, for port integers
     ``ints`` (one int array per input name). Raises OverflowError (with ``check``) if any
     register value leaves its analysed range."""
-    ports = _ports(cp, ints)
+    ports = port_values(cp, ints)
     n = max(np.size(v) for v in ports.values())
     ports = {k: np.broadcast_to(v, (n,)) for k, v in ports.items()}
     ops = NumpyOps(cp.layout, ports, check)

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..fit.plan import Plan
 
-__all__ = ["evaluate", "evaluate_ideal", "quantize_inputs", "outputs"]
+__all__ = ["evaluate", "evaluate_ideal", "quantize_inputs", "outputs", "port_values"]
 
 
 def quantize_inputs(plan: Plan, values: dict) -> dict:
@@ -23,7 +23,9 @@ def quantize_inputs(plan: Plan, values: dict) -> dict:
     return out
 
 
-def _ports(plan: Plan, ints: dict) -> dict:
+def port_values(plan, ints: dict) -> dict:
+    """Port integers by input name as int64 arrays, checked against each port's range (for a
+    :class:`Plan` or anything with such ``inputs``, e.g. a CORDIC plan)."""
     vals = {}
     for i in plan.inputs:
         v = np.asarray(ints[i.name], dtype=np.int64)
@@ -47,7 +49,7 @@ def _last_use(plan: Plan, keep) -> list[int]:
 
 def _run(plan: Plan, ints: dict, keep, step) -> dict:
     """Evaluate node by node with ``step``; returns {node: value} for ``keep`` (all if None)."""
-    ports = _ports(plan, ints)
+    ports = port_values(plan, ints)
     keep = range(len(plan.nodes)) if keep is None else keep
     last = _last_use(plan, keep)
     vals: dict = {}
