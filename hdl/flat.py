@@ -39,6 +39,8 @@ class FlatStreamTop(wiring.Component):
     ----------
     core : wiring.Component
         Has ``i: In(stream.Signature(...))``, ``o: Out(stream.Signature(...))`` and ``latency``.
+    extra_ports : dict, optional
+        More signature members after the stream ports (a subclass wires them).
 
     Latency
     -------
@@ -49,12 +51,12 @@ class FlatStreamTop(wiring.Component):
     That of ``core``.
     """
 
-    def __init__(self, core):
+    def __init__(self, core, extra_ports: dict | None = None):
         for name in ("i", "o", "latency"):
             if not hasattr(core, name):
                 raise TypeError(f"core must be a stream component with i, o and latency, not {core!r}")
         self._core = core
-        super().__init__(flat_stream_ports(core))
+        super().__init__({**flat_stream_ports(core), **(extra_ports or {})})
 
     @property
     def core(self):

@@ -38,6 +38,17 @@ def cmd_presets(args):
         print(f"{n}\t{load_preset(n).description}")
 
 
+def _positive_int(text: str, option: str) -> int:
+    """``text`` as an integer >= 1, or a CliError naming ``option`` and the value."""
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise CliError(f"{option} must be an integer >= 1, not {text!r}")
+    return v
+
+
 def _hardware_overrides(robot, args):
     """``robot`` with the build's --architecture / --multipliers / --interval / --dsp / --fit-device applied
     (validated). --fit-device also sets the DSP size to the device's family unless --dsp is given;
@@ -56,22 +67,10 @@ def _hardware_overrides(robot, args):
         opts["fit_device"] = args.fit_device
         if args.dsp is None:
             opts["dsp"] = FIT_DEVICES[args.fit_device]
-    if args.multipliers is not None:
-        try:
-            k = int(args.multipliers)
-        except ValueError:
-            k = None
-        if k is None or k < 1:
-            raise CliError(f"--multipliers must be an integer >= 1, not {args.multipliers!r}")
-        opts["multipliers"] = k
-    if getattr(args, "interval", None) is not None:
-        try:
-            ii = int(args.interval)
-        except ValueError:
-            ii = None
-        if ii is None or ii < 1:
-            raise CliError(f"--interval must be an integer >= 1, not {args.interval!r}")
-        opts["interval"] = ii
+    for key in ("multipliers", "interval"):
+        text = getattr(args, key, None)
+        if text is not None:
+            opts[key] = _positive_int(text, f"--{key}")
     if args.dsp is not None:
         if args.dsp not in DSP_CHOICES:
             raise CliError(f"--dsp must be one of {', '.join(DSP_CHOICES)}, not {args.dsp!r}")

@@ -109,3 +109,15 @@ def check_exhaustively(plan, want=None):
         assert err.max() <= bound[k] * (1 + 1e-12) + 1e-12, (k, plan.nodes[k].op)
     if want is not None:
         assert np.allclose(fv[plan.outputs[0].preround], want(ports), rtol=0, atol=1e-9)
+
+
+def simulate_bit_exact(core, plan, targets, **kw):
+    """Stream ``targets`` through ``core`` in the Amaranth simulator (``simulate_leg``, keyword
+    options passed on) and assert every output equals the golden model; returns the result."""
+    from ikseries.sim import golden
+    from ikseries.sim.amaranth_sim import simulate_leg
+    res = simulate_leg(core, targets, **kw)
+    exp = golden.outputs(plan, targets)
+    for s in exp:
+        assert np.array_equal(res.outputs[s], exp[s]), s
+    return res

@@ -8,21 +8,12 @@ import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
-from helpers import all_ports, signed_cell_plan, tiny_piecewise_plan, tiny_plan
+from helpers import all_ports, signed_cell_plan, simulate_bit_exact, tiny_piecewise_plan, tiny_plan
 from ikseries.hdl.evaluator import PlanEvaluator, lut_groups, lut_rom_init
 from ikseries.hdl.leg import LegCore
 from ikseries.hdl.pwm import ServoPWM
 from ikseries.sim import golden
-from ikseries.sim.amaranth_sim import simulate_leg
 from ikseries.sim.targets import corner_targets, random_targets
-
-
-def _check(core, plan, targets, **kw):
-    res = simulate_leg(core, targets, **kw)
-    exp = golden.outputs(plan, targets)
-    for s in exp:
-        assert np.array_equal(res.outputs[s], exp[s]), s
-    return res
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -30,7 +21,7 @@ def test_evaluator_exhaustive_at_small_widths(seed):
     """Every port value (in range and clamped out-of-range) of a tiny plan, bit for bit."""
     plan = tiny_plan(seed)
     core = PlanEvaluator(plan)
-    res = _check(core, plan, all_ports(plan))
+    res = simulate_bit_exact(core, plan, all_ports(plan))
     assert set(res.latencies.tolist()) == {core.latency}
 
 
@@ -43,9 +34,9 @@ def test_evaluator_piecewise_exhaustive(seed, shift):
     core = PlanEvaluator(plan)
     assert plan.count("lut") > 1 and len(lut_groups(plan)) == 1
     t = all_ports(plan)
-    res = _check(core, plan, t)
+    res = simulate_bit_exact(core, plan, t)
     assert set(res.latencies.tolist()) == {core.latency} == {plan.latency}
-    res = _check(core, plan, t, ready_prob=0.5, valid_prob=0.6, seed=seed)
+    res = simulate_bit_exact(core, plan, t, ready_prob=0.5, valid_prob=0.6, seed=seed)
     assert res.latencies.min() == core.latency
 
 
@@ -54,7 +45,7 @@ def test_evaluator_signed_cells_exhaustive():
     and as lut indices; a table whose first entries the index never takes."""
     plan = signed_cell_plan()
     core = PlanEvaluator(plan)
-    res = _check(core, plan, all_ports(plan))
+    res = simulate_bit_exact(core, plan, all_ports(plan))
     assert set(res.latencies.tolist()) == {core.latency}
 
 
@@ -120,16 +111,16 @@ def test_leg_core_bit_exact_and_latency_full_plan(plan):
     core = LegCore(plan, period=960000)
     t = {k: np.concatenate([c, r]) for (k, c), r in
          zip(corner_targets(plan).items(), random_targets(plan, 3000, 11).values())}
-    res = _check(core, plan, t)
+    res = simulate_bit_exact(core, plan, t)
     assert set(res.latencies.tolist()) == {core.latency} == {plan.latency}
 
 
 def test_leg_core_under_backpressure_and_gaps(small_plan):
     core = LegCore(small_plan, period=960000)
-    res = _check(core, small_plan, random_targets(small_plan, 600, 5), ready_prob=0.5, valid_prob=0.6, seed=3)
+    res = simulate_bit_exact(core, small_plan, random_targets(small_plan, 600, 5), ready_prob=0.5, valid_prob=0.6, seed=3)
     assert res.latencies.min() >= core.latency   # a stall delays every target in flight
     # input gaps alone never change the latency
-    res = _check(core, small_plan, random_targets(small_plan, 300, 6), valid_prob=0.6, seed=4)
+    res = simulate_bit_exact(core, small_plan, random_targets(small_plan, 300, 6), valid_prob=0.6, seed=4)
     assert set(res.latencies.tolist()) == {core.latency}
 
 

@@ -2,19 +2,9 @@
 import numpy as np
 import pytest
 
-from helpers import all_ports, tiny_piecewise_plan, tiny_plan
+from helpers import all_ports, simulate_bit_exact, tiny_piecewise_plan, tiny_plan
 from ikseries.hdl.modulo import MUL_LATENCY, WIDE_MUL_LATENCY, ModuloEvaluator, modulo_schedule
-from ikseries.sim import golden
-from ikseries.sim.amaranth_sim import simulate_leg
 from ikseries.sim.targets import corner_targets, random_targets
-
-
-def _check(core, plan, targets, **kw):
-    res = simulate_leg(core, targets, **kw)
-    want = golden.outputs(plan, targets)
-    for s in want:
-        assert np.array_equal(res.outputs[s], want[s]), s
-    return res
 
 
 @pytest.mark.parametrize("ii", [1, 2, 3, 5])
@@ -23,7 +13,7 @@ def test_every_port_value_bit_exact_at_each_initiation_interval(ii):
     core = ModuloEvaluator(plan, ii, dsp=None)
     assert core.initiation_interval == ii
     assert core.multipliers == -(-plan.count("mul") // ii)
-    res = _check(core, plan, all_ports(plan))
+    res = simulate_bit_exact(core, plan, all_ports(plan))
     assert np.all(res.latencies == core.latency)
     # back to back: one target every ii cycles
     assert np.all(np.diff(res.input_cycles) == ii)
@@ -33,7 +23,7 @@ def test_every_port_value_bit_exact_at_each_initiation_interval(ii):
 def test_piecewise_plan_bit_exact_with_backpressure(seed):
     plan = tiny_piecewise_plan(seed)
     core = ModuloEvaluator(plan, 4)
-    _check(core, plan, all_ports(plan), ready_prob=0.6, valid_prob=0.7, seed=seed)
+    simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.6, valid_prob=0.7, seed=seed)
 
 
 @pytest.mark.parametrize("dsp", [None, (8, 8), (6, 5)])
@@ -64,7 +54,7 @@ def test_products_split_in_limbs_stay_bit_exact(dsp):
     plan = tiny_plan(2)
     core = ModuloEvaluator(plan, 3, dsp=dsp)
     assert WIDE_MUL_LATENCY in core.schedule.unit_latency
-    res = _check(core, plan, all_ports(plan), ready_prob=0.8, seed=3)
+    res = simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.8, seed=3)
     assert np.all(res.latencies >= core.latency)
 
 
@@ -72,7 +62,7 @@ def test_real_plan_random_targets_bit_exact(plan):
     core = ModuloEvaluator(plan, 6)
     targets = {k: np.concatenate([corner_targets(plan)[k], v])
                for k, v in random_targets(plan, 300, np.random.default_rng(5)).items()}
-    res = _check(core, plan, targets)
+    res = simulate_bit_exact(core, plan, targets)
     assert np.all(res.latencies == core.latency)
 
 
@@ -93,7 +83,7 @@ def test_leg_core_with_an_interval_is_modulo_scheduled():
     assert core.latency == core.evaluator.latency
     with pytest.raises(ValueError, match="multipliers must be None with interval"):
         LegCore(plan, 400, interval=3, multipliers=1)
-    _check(core, plan, all_ports(plan))
+    simulate_bit_exact(core, plan, all_ports(plan))
 
 
 def test_ecp5_dsp_registers_instantiate_the_primitive_with_its_registers():
