@@ -53,7 +53,7 @@ def _hardware_overrides(robot, args):
     """``robot`` with the build's --architecture / --multipliers / --interval / --dsp / --fit-device applied
     (validated). --fit-device also sets the DSP size to the device's family unless --dsp is given;
     --architecture other than fastest drops the description's hardware.fit_device."""
-    from .robot import ARCHITECTURES, DSP_CHOICES, FIT_DEVICES, with_hardware
+    from .robot import ARCHITECTURES, DSP_CHOICES, FIT_DEVICES, check_architecture_options, with_hardware
     opts = {}
     if args.architecture is not None:
         if args.architecture not in ARCHITECTURES:
@@ -82,12 +82,7 @@ def _hardware_overrides(robot, args):
     if given & {"architecture", "fit_device"}:   # either names the other in the error
         given |= {"architecture", "fit_device"}
     new = with_hardware(robot, {k: v for k, v in labels.items() if k in given}, **opts) if opts else robot
-    if "multipliers" in opts and new.architecture != "folded":
-        raise CliError(f"--architecture must be folded when --multipliers is given "
-                       f"(auto picks 1 or 2 multipliers itself), not {new.architecture!r}")
-    if "interval" in opts and new.architecture != "modulo":
-        raise CliError(f"--architecture must be modulo when --interval is given "
-                       f"(auto and fastest pick the interval themselves), not {new.architecture!r}")
+    check_architecture_options(new, set(opts), labels)
     return new
 
 

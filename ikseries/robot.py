@@ -242,12 +242,7 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
                   min_refresh_hz=hw.get("min_refresh_hz", 1000.0), fit_device=hw.get("fit_device"),
                   lowering=lowering, interval=hw.get("interval", 8))
     _check_hardware(robot)
-    if "multipliers" in hw and robot.architecture != "folded":
-        raise RobotError(f"hardware.architecture must be folded when hardware.multipliers is given "
-                         f"(auto picks 1 or 2 multipliers itself), not {robot.architecture!r}")
-    if "interval" in hw and robot.architecture != "modulo":
-        raise RobotError(f"hardware.architecture must be modulo when hardware.interval is given "
-                         f"(auto and fastest pick the interval themselves), not {robot.architecture!r}")
+    check_architecture_options(robot, set(hw))
     robot = dataclasses.replace(robot, min_refresh_hz=float(robot.min_refresh_hz))
     if robot.ticks_per_pu < 1:
         raise RobotError(f"hardware.clock_hz must give at least one PWM tick per pulse unit "
@@ -297,6 +292,21 @@ def _check_hardware(robot: Robot, labels: dict | None = None) -> None:
     if dev is None and robot.architecture == "fastest":
         raise RobotError(f"{lab['fit_device']} must be one of {', '.join(FIT_DEVICES)} when "
                          f"{lab['architecture']} is fastest (the device to fit), not None")
+
+
+#: options that only one architecture takes: option -> (architecture, why the others don't)
+ARCHITECTURE_OPTIONS = {"multipliers": ("folded", "auto picks 1 or 2 multipliers itself"),
+                        "interval": ("modulo", "auto and fastest pick the interval themselves")}
+
+
+def check_architecture_options(robot: Robot, given, labels: dict | None = None) -> None:
+    """Refuse an option of :data:`ARCHITECTURE_OPTIONS` that was ``given`` (a set of option
+    names) with another architecture; errors name the fields via ``labels``."""
+    lab = {**HARDWARE_LABELS, **(labels or {})}
+    for key, (arch, why) in ARCHITECTURE_OPTIONS.items():
+        if key in given and robot.architecture != arch:
+            raise RobotError(f"{lab['architecture']} must be {arch} when {lab[key]} is given ({why}), "
+                             f"not {robot.architecture!r}")
 
 
 def with_hardware(robot: Robot, labels: dict | None = None, **options) -> Robot:
