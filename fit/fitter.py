@@ -7,7 +7,8 @@ fixed-point formats whose *certified* rounding bound meets the quantization
 budget -> plan.
 
 Error budget (pu): ``tolerance = approximation + quantization + output rounding
-+ margin``, output rounding being half a PWM tick.
++ margin``, output rounding being half a PWM tick, quantization 10 % of the tolerance (more
+when products must fit the DSP blocks, see :func:`fit_robot`).
 """
 from __future__ import annotations
 
@@ -21,11 +22,11 @@ from ..kinematics import UnreachableError
 from .certify import CertificationError, certify
 from .features import Cut, Normaliser, coordinate_stage
 from .horner import estrin, lower_poly
-from .plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for, quantize
+from .plan import DSP_SIZES, Plan, PlanBuilder, PlanInput, PlanOutput, bits_for, quantize
 from .polyfit import fit_least_squares, lawson, total_degree_terms, vander
 
 __all__ = ["FitError", "ServoFit", "FeatureSet", "fit_robot", "plan_inputs", "workspace_samples",
-           "output_multipliers"]
+           "output_multipliers", "operand_bits"]
 
 MAX_DEGREE = 12
 CERTIFY_ATTEMPTS = 3   # fits (the first + refits with tighter budgets) before refusing
@@ -35,10 +36,25 @@ FIT_SAMPLES = (30000, 3000)      # random interior points, points per face
 CHECK_SAMPLES = (100000, 10000)  # + points per edge / 4
 MIX_EXTRA_MULTIPLIERS = 2       # fit.lowering = "mixed": extra multiplications allowed per servo
 CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
+#: shares of the tolerance given to the certified rounding error, tried in turn: the first
+#: always; the others when fit.products = "dsp" leaves no format within the smaller share
+QUANTIZATION_SHARES = (0.10, 0.25, 0.40)
 
 
 class FitError(RuntimeError):
     """No plan meets the robot's tolerance."""
+
+
+class FormatError(FitError):
+    """No fixed-point format keeps the rounding error within the quantization budget."""
+
+
+def operand_bits(robot) -> tuple[int, int] | None:
+    """The signed operand widths every plan multiplication must fit: those of the DSP block
+    of ``hardware.dsp`` when ``fit.products = "dsp"``; else None (exact products)."""
+    if getattr(robot, "products", "exact") != "dsp" or robot.dsp not in DSP_SIZES:
+        return None
+    return DSP_SIZES[robot.dsp]
 
 
 @dataclass
@@ -72,9 +88,9 @@ class Budget:
     approximation: float
 
     @classmethod
-    def split(cls, tolerance: float, ticks_per_pu: float) -> "Budget":
+    def split(cls, tolerance: float, ticks_per_pu: float, quantization_share: float = 0.1) -> "Budget":
         rounding = 0.5 / ticks_per_pu
-        quant = 0.1 * tolerance
+        quant = quantization_share * tolerance
         approx = tolerance - rounding - quant - 0.15 * tolerance
         if approx <= 0:
             raise FitError(f"tolerance {tolerance:g} pu leaves no approximation budget after "
@@ -307,7 +323,7 @@ def _servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], f
 def _build(robot, inputs, stage, fits: list[ServoFit], fv: int, mixed: bool | None = None) -> Plan:
     """The plan of ``fits``; ``mixed`` None: as ``robot.lowering`` says."""
     mixed = getattr(robot, "lowering", "mixed") == "mixed" if mixed is None else mixed
-    b = PlanBuilder(inputs)
+    b = PlanBuilder(inputs, operand_bits=operand_bits(robot))
     nodes = _Nodes(robot, stage, b, fv, mixed)
     lo, hi = robot.pulse_limits_ticks()
     outs = []
@@ -589,7 +605,7 @@ def _choose_formats(robot, inputs, stage, fits, budget: Budget, progress) -> int
             progress(f"  formats: features {fv} fractional bits, accumulators "
                      + ", ".join(f"{sf.name} {sf.frac}" for sf in fits))
             return fv
-    raise FitError(f"no fixed-point format keeps the certified rounding error within "
+    raise FormatError(f"no fixed-point format keeps the certified rounding error within "
                    f"{budget.quantization:g} pu in 63-bit intermediates")
 
 
@@ -609,6 +625,7 @@ def _lower(robot, inputs, stage, fits, budget, progress) -> Plan:
         "method": {"fit": "Lawson near-minimax + exchange on a check set; per servo the variable set "
                           "and total degree with the fewest multipliers, then pruned",
                    "lowering": getattr(robot, "lowering", "mixed"),
+                   "operand_bits": list(operand_bits(robot)) if operand_bits(robot) else None,
                    "seed": FIT_SEED, "fit_samples": FIT_SAMPLES, "check_samples": CHECK_SAMPLES,
                    "max_degree": MAX_DEGREE},
         "features": {**stage.meta(), "frac_bits": fv},
@@ -632,9 +649,27 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tu
     ``plan.meta["certificate"]``. A servo whose certified total exceeds the tolerance is
     refitted with a 15 % tighter approximation budget; after ``CERTIFY_ATTEMPTS`` fits the
     plan is refused (:class:`FitError`).
+
+    With ``fit.products = "dsp"`` every multiplication's operands fit one DSP block of
+    ``hardware.dsp`` (:func:`operand_bits`; narrowed by the plan builder). The extra rounding
+    may not fit the usual 10 % of the tolerance; then the whole fit is redone with the next
+    of ``QUANTIZATION_SHARES`` (the approximation budget shrinks by as much).
     """
+    shares = QUANTIZATION_SHARES if operand_bits(robot) is not None else QUANTIZATION_SHARES[:1]
+    for n, share in enumerate(shares):
+        try:
+            return _fit_robot(robot, progress, certified, share)
+        except FormatError as e:
+            if n + 1 == len(shares):
+                raise
+            progress(f"{e} with products fitting {operand_bits(robot)} DSP operands: refitting with "
+                     f"{shares[n + 1]:.0%} of the tolerance for rounding")
+    raise AssertionError("unreachable")
+
+
+def _fit_robot(robot, progress, certified: bool, quantization_share: float) -> tuple[Plan, list[ServoFit]]:
     tpp = robot.ticks_per_pu
-    budget = Budget.split(robot.tolerance_pu, tpp)
+    budget = Budget.split(robot.tolerance_pu, tpp, quantization_share)
     inputs = plan_inputs(robot)
     # cos/sin error e moves the tip by up to R_max * e; keep that to ~1 % of the budget
     rmax = max(abs(robot.inputs[0].min), abs(robot.inputs[0].max))

@@ -34,11 +34,14 @@ import contextlib
 import json
 from dataclasses import dataclass, field
 
-__all__ = ["quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for", "PLAN_FORMAT",
+__all__ = ["DSP_SIZES", "quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for", "PLAN_FORMAT",
            "PLAN_VERSION", "REGISTERED_OPS"]
 
 PLAN_FORMAT = "ikseries.plan"
 PLAN_VERSION = 1
+#: DSP multiplier sizes (signed operand bits) of common FPGA families: iCE40 SB_MAC16,
+#: ECP5 MULT18X18D, Xilinx 7-series DSP48E1
+DSP_SIZES = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
 REGISTERED_OPS = frozenset({"add", "mul", "clamp", "lut"})
 _OPS = {"input": 0, "const": 0, "add": 2, "mul": 2, "clamp": 1, "shr": 1, "shl": 1, "frac": 1,
         "index": 1, "mask": 1, "lut": 1}
@@ -238,9 +241,23 @@ class Plan:
 
 
 class PlanBuilder:
-    """Appends nodes with their intervals; structurally identical nodes are shared."""
+    """Appends nodes with their intervals; structurally identical nodes are shared.
 
-    def __init__(self, inputs: list[PlanInput], with_inputs: bool = True):
+    With ``operand_bits = (p, q)`` every multiplication's operands fit one ``p`` x ``q`` signed
+    DSP multiplier (the wider operand gets the wider port): :meth:`mul` first drops the low
+    bits of an operand that is too wide (a ``shr``; a constant or table is rounded again from
+    its ideal values instead), so the plan never needs a product split into limbs. The extra
+    rounding is part of the plan, so the certified bound includes it.
+    """
+
+    def __init__(self, inputs: list[PlanInput], with_inputs: bool = True,
+                 operand_bits: tuple[int, int] | None = None):
+        if operand_bits is not None and not (
+                isinstance(operand_bits, tuple) and len(operand_bits) == 2
+                and all(isinstance(w, int) and not isinstance(w, bool) and w >= 2 for w in operand_bits)):
+            raise ValueError(f"operand_bits must be None or a pair of signed widths >= 2 such as (18, 18), "
+                             f"not {operand_bits!r}")
+        self.operand_bits = operand_bits
         self.inputs = list(inputs)
         self.nodes: list[Node] = []
         self._memo: dict[tuple, int] = {}
@@ -361,9 +378,39 @@ class PlanBuilder:
         return self._append("add", (self.align(a, f), self.align(b, f)), f)
 
     def mul(self, a: int, b: int, frac: int | None = None) -> int:
-        """Product, truncated (floor) to ``frac`` fractional bits if given."""
+        """Product, truncated (floor) to ``frac`` fractional bits if given (operands first
+        narrowed to ``operand_bits``, if set)."""
+        if self.operand_bits is not None:
+            a, b = self._fit_operands(a, b)
         p = self._append("mul", (a, b), self.frac(a) + self.frac(b))
         return p if frac is None else self.align(p, frac)
+
+    def signed_width(self, a: int) -> int:
+        """Bits of node ``a`` as a signed operand (an unsigned value needs one more)."""
+        w, s = bits_for(self.nodes[a].lo, self.nodes[a].hi)
+        return w if s else w + 1
+
+    def _fit_operands(self, a: int, b: int) -> tuple[int, int]:
+        wide, narrow = max(self.operand_bits), min(self.operand_bits)
+        if a == b:                       # a square: narrow once, keep the operands equal
+            a = self._narrow(a, narrow)
+            return a, a
+        if self.signed_width(a) >= self.signed_width(b):
+            return self._narrow(a, wide), self._narrow(b, narrow)
+        return self._narrow(a, narrow), self._narrow(b, wide)
+
+    def _narrow(self, a: int, bits: int) -> int:
+        """``a`` with low bits dropped until it is at most ``bits`` signed bits wide."""
+        while (w := self.signed_width(a)) > bits:
+            n, f = self.nodes[a], self.frac(a) - (w - bits)
+            if n.op == "const":
+                a = self.const(n.ideal if n.ideal is not None else n.param * 2.0 ** -n.frac, f)
+            elif n.op == "lut":
+                ideal = n.ideal if n.ideal is not None else tuple(v * 2.0 ** -n.frac for v in n.param)
+                a = self.lut(n.args[0], ideal, f)
+            else:
+                a = self.align(a, f)
+        return a
 
     def clamp(self, a: int, lo: int, hi: int) -> int:
         n = self.nodes[a]

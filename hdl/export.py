@@ -166,6 +166,13 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
                                 f"one target every {ii} cycles; a held output (o_valid high, "
                                 "o_ready low) blocks the next target")},
     }
+    if getattr(core, "dsp_registers", None) == "ecp5":
+        man["primitives"] = {
+            "cells": ["MULT18X18D"],
+            "note": "every product on a Lattice ECP5 MULT18X18D with its input and output registers; "
+                    "synthesise for ECP5 (Yosys synth_ecp5, Lattice tools), simulate with "
+                    "sim_models/MULT18X18D.v (a behavioural model of the configuration used)",
+        }
     if shared:
         man["reset"]["state"] = ("evaluator idle (o_valid low), PWM outputs low, no pulses on a leg's "
                                  "channels until widths for that leg are transferred on o")

@@ -39,6 +39,9 @@ class LegCore(wiring.Component):
         :class:`FoldedEvaluator`); only with ``multipliers`` or ``interval``.
     interval : int, optional
         Initiation interval of a :class:`ModuloEvaluator` (not with ``multipliers``).
+    dsp_registers : None or "ecp5", optional
+        With ``interval``: the modulo evaluator's products on instantiated MULT18X18D blocks
+        with their own registers (see :class:`ModuloEvaluator`).
 
     Attributes
     ----------
@@ -66,12 +69,17 @@ class LegCore(wiring.Component):
 
     def __init__(self, plan: Plan, period: int, reset_widths: dict | None = None, *,
                  multipliers: int | None = None, dsp: tuple[int, int] | None = None,
-                 interval: int | None = None):
+                 interval: int | None = None, dsp_registers: str | None = None):
+        self._args = (plan, period, reset_widths, dict(multipliers=multipliers, dsp=dsp, interval=interval))
+        self._dsp_registers = dsp_registers
+        if dsp_registers is not None and interval is None:
+            raise ValueError(f"dsp_registers must be None without interval (only the modulo-scheduled "
+                             f"evaluator instantiates DSP primitives), not {dsp_registers!r}")
         if interval is not None:
             if multipliers is not None:
                 raise ValueError(f"multipliers must be None with interval (a modulo-scheduled evaluator "
                                  f"sizes its multipliers itself), not {multipliers!r}")
-            self._evaluator = ModuloEvaluator(plan, interval, dsp=dsp or (18, 18))
+            self._evaluator = ModuloEvaluator(plan, interval, dsp=dsp or (18, 18), dsp_registers=dsp_registers)
         elif multipliers is None:
             if dsp is not None:
                 raise ValueError(f"dsp must be None for the pipelined evaluator (multipliers=None), not {dsp!r}")
@@ -104,6 +112,21 @@ class LegCore(wiring.Component):
     @property
     def latency(self) -> int:
         return self._evaluator.latency
+
+    @property
+    def dsp_registers(self) -> str | None:
+        """"ecp5" when the products run on instantiated MULT18X18D primitives, else None."""
+        return self._dsp_registers
+
+    def simulation_model(self) -> "LegCore":
+        """A core the Amaranth simulator can run with the same ports, timing and values: this
+        one, or with ``dsp_registers`` a twin whose DSP registers are fabric flip-flops (the
+        simulator cannot run an ``Instance``; the exported Verilog with the primitives is
+        simulated by cocotb with the primitive's model)."""
+        if self._dsp_registers is None:
+            return self
+        plan, period, widths, kw = self._args
+        return LegCore(plan, period, widths, **kw)
 
     @property
     def initiation_interval(self) -> int:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Array, Cat, ClockSignal, Const, Instance, Module, Mux, Signal, signed
+from amaranth.hdl import Array, Cat, ClockSignal, Const, Instance, Module, Mux, ResetSignal, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -213,10 +213,12 @@ class ModuloEvaluator(wiring.Component):
     dsp_registers : None or "ecp5"
         None (default): the operand and product registers are fabric flip-flops (Yosys maps
         the product to a DSP block without absorbing them, so every product path runs fabric
-        -> DSP -> fabric). "ecp5": each block product is an instantiated MULT18X18D with its own
-        input and output registers (clock enable = the pipeline enable), same timing. For
-        place-and-route experiments only: neither the Amaranth simulator nor Icarus/Verilator
-        has a model of the primitive, so this variant is not simulated.
+        -> DSP -> fabric). "ecp5": each block product is an instantiated MULT18X18D whose own
+        input and output registers are the operand and product registers (clock enable = the
+        pipeline enable, synchronous reset = the domain's reset), same timing and values. The
+        Amaranth simulator cannot run an ``Instance``: simulate the same core with None; the
+        exported Verilog runs in Icarus and Verilator with the primitive's model
+        ``ikseries/sim/models/MULT18X18D.v`` (:func:`ikseries.sim.runner.run` adds it).
 
     Attributes
     ----------
@@ -278,7 +280,7 @@ class ModuloEvaluator(wiring.Component):
     def _product(self, m, a, b, en, name):
         """``a * b`` two enabled clock edges later: operand registers, then a product register
         (in the fabric; with ``dsp_registers="ecp5"`` the MULT18X18D's own input and output
-        registers)."""
+        registers, cleared by the domain's reset like the fabric ones)."""
         wa, wb = len(a), len(b)
         p = Signal(signed(wa + wb + 1), name=f"{name}_p")   # + 1: unsigned limb x unsigned limb
         if self._dsp_registers is None:
@@ -296,7 +298,7 @@ class ModuloEvaluator(wiring.Component):
             **{f"i_A{k}": sa[k] for k in range(18)}, **{f"i_B{k}": sb[k] for k in range(18)},
             **{f"i_C{k}": Const(0, 1) for k in range(18)},
             i_SIGNEDA=Const(1, 1), i_SIGNEDB=Const(1, 1), i_SOURCEA=Const(0, 1), i_SOURCEB=Const(0, 1),
-            i_CLK0=ClockSignal(), i_CE0=en, i_RST0=Const(0, 1),
+            i_CLK0=ClockSignal(), i_CE0=en, i_RST0=ResetSignal(),
             **{f"o_P{k}": out[k] for k in range(36)})
         return p
 

@@ -62,15 +62,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..fit.plan import REGISTERED_OPS, Plan, bits_for
+from ..fit.plan import DSP_SIZES, REGISTERED_OPS, Plan, bits_for
 from .limbmul import _check_dsp, limb_split
 
 __all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "READ_DELAY", "WRITE_DELAY", "compile_program",
            "resolve_view"]
 
 ALU_OPS = ("add", "max", "min", "pass", "and")
-#: DSP multiplier sizes (signed operand bits) of common FPGA families
-DSP_SIZES = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
 READ_DELAY = 2         # issue -> cycle the units see the (registered) read data
 ALU_LATENCY = READ_DELAY + 2   # issue -> write: read, read register, ALU compare/add, ALU select
 LUT_LATENCY = READ_DELAY + 1   # issue -> write: index read, read register, ROM read

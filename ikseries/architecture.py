@@ -81,7 +81,8 @@ class Candidate:
         if self.architecture == "folded":
             return LegCore(plan, robot.pwm_period_ticks, multipliers=self.multipliers, dsp=dsp)
         if self.architecture == "modulo":
-            return LegCore(plan, robot.pwm_period_ticks, interval=self.interval, dsp=dsp)
+            prim = "ecp5" if getattr(robot, "dsp_primitives", False) and self.dsp == "ecp5" else None
+            return LegCore(plan, robot.pwm_period_ticks, interval=self.interval, dsp=dsp, dsp_registers=prim)
         return LegCore(plan, robot.pwm_period_ticks)
 
 

@@ -24,7 +24,7 @@ from .report import render_markdown
 from .robot import robot_record
 from .sim import golden
 from .sim.amaranth_sim import simulate_leg, simulate_robot
-from .sim.runner import SIMULATORS
+from .sim.runner import SIMULATORS, primitive_models
 from .sim.targets import corner_targets, random_targets
 
 __all__ = ["BuildError", "build", "default_output_dir"]
@@ -66,7 +66,7 @@ def _simulate(core, plan, progress, vcd=None) -> dict:
         res = simulate_robot(core, legs, targets, vcd=vcd)
         leg_mismatches = int(np.count_nonzero(res.legs != legs))
     else:
-        res = simulate_leg(core, targets, vcd=vcd)
+        res = simulate_leg(core.simulation_model(), targets, vcd=vcd)
     exp = golden.outputs(plan, targets)
     mismatches = int(sum(np.count_nonzero(res.outputs[s] != exp[s]) for s in exp))
     lat = sorted(set(int(x) for x in res.latencies))
@@ -222,6 +222,9 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         sim = _simulate(core, plan, progress, vcd=str(tmp / "sim.vcd") if vcd else None)
         vfile = f"{name}.v"
         (tmp / vfile).write_text(verilog_text)
+        for model in primitive_models(verilog_text):   # vendor primitives: our simulation model
+            (tmp / "sim_models").mkdir(exist_ok=True)
+            shutil.copyfile(model, tmp / "sim_models" / model.name)
         (tmp / f"{name}.sdc").write_text(clock_sdc(name, robot.clock_hz))
         resources = None
         if synth:

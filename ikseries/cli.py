@@ -50,10 +50,11 @@ def _positive_int(text: str, option: str) -> int:
 
 
 def _hardware_overrides(robot, args):
-    """``robot`` with the build's --architecture / --multipliers / --interval / --dsp / --fit-device applied
+    """``robot`` with the build's --architecture / --multipliers / --interval / --dsp / --fit-device /
+    --products applied
     (validated). --fit-device also sets the DSP size to the device's family unless --dsp is given;
     --architecture other than fastest drops the description's hardware.fit_device."""
-    from .robot import ARCHITECTURES, DSP_CHOICES, FIT_DEVICES, check_architecture_options, with_hardware
+    from .robot import ARCHITECTURES, DSP_CHOICES, FIT_DEVICES, PRODUCTS, check_architecture_options, with_hardware
     opts = {}
     if args.architecture is not None:
         if args.architecture not in ARCHITECTURES:
@@ -75,10 +76,17 @@ def _hardware_overrides(robot, args):
         if args.dsp not in DSP_CHOICES:
             raise CliError(f"--dsp must be one of {', '.join(DSP_CHOICES)}, not {args.dsp!r}")
         opts["dsp"] = args.dsp
+    if getattr(args, "dsp_primitives", False):
+        opts["dsp_primitives"] = True
+    if getattr(args, "products", None) is not None:
+        if args.products not in PRODUCTS:
+            raise CliError(f"--products must be one of {', '.join(PRODUCTS)}, not {args.products!r}")
+        opts["products"] = args.products
     labels = {"architecture": "--architecture", "multipliers": "--multipliers", "interval": "--interval",
-              "dsp": "--dsp", "fit_device": "--fit-device"}
+              "dsp": "--dsp", "fit_device": "--fit-device", "dsp_primitives": "--dsp-primitives"}
     given = {k for k in ("architecture", "multipliers", "interval", "dsp", "fit_device")
-             if getattr(args, k, None) is not None}
+             if getattr(args, k, None) is not None} | ({"dsp_primitives", "dsp"} if getattr(args, "dsp_primitives", False)
+                                                         else set())
     if given & {"architecture", "fit_device"}:   # either names the other in the error
         given |= {"architecture", "fit_device"}
     new = with_hardware(robot, {k: v for k, v in labels.items() if k in given}, **opts) if opts else robot
@@ -234,6 +242,12 @@ def main(argv=None):
     b.add_argument("--fit-device", metavar="DEVICE",
                    help="override hardware.fit_device (with --architecture fastest): "
                         f"{', '.join(FIT_DEVICES)}; also sets --dsp to the device's family unless --dsp is given")
+    b.add_argument("--dsp-primitives", action="store_true",
+                   help="override hardware.dsp_primitives: put a modulo core's products on instantiated ECP5 "
+                        "MULT18X18D blocks with their own registers (needs --dsp ecp5)")
+    b.add_argument("--products", metavar="MODE",
+                   help="override fit.products: exact (default: every product as wide as it needs, split "
+                        "into DSP-sized limbs in hardware) or dsp (operands narrowed to one --dsp block each)")
     b.add_argument("-q", "--quiet", action="store_true")
     f = sub.add_parser("fit", help="fit only (no hardware) by one method, with a report")
     f.add_argument("robot", nargs="?", help="robot description (TOML); default: --preset cylinder-leg")

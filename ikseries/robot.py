@@ -17,12 +17,16 @@ from .quadruped import QuadrupedFore, QuadrupedHind
 from .synth import FIT_DEVICES
 
 __all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot",
-           "robot_record", "robot_from_record", "fit_record", "with_hardware", "ARCHITECTURES", "DSP_CHOICES",
+           "robot_record", "robot_from_record", "fit_record", "with_hardware", "ARCHITECTURES", "DSP_CHOICES", "PRODUCTS",
            "FIT_DEVICES"]
 
 #: fit.lowering values: "mixed" = per servo the Horner/Estrin mix of least pipeline depth (a few
 #: more multiplications), "horner" = nested Horner (fewest multiplications, deepest)
 LOWERINGS = ("mixed", "horner")
+#: fit.products values: "exact" = every product at the width interval analysis gives it (a wide
+#: one is split into DSP-sized limbs in hardware), "dsp" = operands narrowed so that every
+#: product fits one DSP block of hardware.dsp (fewer DSP blocks and cycles, a bit more rounding)
+PRODUCTS = ("exact", "dsp")
 #: hardware.architecture values: "auto" picks the smallest that meets hardware.min_refresh_hz,
 #: "fastest" the fastest whose Yosys cell counts fit hardware.fit_device (see ikseries.architecture).
 #: Default: "pipelined" (one target per clock, verified by cocotb too) for one leg, "auto" for more.
@@ -86,6 +90,8 @@ class Robot:
     fit_device: str | None = None   # one of FIT_DEVICES: the device "fastest" must fit
     lowering: str = "mixed"         # one of LOWERINGS: how servo polynomials become plan operations
     interval: int = 8               # initiation interval of a modulo-scheduled evaluator
+    products: str = "exact"         # one of PRODUCTS: product widths exact or fitted to hardware.dsp
+    dsp_primitives: bool = False    # modulo cores: products on instantiated ECP5 MULT18X18D with their registers
 
     @property
     def servos(self) -> tuple[str, ...]:
@@ -215,17 +221,20 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
         raise RobotError(f"calibration.pulse_max_us must be > pulse_min_us ({pmin!r}), not {pmax!r}")
 
     fit = _table(data, "fit", "", required=False)
-    _no_extra(fit, ["tolerance_pu", "lowering"], "fit.")
+    _no_extra(fit, ["tolerance_pu", "lowering", "products"], "fit.")
     tol = fit.get("tolerance_pu", 0.5)
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not tol > 0:
         raise RobotError(f"fit.tolerance_pu must be > 0 pu, not {tol!r}")
     lowering = fit.get("lowering", "mixed")
     if lowering not in LOWERINGS:
         raise RobotError(f"fit.lowering must be one of {', '.join(LOWERINGS)}, not {lowering!r}")
+    products = fit.get("products", "exact")
+    if products not in PRODUCTS:
+        raise RobotError(f"fit.products must be one of {', '.join(PRODUCTS)}, not {products!r}")
 
     hw = _table(data, "hardware", "", required=False)
     _no_extra(hw, ["clock_hz", "pwm_period_us", "architecture", "multipliers", "interval", "dsp", "min_refresh_hz",
-                   "fit_device"], "hardware.")
+                   "fit_device", "dsp_primitives"], "hardware.")
     clk = _number(hw, "clock_hz", "hardware.", default=48_000_000, positive=True, integer=True)
     period = float(_number(hw, "pwm_period_us", "hardware.", default=20000.0, positive=True))
     if period <= pmax:
@@ -240,7 +249,8 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
                   architecture=hw.get("architecture", "auto" if data.get("legs", 1) != 1 else "pipelined"),
                   multipliers=hw.get("multipliers", 1), dsp=hw.get("dsp", _default_dsp(hw.get("fit_device"))),
                   min_refresh_hz=hw.get("min_refresh_hz", 1000.0), fit_device=hw.get("fit_device"),
-                  lowering=lowering, interval=hw.get("interval", 8))
+                  lowering=lowering, interval=hw.get("interval", 8), products=products,
+                  dsp_primitives=hw.get("dsp_primitives", False))
     _check_hardware(robot)
     check_architecture_options(robot, set(hw))
     robot = dataclasses.replace(robot, min_refresh_hz=float(robot.min_refresh_hz))
@@ -254,7 +264,8 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
 #: option -> how errors name it (TOML field names; the CLI passes its option names)
 HARDWARE_LABELS = {"legs": "legs", "architecture": "hardware.architecture",
                    "multipliers": "hardware.multipliers", "interval": "hardware.interval", "dsp": "hardware.dsp",
-                   "min_refresh_hz": "hardware.min_refresh_hz", "fit_device": "hardware.fit_device"}
+                   "min_refresh_hz": "hardware.min_refresh_hz", "fit_device": "hardware.fit_device",
+                   "dsp_primitives": "hardware.dsp_primitives"}
 
 
 def _default_dsp(fit_device) -> str:
@@ -283,6 +294,12 @@ def _check_hardware(robot: Robot, labels: dict | None = None) -> None:
     if robot.legs > 1 and robot.architecture in ("pipelined", "modulo"):
         raise RobotError(f"{lab['architecture']} must be auto, folded or fastest for {lab['legs']} = {robot.legs} "
                          f"(the legs share one folded evaluator), not {robot.architecture!r}")
+    prim = robot.dsp_primitives
+    if not isinstance(prim, bool):
+        raise RobotError(f"{lab['dsp_primitives']} must be true or false, not {prim!r}")
+    if prim and robot.dsp != "ecp5":
+        raise RobotError(f"{lab['dsp']} must be ecp5 when {lab['dsp_primitives']} is true (the only "
+                         f"DSP primitive instantiated is the ECP5 MULT18X18D), not {robot.dsp!r}")
     dev = robot.fit_device
     if dev is not None and dev not in FIT_DEVICES:
         raise RobotError(f"{lab['fit_device']} must be one of {', '.join(FIT_DEVICES)}, not {dev!r}")
@@ -342,12 +359,15 @@ def robot_record(robot: Robot) -> dict:
 
 #: Robot fields that do not change the fitted plan (hardware architecture, naming, PWM period)
 NON_FIT_FIELDS = ("name", "description", "legs", "architecture", "multipliers", "interval", "dsp", "min_refresh_hz",
-                  "fit_device", "pwm_period_us")
+                  "fit_device", "pwm_period_us", "dsp_primitives")
 
 
 def fit_record(record: dict) -> dict:
-    """The part of a :func:`robot_record` that decides the fitted plan."""
-    return {k: v for k, v in record.items() if k not in NON_FIT_FIELDS}
+    """The part of a :func:`robot_record` that decides the fitted plan (``dsp`` too when
+    ``fit.products = "dsp"`` sizes the products by it)."""
+    dsp_sized = record.get("products", "exact") != "exact"
+    return {k: v for k, v in record.items()
+            if (k not in NON_FIT_FIELDS or (k == "dsp" and dsp_sized)) and (k != "products" or dsp_sized)}
 
 
 def robot_from_record(d: dict) -> Robot:

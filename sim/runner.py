@@ -142,6 +142,15 @@ def _env(**values):
                 os.environ[k] = v
 
 
+#: simulation models of the vendor primitives the exported Verilog may instantiate
+MODELS = {"MULT18X18D": Path(__file__).parent / "models" / "MULT18X18D.v"}
+
+
+def primitive_models(verilog: str) -> list[Path]:
+    """The model files of the vendor primitives instantiated in ``verilog``."""
+    return [path for cell, path in MODELS.items() if re.search(rf"^\s*{cell}\b", verilog, re.M)]
+
+
 def _write_if_changed(path: Path, text: str) -> None:
     # keep the timestamp when nothing changed, so Verilator's make does not rebuild
     if not path.exists() or path.read_text() != text:
@@ -249,9 +258,10 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
         core's initiation interval: 3000 for a pipelined core, fewer for a folded one).
     latency : expected latency told to the bench (default: ``core.latency``).
     testcase : run only this cocotb test (comma-separated names).
-    verilator_opt : C++ optimisation flag for the Verilator build (``OPT_FAST``, ``OPT_SLOW``,
-        ``OPT_GLOBAL``); None keeps Verilator's ``-Os``. ``-O1`` built the small plan's model in
-        ~30 s instead of ~47 s and simulates it at least as fast.
+    verilator_opt : C++ optimisation flag for the Verilator build (``OPT_FAST``, ``OPT_GLOBAL``;
+        the run-once ``OPT_SLOW`` code is always built at ``-O0``); None keeps Verilator's
+        ``-Os``. ``-O1`` built the small plan's model in ~30 s instead of ~47 s and simulates it
+        at least as fast.
     core : the core to export and test (see :func:`export`): a folded ``LegCore`` or a
         ``RobotCore`` gets its initiation interval (and legs) passed to the bench; None: the
         pipelined ``LegCore(plan, period)``.
@@ -275,7 +285,7 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
     ii = core.initiation_interval if initiation_interval is None else initiation_interval
     if n_random is None:
         n_random = default_n_random(ii)
-    sources = [vfile]
+    sources = [vfile, *primitive_models(vfile.read_text())]
     build_args: list = []
     if simulator == "verilator":
         build_args = ["-Wno-fatal"]
@@ -293,7 +303,9 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
         path = _verilator_path()
         fix = [_verilator_make_fixes(path)]
         if verilator_opt:
-            fix += [f"OPT_FAST={verilator_opt}", f"OPT_SLOW={verilator_opt}", f"OPT_GLOBAL={verilator_opt}"]
+            # the slow (run-once) code at -O0: GCC spent over 10 minutes at -O1 on the symbol
+            # table constructor of a core with ~50 MULT18X18D model instances (2 s at -O0)
+            fix += [f"OPT_FAST={verilator_opt}", "OPT_SLOW=-O0", f"OPT_GLOBAL={verilator_opt}"]
         makeflags = " ".join(x for x in (os.environ.get("MAKEFLAGS", ""), *fix) if x) or None
     # Icarus: the runner puts "-none" (no dump) after the plusargs when waves=False; vvp takes
     # the last dumper option, and SIM_CMD_SUFFIX comes last of all

@@ -6,13 +6,13 @@ from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput
 from ikseries.sim import golden
 
 
-def tiny_plan(seed=0, clamp=(-100, 100), degree=4) -> Plan:
+def tiny_plan(seed=0, clamp=(-100, 100), degree=4, operand_bits=None) -> Plan:
     """Two small inputs, a random 2-variable polynomial of total ``degree`` (<= 4, at most
     cubic in a and quadratic in b), rounded and clamped: small enough to evaluate exhaustively
-    over every port value."""
+    over every port value. ``operand_bits``: the builder's product operand limit."""
     rng = np.random.default_rng(seed)
     inputs = [PlanInput("a", "mm", 2, 0, 12, 4, False), PlanInput("b", "deg", 1, -10, 9, 5, True)]
-    b = PlanBuilder(inputs)
+    b = PlanBuilder(inputs, operand_bits=operand_bits)
     a_n = b.align(b.reinterpret(b.input_nodes["a"], 4), 6)   # a / 4 in [0, 0.75]
     b_n = b.reinterpret(b.input_nodes["b"], 5)               # b / 16 in [-0.31, 0.28]
     poly = {(i, j): float(rng.normal() * 50) for i in range(4) for j in range(3) if i + j <= degree}
@@ -21,13 +21,13 @@ def tiny_plan(seed=0, clamp=(-100, 100), degree=4) -> Plan:
     return b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
 
 
-def tiny_piecewise_plan(seed=0, shift=2, degree=3, clamp=(-100, 100)) -> Plan:
+def tiny_piecewise_plan(seed=0, shift=2, degree=3, clamp=(-100, 100), operand_bits=None) -> Plan:
     """``tiny_plan``'s inputs, input a cut into cells of 2**shift port values, a random
     polynomial per cell in the offset inside the cell (centred on [-1, 1)) and b, its
     coefficients looked up by cell (``lut``), rounded and clamped to ``clamp``."""
     rng = np.random.default_rng(seed)
     inputs = [PlanInput("a", "mm", 2, 0, 12, 4, False), PlanInput("b", "deg", 1, -10, 9, 5, True)]
-    b = PlanBuilder(inputs)
+    b = PlanBuilder(inputs, operand_bits=operand_bits)
     cell, off = b.cell(b.input_nodes["a"], shift)
     t = b.add(b.reinterpret(off, shift - 1), b.const(-1.0, shift - 1))
     b_n = b.reinterpret(b.input_nodes["b"], 5)

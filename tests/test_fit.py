@@ -7,6 +7,7 @@ import pytest
 
 from ikseries.accuracy import measure, verification_points
 from ikseries.fit.fitter import Budget, FitError, fit_robot
+from ikseries.fit.plan import bits_for
 
 
 @pytest.fixture(scope="module")
@@ -233,3 +234,46 @@ def test_default_plan_takes_cos_and_sin_from_theta_tables(plan):
     meta = plan.meta["features"]
     assert meta["kind"] == "cylindrical" and "trig_table" in meta
     assert meta["trig_table"]["cells"] == len(meta["trig_table"]["cos"][0])
+
+
+@pytest.fixture(scope="module")
+def dsp_sized(small_robot):
+    """The small leg fitted with fit.products = "dsp" for iCE40 16x16 blocks."""
+    from ikseries.robot import with_hardware
+    robot = with_hardware(small_robot, products="dsp", dsp="ice40")
+    return robot, fit_robot(robot)[0]
+
+
+def test_products_dsp_fit_every_product_into_one_dsp_block_and_stay_certified(dsp_sized, small_plan):
+    robot, plan = dsp_sized
+    widths = [sorted(bits_for(plan.nodes[a].lo, plan.nodes[a].hi)[0]
+                     + (plan.nodes[a].lo >= 0) for a in n.args) for n in plan.nodes if n.op == "mul"]
+    assert widths and max(max(w) for w in widths) <= 16
+    exact = [n for n in small_plan.nodes if n.op == "mul"
+             and max(bits_for(small_plan.nodes[a].lo, small_plan.nodes[a].hi)[0] for a in n.args) > 16]
+    assert exact                       # without the option some products are wider
+    assert plan.meta["method"]["operand_bits"] == [16, 16]
+    assert all(c["total_pu"] <= robot.tolerance_pu for c in plan.meta["certificate"]["servos"])
+
+
+def test_products_dsp_give_rounding_a_larger_share_when_the_usual_one_is_too_small(small_robot, monkeypatch):
+    from ikseries.fit import fitter
+    from ikseries.robot import with_hardware
+    seen, msgs = [], []
+    real = fitter._choose_formats
+
+    def choose(robot, inputs, stage, fits, budget, progress):
+        seen.append(budget.quantization / robot.tolerance_pu)
+        if len(seen) == 1:
+            raise fitter.FormatError("no fixed-point format keeps the certified rounding error within 0.4 pu")
+        return real(robot, inputs, stage, fits, budget, progress)
+    monkeypatch.setattr(fitter, "_choose_formats", choose)
+    robot = with_hardware(small_robot, products="dsp", dsp="ecp5")
+    plan, _ = fit_robot(robot, msgs.append, certified=False)
+    assert seen == pytest.approx([0.10, 0.25])
+    assert plan.meta["budget_pu"]["quantization"] == pytest.approx(0.25 * robot.tolerance_pu)
+    assert any("refitting with 25% of the tolerance for rounding" in m for m in msgs)
+    seen.clear()
+    with pytest.raises(fitter.FormatError):     # exact products: no second share
+        fit_robot(small_robot, certified=False)
+    assert seen == pytest.approx([0.10])

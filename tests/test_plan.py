@@ -143,3 +143,65 @@ def test_lut_and_cell_operations_check_their_operands():
     lut = b.lut(cell, [0.5, 1.0, -2.0, 0.25], 1)
     assert (b.nodes[lut].lo, b.nodes[lut].hi) == (-4, 2)
     assert b.nodes[lut].ideal == (0.5, 1.0, -2.0, 0.25)
+
+
+# -- products narrowed to DSP operands (PlanBuilder(operand_bits=...)) --------------------------
+
+def _operand_widths(plan):
+    def sw(n):
+        w, s = bits_for(n.lo, n.hi)
+        return w if s else w + 1
+    return [tuple(sw(plan.nodes[a]) for a in n.args) for n in plan.nodes if n.op == "mul"]
+
+
+@pytest.mark.parametrize("make", [tiny_plan, tiny_piecewise_plan])
+@pytest.mark.parametrize("cap", [(7, 7), (9, 6)])
+def test_operand_bits_cap_every_product_and_the_rounding_bound_still_holds(make, cap):
+    plan = make(1, operand_bits=cap)
+    exact = make(1)
+    assert any(max(w) > max(cap) for w in _operand_widths(exact))   # the cap has work to do
+    for wa, wb in _operand_widths(plan):
+        lo, hi = sorted((wa, wb))
+        assert lo <= min(cap) and hi <= max(cap), (wa, wb)
+    ports = all_ports(plan)
+    iv, fv = golden.evaluate(plan, ports), golden.evaluate_ideal(plan, ports)
+    bound = plan.rounding_bounds()
+    for k in plan.cone(plan.outputs[0].preround):
+        v = np.asarray(iv[k])
+        assert v.min() >= plan.nodes[k].lo and v.max() <= plan.nodes[k].hi, k
+        err = np.abs(v * 2.0 ** -plan.nodes[k].frac - fv[k])
+        assert err.max() <= bound[k] * (1 + 1e-12) + 1e-12, (k, plan.nodes[k].op)
+    # the ideal function is the same polynomial: narrowing only rounds
+    assert np.allclose(golden.evaluate_ideal(exact, ports)[exact.outputs[0].preround],
+                       fv[plan.outputs[0].preround], rtol=0, atol=1e-9)
+
+
+def test_operand_bits_round_constants_and_tables_again_from_their_ideal_values():
+    b = PlanBuilder([PlanInput("a", "mm", 0, -100, 100, 8, True)], operand_bits=(8, 8))
+    x = b.input_nodes["a"]
+    k = b.const(1234.56789, 4)                              # 16 signed bits
+    p = b.mul(k, x)
+    n = b.nodes[b.nodes[p].args[0]]
+    assert n.op == "const" and n.ideal == 1234.56789 and n.param == round(1234.56789 * 2 ** n.frac)
+    assert b.signed_width(b.nodes[p].args[0]) == 8
+    cell, off = b.cell(b.input_nodes["a"], 6)               # cells -2..1
+    t = b.lut(b.add(cell, b.const(2, 0)), [1000.25, -999.5, 3.0, 0.125], 2)
+    q = b.mul(t, off)
+    n = b.nodes[b.nodes[q].args[0]]
+    assert n.op == "lut" and n.ideal == (1000.25, -999.5, 3.0, 0.125) and b.signed_width(b.nodes[q].args[0]) <= 8
+    sq = b.mul(b.const(77.0, 0), b.const(77.0, 0))         # equal operands stay one node
+    assert b.nodes[sq].args[0] == b.nodes[sq].args[1]
+
+
+def test_operand_bits_give_the_wider_port_to_the_wider_operand():
+    b = PlanBuilder([PlanInput("a", "mm", 0, -2 ** 22, 2 ** 22 - 1, 23, True),
+                     PlanInput("c", "mm", 0, -2 ** 19, 2 ** 19 - 1, 20, True)], operand_bits=(25, 18))
+    p = b.mul(b.input_nodes["c"], b.input_nodes["a"])
+    assert [b.signed_width(a) for a in b.nodes[p].args] == [18, 23]
+
+
+@pytest.mark.parametrize("bad", [(18,), (18, 1), "18x18", (18.0, 18), (True, 18)])
+def test_operand_bits_must_be_a_pair_of_widths(bad):
+    with pytest.raises(ValueError, match=r"operand_bits must be None or a pair of signed widths >= 2 "
+                                         r"such as \(18, 18\), not "):
+        PlanBuilder([], operand_bits=bad)

@@ -31,6 +31,7 @@ _DEL = object()
 @pytest.mark.parametrize("path, value, message", [
     ("fit.tolerance_pu", -1, "fit.tolerance_pu must be > 0 pu, not -1"),
     ("fit.tolerance_pu", "x", "fit.tolerance_pu must be > 0 pu, not 'x'"),
+    ("fit.products", "narrow", "fit.products must be one of exact, dsp, not 'narrow'"),
     ("geometry.femur", -60.0, "geometry.femur must be > 0, not -60.0"),
     ("geometry.femur", _DEL, "geometry.femur is missing"),
     ("geometry.type", "hexapod", "geometry.type must be one of ['cylinder-leg', 'hexapod-leg', 'planar-arm', 'quadruped-fore', 'quadruped-hind'], not 'hexapod'"),
@@ -77,3 +78,22 @@ def test_robot_record_round_trip():
     assert robot_from_record(robot_record(r)) == r
     with pytest.raises(RobotError, match="not a robot record"):
         robot_from_record({"geometry": {"type": "cylinder-leg"}})
+
+
+def test_products_dsp_makes_the_dsp_family_part_of_the_fit():
+    from ikseries.fit.fitter import operand_bits
+    from ikseries.robot import fit_record, robot_record, with_hardware
+    r = parse_robot(base())
+    assert r.products == "exact" and operand_bits(r) is None
+    exact = fit_record(robot_record(r))
+    assert "products" not in exact and "dsp" not in exact     # records from before fit.products still match
+    assert fit_record(robot_record(with_hardware(r, dsp="xc7"))) == exact
+    d = base()
+    _set(d, "fit.products", "dsp")
+    _set(d, "hardware.dsp", "ecp5")
+    r = parse_robot(d)
+    assert operand_bits(r) == (18, 18)
+    rec = fit_record(robot_record(r))
+    assert rec["products"] == "dsp" and rec["dsp"] == "ecp5"
+    assert fit_record(robot_record(with_hardware(r, dsp="ice40"))) != rec
+    assert operand_bits(with_hardware(r, dsp="none")) is None
