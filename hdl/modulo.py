@@ -15,12 +15,14 @@ from .schedule import _swidth
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY"]
 
-#: cycles from reading a multiplication's operands to reading its product: operand registers at
-#: the multiplier inputs, the product register, the capture into the node's own register
-MUL_LATENCY = 3
+#: cycles from reading a multiplication's operands to the first cycle its product can be read:
+#: operand registers at the multiplier inputs, then the product register. Consumers scheduled in
+#: that cycle read the product register itself (a bypass); the node's own register captures the
+#: product at the end of it for later readers
+MUL_LATENCY = 2
 #: the same for a product wider than one DSP block: operand registers, the registered partial
-#: products of the limbs, their registered sum, the capture
-WIDE_MUL_LATENCY = 4
+#: products of the limbs, their registered sum
+WIDE_MUL_LATENCY = 3
 _WIRING = ("shr", "shl", "frac", "index", "mask")
 
 
@@ -44,6 +46,12 @@ class ModuloSchedule:
     swap: tuple = ()      # per node: the multiplier takes the operands in the other order
     operand_widths: tuple = ()  # per multiplier: signed widths (a, b) of its operands
     unit_latency: tuple = ()    # per multiplier: MUL_LATENCY, or WIDE_MUL_LATENCY if split in limbs
+
+    def held_from(self, plan: Plan) -> list[int]:
+        """Per node, the first cycle its own register holds it: ``ready``, except for a
+        multiplication, whose product is read from the multiplier in cycle ``ready`` and
+        captured at its end."""
+        return [r + 1 if n.op == "mul" else r for r, n in zip(self.ready, plan.nodes)]
 
     def last_read(self, plan: Plan) -> list[int]:
         """Per node, the last cycle it is read: by a registered consumer (when that reads its
@@ -194,7 +202,9 @@ class ModuloEvaluator(wiring.Component):
     evaluation): the dataflow keeps its own adders, clamps and table reads, while the
     multiplications share multipliers in a modulo schedule (:func:`modulo_schedule`). A phase
     counter selects each multiplier's operands; each multiplier has registered operands and a
-    registered product (DSP-friendly), which the node's own register captures. Products wider
+    registered product (DSP-friendly). Consumers scheduled in the cycle after the product
+    register is written read it directly; the node's own register captures it at the end of
+    that cycle for later ones. Products wider
     than one DSP block run on multipliers split into DSP-sized limbs (lower limbs unsigned,
     ``dsp[0] - 1`` bits; the top limb signed), whose partial products are registered and then
     summed into a registered product. A value read more than ``initiation_interval`` cycles
@@ -314,8 +324,11 @@ class ModuloEvaluator(wiring.Component):
         m.d.comb += self.i.ready.eq(en & (phase == 0))
 
         last = sch.last_read(plan)
+        held = sch.held_from(plan)
         chains: dict = {}
         wires: dict = {}
+        products: dict = {}     # multiplier -> its product register
+        bypass: list = []       # (wire, multiplier): a product read from the product register
 
         def at_phase(c):
             return en & (phase == c % ii)
@@ -334,17 +347,22 @@ class ModuloEvaluator(wiring.Component):
                 return w
             if c < sch.ready[i] or c > last[i]:
                 raise AssertionError(f"node {i} read at cycle {c} outside [{sch.ready[i]}, {last[i]}]")
-            return chains[i][(c - sch.ready[i]) // ii]
+            if c < held[i]:         # the product register, in the cycle after the product
+                if (i, c) not in wires:
+                    wires[i, c] = Signal(_shape(n), name=f"n{i}_mul_bypass")
+                    bypass.append((wires[i, c], sch.unit[i]))
+                return wires[i, c]
+            return chains[i][(c - held[i]) // ii]
 
-        # registers of every registered node: reg[0] written at the end of cycle ready - 1,
-        # reg[j] takes reg[j - 1] at the same phase
+        # registers of every registered node: reg[0] written at the end of cycle held - 1,
+        # reg[j] takes reg[j - 1] at the same phase (none for a product only read by bypass)
         for i, n in enumerate(nodes):
             if n.op in _WIRING or n.op == "const":
                 continue
-            depth = (last[i] - sch.ready[i]) // ii + 1
+            depth = max(0, (last[i] - held[i]) // ii + 1)
             chains[i] = [Signal(_shape(n), name=f"n{i}_{n.op}" + (f"_r{j}" if j else ""))
                          for j in range(depth)]
-            with m.If(at_phase(sch.ready[i] - 1)):
+            with m.If(at_phase(held[i] - 1)):
                 m.d.sync += [chains[i][j].eq(chains[i][j - 1]) for j in range(1, depth)]
 
         for i, n in enumerate(nodes):
@@ -379,7 +397,7 @@ class ModuloEvaluator(wiring.Component):
                     with m.Case(s % ii):
                         m.d.comb += [a.eq(read(x, s)), b.eq(read(y, s))]
             if sch.unit_latency[u] == MUL_LATENCY:
-                p = self._product(m, a, b, en, f"mul{u}")
+                p = products[u] = self._product(m, a, b, en, f"mul{u}")
             else:   # limbs: registered partial products, then their registered sum
                 terms = [self._product(m, xa, xb, en, f"mul{u}_{j}{k}") << (sa + sb)
                          for j, (xa, sa) in enumerate(_limbs(a, wa, self._dsp[0] - 1))
@@ -390,9 +408,14 @@ class ModuloEvaluator(wiring.Component):
                     total = total + t
                 with m.If(en):
                     m.d.sync += p.eq(total)
+                products[u] = p
             for i in mine:
-                with m.If(at_phase(sch.start[i] + sch.unit_latency[u] - 1)):
-                    m.d.sync += chains[i][0].eq(p)
+                if chains[i]:
+                    with m.If(at_phase(sch.ready[i])):
+                        m.d.sync += chains[i][0].eq(p)
+
+        for w, u in bypass:
+            m.d.comb += w.eq(products[u])
 
         valid = Signal(lat, name="valid")    # valid[k]: a target accepted k + 1 cycles ago
         with m.If(en):
