@@ -10,10 +10,12 @@ For the cylinder-leg robot, the IK cores alone (no PWM), as flat-port stream top
 ``moduloN``    ``ModuloEvaluator``: the dataflow pipelined, its multiplications shared by a modulo
                schedule, one target every N cycles (N = 4, 8, 12; products gathered by the device's
                DSP size);
-``moduloNr``   the same on the ECP5 only (N = 8, 12) with every block product an instantiated
-               MULT18X18D using its own input and output registers (Yosys leaves them in the
-               fabric); a place-and-route experiment: the primitive has no simulation model here,
-               so this variant is not simulated (its accuracy column is the plan's);
+``moduloNd``   on the ECP5 only (N = 4, 7, 16): the plan fitted with ``fit.products = "dsp"`` (every
+               product's operands narrowed to 18x18, so each is one MULT18X18D), modulo-scheduled,
+               every product an instantiated MULT18X18D using its own input and output registers
+               (``dsp_registers="ecp5"``; Yosys would leave them in the fabric); simulated in
+               cocotb with the primitive's model (``sim/models/MULT18X18D.v``, tests); its
+               accuracy column is that plan's own;
 ``cordic``     ``CordicLegSolver``, sized with ``size_cordic(margin_pu=0.075)`` (about 1.5 min)
                unless ``--cordic-design JSON`` gives the design;
 
@@ -39,7 +41,8 @@ latency in ns at Fmax on y, Pareto front of the placed cylinder-leg cores marked
 verdicts for the issue's targets.
 
     python bench/pareto.py [--devices ice40-up5k-sg48,ecp5-25f-cabga381]
-                           [--designs pipelined,modulo4,modulo8,modulo12,modulo8r,modulo12r,folded1,folded2,cordic,hexapod] [--jobs 2]
+                           [--designs pipelined,modulo4,modulo8,modulo12,modulo4d,modulo7d,modulo16d,folded1,folded2,cordic,hexapod]
+                           [--jobs 2]
                            [--clock-mhz 100] [--cordic-design JSON] [--out build/bench/pareto.json]
 """
 from __future__ import annotations
@@ -56,11 +59,11 @@ from ikseries.pnr import PNR_DEVICES
 
 ICE40, ECP5 = "ice40-up5k-sg48", "ecp5-25f-cabga381"
 MODULO_II = (4, 8, 12)
-MODULO_DSPREG_II = (8, 12)   # ECP5 only: MULT18X18D with its own registers (not simulated)
-DESIGNS = ("pipelined", *(f"modulo{ii}" for ii in MODULO_II), *(f"modulo{ii}r" for ii in MODULO_DSPREG_II),
+MODULO_DSP_II = (4, 7, 16)   # ECP5 only: DSP-sized plan, MULT18X18D with its own registers
+DESIGNS = ("pipelined", *(f"modulo{ii}" for ii in MODULO_II), *(f"modulo{ii}d" for ii in MODULO_DSP_II),
            "folded1", "folded2", "cordic", "hexapod")
-POLY_DESIGNS = tuple(d for d in DESIGNS if d not in ("cordic", "hexapod"))
-UNVERIFIED = tuple(f"modulo{ii}r" for ii in MODULO_DSPREG_II)   # not simulated: out of the verdicts
+DSP_DESIGNS = tuple(f"modulo{ii}d" for ii in MODULO_DSP_II)
+POLY_DESIGNS = tuple(d for d in DESIGNS if d not in ("cordic", "hexapod", *DSP_DESIGNS))
 TARGET_FMAX_MHZ, TARGET_LATENCY_NS, TARGET_THROUGHPUT = 150.0, 200.0, 20e6
 HEXAPOD_DSP, HEXAPOD_LC, HEXAPOD_REFRESH_HZ = 8, 5280, 1000.0
 
@@ -80,7 +83,6 @@ def polynomial_specs(plan, max_error_pu: float | None, names=POLY_DESIGNS,
     of ``plan``, multipliers of the device's DSP size."""
     from ikseries.hdl.evaluator import PlanEvaluator
     from ikseries.hdl.flat import stream_verilog
-    from ikseries.hdl.folded import FoldedEvaluator
     from ikseries.hdl.modulo import ModuloEvaluator
     from ikseries.hdl.schedule import DSP_SIZES
 
@@ -101,18 +103,38 @@ def polynomial_specs(plan, max_error_pu: float | None, names=POLY_DESIGNS,
             f"modulo{ii}", "polynomial", f"polynomial, modulo-scheduled, one target per {ii} cycles",
             lambda dev, make=make_modulo, ii=ii: (stream_verilog(make(dev), f"poly_modulo{ii}"), f"poly_modulo{ii}"),
             lambda dev, make=make_modulo: make(dev).latency, lambda dev, ii=ii: ii, max_error_pu, extra=extra))
-    for ii in MODULO_DSPREG_II:
-        if f"modulo{ii}r" not in names:
+    return specs + folded_specs(plan, max_error_pu, names, extra)
+
+
+def dsp_specs(plan, max_error_pu: float | None, names=DSP_DESIGNS, extra: dict | None = None) -> list[DesignSpec]:
+    """Specs of the modulo-scheduled evaluators (II = MODULO_DSP_II) of a plan fitted with
+    ``fit.products = "dsp"`` for the ECP5, every product on an instantiated MULT18X18D."""
+    from ikseries.hdl.flat import stream_verilog
+    from ikseries.hdl.modulo import ModuloEvaluator
+
+    specs = []
+    for ii in MODULO_DSP_II:
+        if f"modulo{ii}d" not in names:
             continue
 
-        def make_reg(dev, ii=ii):
+        def make_dsp(dev, ii=ii):
             return ModuloEvaluator(plan, ii, dsp=(18, 18), dsp_registers="ecp5")
         specs.append(DesignSpec(
-            f"modulo{ii}r", "polynomial", f"polynomial, modulo-scheduled, one target per {ii} cycles, "
-            "MULT18X18D registers (not simulated)",
-            lambda dev, make=make_reg, ii=ii: (stream_verilog(make(dev), f"poly_modulo{ii}r"), f"poly_modulo{ii}r"),
-            lambda dev, make=make_reg: make(dev).latency, lambda dev, ii=ii: ii, max_error_pu,
-            devices=(ECP5,), extra=extra))
+            f"modulo{ii}d", "polynomial", f"polynomial, 18x18 products (fit.products = dsp), modulo-scheduled, "
+            f"one target per {ii} cycles, MULT18X18D primitives with their registers",
+            lambda dev, make=make_dsp, ii=ii: (stream_verilog(make(dev), f"poly_modulo{ii}d"), f"poly_modulo{ii}d"),
+            lambda dev, make=make_dsp: make(dev).latency, lambda dev, ii=ii: ii, max_error_pu,
+            devices=(ECP5,), extra=dict(extra or {})))
+    return specs
+
+
+def folded_specs(plan, max_error_pu: float | None, names, extra: dict) -> list[DesignSpec]:
+    """Specs of the folded evaluators (k = 1, 2 multipliers of the device's DSP size)."""
+    from ikseries.hdl.flat import stream_verilog
+    from ikseries.hdl.folded import FoldedEvaluator
+    from ikseries.hdl.schedule import DSP_SIZES
+
+    specs = []
     for k in (1, 2):
         if f"folded{k}" not in names:
             continue
@@ -173,22 +195,8 @@ def _certified(cert: dict) -> dict | None:
 
 # -- verdicts --------------------------------------------------------------------------------------
 def _by(records, device, kind=None):
-    """Records of ``device`` (and ``kind``), the unverified experiments left out."""
-    return [r for r in records if r["device"] == device and (kind is None or r["kind"] == kind)
-            and r["design"] not in UNVERIFIED]
-
-
-def verdict_experiments(records) -> list[str]:
-    """The unverified place-and-route experiments, apart from the verdicts."""
-    lines = []
-    for r in records:
-        if r["design"] in UNVERIFIED and r["status"] == "placed":
-            lines.append(f"experiment (not simulated, not in the verdicts): {r['design']} on {r['device']}: "
-                         f"Fmax {r['fmax_mhz']:.1f} MHz, latency {r['latency_ns']:.0f} ns, "
-                         f"{r['throughput_per_s'] / 1e6:.3g} M/s, LUT {r['LUT']}, DSP {r['DSP']}")
-        elif r["design"] in UNVERIFIED:
-            lines.append(f"experiment {r['design']} on {r['device']}: {r['status']}")
-    return lines
+    """Records of ``device`` (and ``kind``)."""
+    return [r for r in records if r["device"] == device and (kind is None or r["kind"] == kind)]
 
 
 def verdict_ecp5_speed(records) -> list[str]:
@@ -310,7 +318,7 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
     from ikseries.fit.cordic import CordicDesign
     from ikseries.fit.cordic_sizing import measure_cordic, size_cordic
     from ikseries.fit.fitter import fit_robot
-    from ikseries.robot import load_preset
+    from ikseries.robot import load_preset, with_hardware
 
     robot = load_preset("cylinder-leg")
     info = {"robot": robot.name, "tolerance_pu": robot.tolerance_pu}
@@ -328,6 +336,19 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
         say(f"polynomial plan: latency {plan.latency}, {plan.count('mul')} mul, max error "
             + ", ".join(f"{s} {e:.4f}" for s, e in err.items()) + f" pu ({time.perf_counter() - t0:.0f} s)")
         specs += polynomial_specs(plan, max(err.values()), poly_names, extra)
+    dsp_names = [d for d in designs if d in DSP_DESIGNS]
+    if dsp_names:
+        t0 = time.perf_counter()
+        drobot = with_hardware(robot, products="dsp", dsp="ecp5")
+        dplan, _ = fit_robot(drobot)
+        points = verification_points(robot) if points is None else points
+        m = measure(drobot, dplan, points)
+        err = {s: e["total"] for s, e in m["servos"].items()}
+        extra = {"max_error_pu_per_servo": err, "error_points": m["points"], "products": "dsp (18x18)",
+                 "certified_pu": _certified(dplan.meta.get("certificate", {}))}
+        say(f"DSP-sized plan: latency {dplan.latency}, {dplan.count('mul')} mul, max error "
+            + ", ".join(f"{s} {e:.4f}" for s, e in err.items()) + f" pu ({time.perf_counter() - t0:.0f} s)")
+        specs += dsp_specs(dplan, max(err.values()), dsp_names, extra)
     if "cordic" in designs:
         points = verification_points(robot) if points is None else points
         if cordic_design:
@@ -392,7 +413,7 @@ def main(argv=None):
         front = plot_device([r for r in records if r["kind"] != "robot"], d, png)
         plots[d] = {"png": str(png), "pareto_front": front}
     verdicts = {"ecp5_speed": verdict_ecp5_speed(records), "hexapod": verdict_hexapod(records),
-                "poly_vs_cordic": verdict_poly_vs_cordic(records), "experiments": verdict_experiments(records)}
+                "poly_vs_cordic": verdict_poly_vs_cordic(records)}
     result = {**info, "clock_target_mhz": args.clock_mhz, "seed": args.seed, "devices": devices,
               "area_metric": "LUT + FF - harness_ffs (Yosys counts)", "records": records, "plots": plots,
               "verdicts": verdicts, "seconds": round(time.perf_counter() - t0, 1)}

@@ -246,8 +246,9 @@ class PlanBuilder:
     With ``operand_bits = (p, q)`` every multiplication's operands fit one ``p`` x ``q`` signed
     DSP multiplier (the wider operand gets the wider port): :meth:`mul` first drops the low
     bits of an operand that is too wide (a ``shr``; a constant or table is rounded again from
-    its ideal values instead), so the plan never needs a product split into limbs. The extra
-    rounding is part of the plan, so the certified bound includes it.
+    its ideal values instead; a clamp to multiples of the dropped bits clamps the narrowed value,
+    the same integers on fewer bits), so the plan never needs a product split into limbs. The
+    extra rounding is part of the plan, so the certified bound includes it.
     """
 
     def __init__(self, inputs: list[PlanInput], with_inputs: bool = True,
@@ -408,6 +409,10 @@ class PlanBuilder:
             elif n.op == "lut":
                 ideal = n.ideal if n.ideal is not None else tuple(v * 2.0 ** -n.frac for v in n.param)
                 a = self.lut(n.args[0], ideal, f)
+            elif n.op == "clamp" and all(v % (1 << (w - bits)) == 0 for v in n.param):
+                # floor commutes with a clamp to multiples of 2**s: clamp the narrow value
+                sh = w - bits
+                a = self.clamp(self.align(n.args[0], f), n.param[0] >> sh, n.param[1] >> sh)
             else:
                 a = self.align(a, f)
         return a

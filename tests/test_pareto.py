@@ -116,3 +116,15 @@ def test_verdicts_on_hand_made_records(records):
 def test_jobs_must_be_one_or_two(tmp_path):
     with pytest.raises(ValueError, match=r"^jobs must be 1 or 2 \(two cores, at most two tool processes\), not 3$"):
         run_matrix([], [ICE40], 1, tmp_path, jobs=3)
+
+
+def test_bench_dsp_designs_are_ecp5_modulo_cores_on_mult18x18d_primitives():
+    from helpers import tiny_plan
+    bench = _bench()
+    specs = bench.dsp_specs(tiny_plan(1, operand_bits=(18, 18)), 0.3)
+    assert [s.name for s in specs] == [f"modulo{ii}d" for ii in bench.MODULO_DSP_II]
+    for s, ii in zip(specs, bench.MODULO_DSP_II):
+        assert s.devices == (bench.ECP5,) and s.initiation_interval(bench.ECP5) == ii
+        text, top = s.verilog(bench.ECP5)
+        assert top == f"poly_{s.name}" and "MULT18X18D" in text
+    assert not set(bench.DSP_DESIGNS) & set(bench.POLY_DESIGNS)

@@ -205,3 +205,21 @@ def test_operand_bits_must_be_a_pair_of_widths(bad):
     with pytest.raises(ValueError, match=r"operand_bits must be None or a pair of signed widths >= 2 "
                                          r"such as \(18, 18\), not "):
         PlanBuilder([], operand_bits=bad)
+
+
+def test_operand_bits_clamp_the_narrowed_value_when_the_bounds_allow():
+    """floor(clamp(x, L, H) / 2**s) == clamp(floor(x / 2**s), L / 2**s, H / 2**s) when 2**s
+    divides L and H: the narrow clamp is used (exhaustively equal to the wide one)."""
+    inputs = [PlanInput("a", "mm", 0, -3000, 3000, 13, True)]
+    wide = PlanBuilder(inputs)
+    x = wide.add(wide.input_nodes["a"], wide.const(7, 0))
+    c = wide.clamp(x, -2048, 2048)
+    ref = wide.build([PlanOutput("y", wide.align(c, -2), c, "ticks", 1.0)])
+    nb = PlanBuilder(inputs, operand_bits=(11, 11))
+    x = nb.add(nb.input_nodes["a"], nb.const(7, 0))
+    p = nb.mul(nb.clamp(x, -2048, 2048), nb.const(3.0, 0))
+    op = nb.nodes[nb.nodes[p].args[0]]
+    assert op.op == "clamp" and op.param == (-512, 512) and nb.signed_width(nb.nodes[p].args[0]) <= 11
+    plan = nb.build([PlanOutput("y", nb.nodes[p].args[0], nb.nodes[p].args[0], "ticks", 1.0)])
+    ports = all_ports(plan)
+    assert np.array_equal(golden.outputs(plan, ports)["y"], golden.outputs(ref, ports)["y"])
