@@ -224,6 +224,16 @@ def verdict_ecp5_speed(records) -> list[str]:
             and r["throughput_per_s"] >= TARGET_THROUGHPUT]
     lines.append(f"  verdict: {'MET' if ok_all else 'NOT MET'}; placed cores meeting all three: "
                  f"{', '.join(also) or 'none'}")
+    poly = [r for r in placed if r["kind"] == "polynomial"]
+    if poly:    # the polynomial core nearest to all three (its worst ratio to a target)
+        def shortfall(r):
+            return max(TARGET_FMAX_MHZ / r["fmax_mhz"], r["latency_ns"] / TARGET_LATENCY_NS,
+                       TARGET_THROUGHPUT / r["throughput_per_s"])
+        p = min(poly, key=shortfall)
+        lines.append(f"  nearest polynomial core: {p['design']}: Fmax {p['fmax_mhz']:.1f} MHz "
+                     f"({p['fmax_mhz'] / TARGET_FMAX_MHZ:.0%} of the target), latency {p['latency_ns']:.0f} ns "
+                     f"({p['latency_ns'] / TARGET_LATENCY_NS:.2f}x the target), "
+                     f"{p['throughput_per_s'] / 1e6:.3g} M/s ({p['throughput_per_s'] / TARGET_THROUGHPUT:.2f}x)")
     return lines
 
 
@@ -270,7 +280,13 @@ def verdict_poly_vs_cordic(records) -> list[str]:
                          n for n, ok in (("LUT", lut), ("DSP", dsp), ("latency", lat)) if not ok)))
         if lut and dsp and lat:
             winners.append(p["design"])
-    lines.append(f"  verdict: {'MET by ' + ', '.join(winners) if winners else 'NOT MET'}")
+    lines.append(f"  verdict: {'MET by ' + ', '.join(winners) if winners else 'NOT MET'} (LUT and DSP each, "
+                 "latency no worse)")
+    summed = [p["design"] for p in poly if p["LUT"] + p["DSP"] < c["LUT"] + c["DSP"]
+              and p["latency_ns"] <= c["latency_ns"]]
+    lines.append(f"  read as the sum LUT + DSP ({c['LUT'] + c['DSP']} for CORDIC), latency no worse: "
+                 + (f"met by {', '.join(summed)}" if summed else "not met")
+                 + " (a DSP block counted as one LUT: this reading favours the DSP-heavy cores)")
     return lines
 
 

@@ -13,7 +13,8 @@ from .evaluator import _shape, input_layout, node_expression, output_layout
 from .limbmul import _check_dsp
 from .schedule import _swidth
 
-__all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY"]
+__all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
+           "CLAMP_LATENCY"]
 
 #: cycles from reading a multiplication's operands to the first cycle its product can be read:
 #: operand registers at the multiplier inputs, then the product register. Consumers scheduled in
@@ -23,7 +24,15 @@ MUL_LATENCY = 2
 #: the same for a product wider than one DSP block: operand registers, the registered partial
 #: products of the limbs, their registered sum
 WIDE_MUL_LATENCY = 3
+#: cycles of a clamp: its comparisons registered (with the value), then the selection
+CLAMP_LATENCY = 2
 _WIRING = ("shr", "shl", "frac", "index", "mask")
+
+
+def _input_clamp(plan: Plan, i: int) -> bool:
+    """Node ``i`` clamps an input port: the input register takes the clamped value at once."""
+    n = plan.nodes[i]
+    return n.op == "clamp" and plan.nodes[n.args[0]].op == "input"
 
 
 @dataclass(frozen=True)
@@ -32,7 +41,7 @@ class ModuloSchedule:
 
     ``ready[n]``: first cycle (counted from the cycle the target is accepted) in which node
     ``n`` can be read; ``start[n]``: the cycle a registered operation reads its operands
-    (None for inputs, constants and wiring); ``unit[n]``: the multiplier of a
+    (None for inputs, clamps of inputs, constants and wiring); ``unit[n]``: the multiplier of a
     multiplication. A multiplier serves at most one multiplication per phase
     ``start mod initiation_interval``, so targets can enter every ``initiation_interval``
     cycles.
@@ -65,7 +74,10 @@ class ModuloSchedule:
                 readers[a].append(i)
         for i in reversed(range(len(plan.nodes))):     # readers come after their operands
             for r in readers[i]:
-                last[i] = max(last[i], last[r] if plan.nodes[r].op in _WIRING else self.start[r])
+                if plan.nodes[r].op in _WIRING:
+                    last[i] = max(last[i], last[r])
+                elif self.start[r] is not None:         # not an input clamp (reads the port)
+                    last[i] = max(last[i], self.start[r])
         return last
 
 
@@ -108,8 +120,9 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
             users[a].append(i)
     height = [0] * len(nodes)
     for i in reversed(range(len(nodes))):
-        own = (WIDE_MUL_LATENCY if i in wide else MUL_LATENCY) if nodes[i].op == "mul" else \
-            (0 if nodes[i].op in _WIRING else 1)
+        op = nodes[i].op
+        own = (WIDE_MUL_LATENCY if i in wide else MUL_LATENCY) if op == "mul" else \
+            0 if op in _WIRING or _input_clamp(plan, i) else CLAMP_LATENCY if op == "clamp" else 1
         height[i] = own + max((height[u] for u in users[i]), default=0)
     ready: list = [None] * len(nodes)
     start: list = [None] * len(nodes)
@@ -149,14 +162,14 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
                 continue
             if n.op == "const":
                 ready[i] = 0
-            elif n.op == "input":
+            elif n.op == "input" or _input_clamp(plan, i):
                 ready[i] = 1
             elif all(ready[a] is not None for a in n.args):
                 t = max(ready[a] for a in n.args)
                 if n.op in _WIRING:
                     ready[i] = t
                 else:
-                    start[i], ready[i] = t, t + 1
+                    start[i], ready[i] = t, t + (CLAMP_LATENCY if n.op == "clamp" else 1)
 
     settle()
     cycle = 0
@@ -239,7 +252,8 @@ class ModuloEvaluator(wiring.Component):
     -------
     ``latency`` cycles from an input transfer to its output transfer while ``o.ready`` is
     high (the schedule's length; a multiplication takes ``MUL_LATENCY`` cycles, one split in
-    limbs ``WIDE_MUL_LATENCY``).
+    limbs ``WIDE_MUL_LATENCY``, a clamp ``CLAMP_LATENCY``, other operations one; the clamp of
+    an input port none: the input register takes the clamped port value).
 
     Throughput
     ----------
@@ -368,15 +382,25 @@ class ModuloEvaluator(wiring.Component):
         for i, n in enumerate(nodes):
             if n.op in _WIRING or n.op in ("const", "mul"):
                 continue
-            reg = chains[i][0]
-            if n.op == "input":
+            reg = chains[i][0] if chains[i] else Signal(_shape(n), name=f"n{i}_{n.op}_unread")
+            if n.op == "input" or _input_clamp(plan, i):    # input registers: the port, or clamped
+                port = self.i.payload[(nodes[n.args[0]] if n.args else n).param]
                 with m.If(self.i.ready):
-                    m.d.sync += reg.eq(self.i.payload[n.param])
+                    m.d.sync += reg.eq(node_expression(n, [port]) if n.args else port)
                 continue
             s = sch.start[i]
             ops = [read(a, s) for a in n.args]
             if n.op == "lut":
                 v = Array(Const(x, _shape(n)) for x in n.param)[ops[0]]
+            elif n.op == "clamp":   # comparisons registered with the value, then the selection
+                lo, hi = n.param
+                x = Signal.like(ops[0], name=f"n{i}_clamp_x")
+                below, above = Signal(name=f"n{i}_clamp_lt"), Signal(name=f"n{i}_clamp_gt")
+                with m.If(at_phase(s)):
+                    m.d.sync += [x.eq(ops[0]), below.eq(ops[0] < lo), above.eq(ops[0] > hi)]
+                with m.If(at_phase(s + 1)):
+                    m.d.sync += reg.eq(Mux(below, lo, Mux(above, hi, x)))
+                continue
             else:
                 v = node_expression(n, ops)
             with m.If(at_phase(s)):

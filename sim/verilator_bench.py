@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..fit.plan import Plan
-from .runner import _verilator_make_fixes, _verilator_path, simulator_available
+from .runner import _verilator_make_fixes, _verilator_path, primitive_models, simulator_available
 
 __all__ = ["VerilatorTestbench", "write_vectors", "testbench_cpp", "build_testbench", "run_testbench"]
 
@@ -221,11 +221,12 @@ def build_testbench(plan: Plan, verilog: str, top: str, workdir, *, cxx_opt: str
     (workdir / "tb.cpp").write_text(testbench_cpp(plan, top))
     path = _verilator_path()
     env = dict(os.environ, PATH=path)
-    fixes = [_verilator_make_fixes(path), f"OPT_FAST={cxx_opt}", f"OPT_SLOW={cxx_opt}", f"OPT_GLOBAL={cxx_opt}"]
+    # run-once code at -O0 (see runner.run)
+    fixes = [_verilator_make_fixes(path), f"OPT_FAST={cxx_opt}", "OPT_SLOW=-O0", f"OPT_GLOBAL={cxx_opt}"]
     env["MAKEFLAGS"] = " ".join(x for x in (os.environ.get("MAKEFLAGS", ""), *fixes) if x)
     argv = [shutil.which("verilator", path=path), "--cc", "--exe", "--build", "-j", str(jobs), "--no-timing",
             "-Wno-fatal", "-Wno-lint", "-Wno-style", "--top-module", top, "--Mdir", "obj",
-            "-o", f"V{top}", f"{top}.v", "tb.cpp"]
+            "-o", f"V{top}", f"{top}.v", *map(str, primitive_models(verilog)), "tb.cpp"]
     t0 = time.perf_counter()
     proc = subprocess.run(argv, cwd=workdir, env=env, stdin=subprocess.DEVNULL, capture_output=True, text=True)
     build_s = round(time.perf_counter() - t0, 2)

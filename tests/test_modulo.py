@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from helpers import all_ports, simulate_bit_exact, tiny_piecewise_plan, tiny_plan
-from ikseries.hdl.modulo import MUL_LATENCY, WIDE_MUL_LATENCY, ModuloEvaluator, modulo_schedule
+from ikseries.hdl.modulo import CLAMP_LATENCY, MUL_LATENCY, WIDE_MUL_LATENCY, ModuloEvaluator, modulo_schedule
 from ikseries.sim.targets import corner_targets, random_targets
 
 
@@ -26,9 +26,10 @@ def test_piecewise_plan_bit_exact_with_backpressure(seed):
     simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.6, valid_prob=0.7, seed=seed)
 
 
+@pytest.mark.parametrize("clamp", [(-100, 100), (0, 100)])
 @pytest.mark.parametrize("dsp", [None, (8, 8), (6, 5)])
-def test_schedule_respects_the_multipliers_and_dependencies(dsp):
-    plan = tiny_plan(1)
+def test_schedule_respects_the_multipliers_and_dependencies(dsp, clamp):
+    plan = tiny_plan(1, clamp=clamp)
     for ii in (1, 2, 4):
         sch = modulo_schedule(plan, ii, dsp)
         slots = set()
@@ -43,6 +44,9 @@ def test_schedule_respects_the_multipliers_and_dependencies(dsp):
                 assert (wb <= ua and wa <= ub) if sch.swap[i] else (wa <= ua and wb <= ub)
             if sch.start[i] is not None:
                 assert all(sch.ready[a] <= sch.start[i] for a in n.args)
+            if n.op == "clamp":         # input clamps: in the input register; others two cycles
+                assert (sch.start[i], sch.ready[i]) == (None, 1) if plan.nodes[n.args[0]].op == "input" \
+                    else sch.ready[i] == sch.start[i] + CLAMP_LATENCY
         for (ua, ub), lat in zip(sch.operand_widths, sch.unit_latency):
             fits = dsp is None or (ua <= dsp[0] and ub <= dsp[1]) or (ua <= dsp[1] and ub <= dsp[0])
             assert lat == (MUL_LATENCY if fits else WIDE_MUL_LATENCY)
@@ -87,8 +91,9 @@ def test_leg_core_with_an_interval_is_modulo_scheduled():
 
 
 def test_ecp5_dsp_registers_instantiate_the_primitive_with_its_registers():
-    """The place-and-route variant: every block product a MULT18X18D with input and output
-    registers on the pipeline enable (not simulated: no model of the primitive)."""
+    """Every block product a MULT18X18D with input and output registers on the pipeline enable
+    and the domain's reset (the Verilog is simulated with the primitive's model in
+    test_cocotb.py)."""
     from amaranth.back import verilog
     plan = tiny_plan(2)
     core = ModuloEvaluator(plan, 2, dsp_registers="ecp5")
@@ -102,3 +107,18 @@ def test_ecp5_dsp_registers_instantiate_the_primitive_with_its_registers():
         ModuloEvaluator(plan, 2, dsp_registers="ice40")
     with pytest.raises(ValueError, match="dsp_registers must be None"):
         ModuloEvaluator(plan, 2, dsp=(16, 16), dsp_registers="ecp5")
+
+
+def test_leg_core_on_dsp_primitives_has_a_fabric_twin_for_the_amaranth_simulator():
+    from ikseries.hdl.leg import LegCore
+    plan = tiny_plan(2, clamp=(0, 100))
+    core = LegCore(plan, 400, interval=3, dsp=(18, 18), dsp_registers="ecp5")
+    twin = core.simulation_model()
+    assert core.dsp_registers == "ecp5" and twin.dsp_registers is None
+    assert (twin.latency, twin.initiation_interval, twin.period) == (core.latency, 3, 400)
+    plain = LegCore(plan, 400, interval=3)
+    assert plain.simulation_model() is plain
+    simulate_bit_exact(twin, plan, all_ports(plan))
+    with pytest.raises(ValueError, match=r"^dsp_registers must be None without interval \(only the "
+                                         r"modulo-scheduled evaluator instantiates DSP primitives\), not 'ecp5'$"):
+        LegCore(plan, 400, multipliers=1, dsp_registers="ecp5")
