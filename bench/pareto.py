@@ -202,13 +202,15 @@ def _by(records, device, kind=None):
 def verdict_ecp5_speed(records) -> list[str]:
     """Target 1: the fastest cylinder-leg configuration that fits an ECP5-25F."""
     placed = [r for r in _by(records, ECP5) if r["kind"] != "robot" and r["status"] == "placed"]
-    if not placed:
-        return ["ECP5 speed target: no cylinder-leg core placed on the ECP5-25F - NOT MET"]
-    best = max(placed, key=lambda r: (r["throughput_per_s"], -r["latency_ns"]))
+    poly = [r for r in placed if r["kind"] == "polynomial"]
+    if not poly:
+        return ["ECP5 speed target: no polynomial cylinder-leg core placed on the ECP5-25F - NOT MET"]
+    # the target is ikseries' own core: the CORDIC baseline is compared in the third verdict
+    best = max(poly, key=lambda r: (r["throughput_per_s"], -r["latency_ns"]))
     checks = [("Fmax", best["fmax_mhz"], ">=", TARGET_FMAX_MHZ, "MHz"),
               ("latency", best["latency_ns"], "<=", TARGET_LATENCY_NS, "ns"),
               ("throughput", best["throughput_per_s"] / 1e6, ">=", TARGET_THROUGHPUT / 1e6, "M/s")]
-    lines = [f"ECP5 speed target (fastest = highest throughput among placed cores): {best['design']}"]
+    lines = [f"ECP5 speed target (fastest = highest throughput among the placed polynomial cores): {best['design']}"]
     ok_all = True
     for name, v, op, t, unit in checks:
         ok = v >= t if op == ">=" else v <= t
@@ -224,8 +226,7 @@ def verdict_ecp5_speed(records) -> list[str]:
             and r["throughput_per_s"] >= TARGET_THROUGHPUT]
     lines.append(f"  verdict: {'MET' if ok_all else 'NOT MET'}; placed cores meeting all three: "
                  f"{', '.join(also) or 'none'}")
-    poly = [r for r in placed if r["kind"] == "polynomial"]
-    if poly:    # the polynomial core nearest to all three (its worst ratio to a target)
+    if not ok_all:    # the polynomial core nearest to all three (its worst ratio to a target)
         def shortfall(r):
             return max(TARGET_FMAX_MHZ / r["fmax_mhz"], r["latency_ns"] / TARGET_LATENCY_NS,
                        TARGET_THROUGHPUT / r["throughput_per_s"])

@@ -104,13 +104,20 @@ def test_verdicts_on_hand_made_records(records):
             "throughput_per_s": 3.3e6, "LUT": 900, "DSP": 4}
     cordic = {**base, "kind": "cordic", "design": "cordic", "device": bench.ECP5, "fmax_mhz": 160.0,
               "latency_ns": 250.0, "throughput_per_s": 160e6, "LUT": 5000, "DSP": 2}
-    speed = bench.verdict_ecp5_speed([poly, cordic])
-    assert "cordic" in speed[0] and any("latency 250 ns <= 200 ns: NOT MET (by 50 ns, 25%)" in s for s in speed)
-    assert speed[-1].startswith("  verdict: NOT MET")
+    speed = bench.verdict_ecp5_speed([poly, cordic])     # the target is the polynomial core's
+    assert speed[0].endswith("polynomial cores): folded2")
+    assert any("latency 300 ns <= 200 ns: NOT MET (by 100 ns, 50%)" in s for s in speed)
+    assert any(s.startswith("  verdict: NOT MET") for s in speed)
+    assert speed[-1].startswith("  nearest polynomial core: folded2: Fmax 100.0 MHz (67% of the target)")
+    fast = {**poly, "design": "modulo4d", "fmax_mhz": 151.0, "latency_ns": 199.0, "throughput_per_s": 37e6}
+    speed = bench.verdict_ecp5_speed([poly, fast, cordic])
+    assert speed[-1] == "  verdict: MET; placed cores meeting all three: modulo4d"
     pv = bench.verdict_poly_vs_cordic([poly, cordic])
-    assert "loses on DSP, latency" in pv[1] and pv[-1] == "  verdict: NOT MET"
+    assert "loses on DSP, latency" in pv[1] and pv[-2] == "  verdict: NOT MET (LUT and DSP each, latency no worse)"
+    assert pv[-1].startswith("  read as the sum LUT + DSP (5002 for CORDIC), latency no worse: not met")
     pv = bench.verdict_poly_vs_cordic([{**poly, "DSP": 2, "latency_ns": 200.0}, cordic])
-    assert pv[-1] == "  verdict: MET by folded2"
+    assert pv[-2] == "  verdict: MET by folded2 (LUT and DSP each, latency no worse)"
+    assert pv[-1].startswith("  read as the sum LUT + DSP (5002 for CORDIC), latency no worse: met by folded2")
 
 
 def test_jobs_must_be_one_or_two(tmp_path):
