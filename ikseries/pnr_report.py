@@ -66,7 +66,8 @@ def render_markdown(results: dict, latency_cycles: int, initiation_interval: int
     for dev, r in results.items():
         if not r.get("fits"):
             over = ", ".join(f"{k} {u:,} of {a:,}" for k, (u, a) in (r.get("overflow") or {}).items())
-            rows.append(f"| {dev} | does not fit: {over or r.get('error', '?')} |" + " - |" * (len(head) - 2))
+            what = r.get("error", "?") if r.get("stage") == "primitives" else f"does not fit: {over or r.get('error', '?')}"
+            rows.append(f"| {dev} | {what} |" + " - |" * (len(head) - 2))
             continue
         u, f = r["utilisation"], r["fmax_mhz"]
         mark = "" if r["meets_clock"] else f" (misses {r['clock_hz'] / 1e6:g})"
@@ -183,7 +184,13 @@ def report_build(build_dir, devices: Iterable[str] = tuple(PNR_DEVICES), *, seed
     ii = max(1, round(1 / tpc))
     work = Path(tempfile.mkdtemp(prefix=".pnr-", dir=build_dir))
 
+    cells = man.get("primitives", {}).get("cells", [])
+
     def one(dev: str) -> dict:
+        if cells and PNR_DEVICES[dev].family != "ecp5":      # vendor cells of another family
+            why = f"not run: the Verilog instantiates ECP5 {', '.join(cells)} primitives"
+            say(f"{dev}: {why}")
+            return {"fits": False, "error": why, "stage": "primitives", "overflow": {}}
         say(f"{dev}: synthesis, place and route ...")
         try:
             r = place_and_route(verilog, module, dev, clock_hz, work / dev, seed=seed,

@@ -259,3 +259,19 @@ def test_cli_report_errors(tmp_path, capsys):
     assert main(["report", "--pnr", "--seed", "-3", str(tmp_path)]) == 2
     assert capsys.readouterr().err == "ikseries: error: --seed must be an integer in [0, 2**31), not -3\n"
     assert not any(tmp_path.iterdir())
+
+
+def test_report_skips_other_families_for_a_build_with_ecp5_primitives(wide_verilog, tmp_path):
+    from ikseries.pnr_report import report_build
+    bdir = tmp_path / "build"
+    bdir.mkdir()
+    (bdir / "wide.v").write_text(wide_verilog)
+    (bdir / "manifest.json").write_text(json.dumps({
+        "module": "wide", "clock": {"port": "clk", "frequency_hz": CLOCK}, "reset": {"port": "rst"},
+        "latency_cycles": 2, "throughput": {"targets_per_cycle": 1},
+        "primitives": {"cells": ["MULT18X18D"]}}))
+    (bdir / "report.md").write_text("# report\n")
+    pnr = report_build(bdir, [ICE40])
+    why = "not run: the Verilog instantiates ECP5 MULT18X18D primitives"
+    assert pnr["devices"][ICE40] == {"fits": False, "error": why, "stage": "primitives", "overflow": {}}
+    assert f"| {ICE40} | {why} |" in (bdir / "report.md").read_text()
