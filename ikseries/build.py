@@ -230,7 +230,9 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         if synth:
             from .synth import synth_counts
             t0 = time.perf_counter()
-            resources = synth_counts(tmp / vfile, name, workdir=tmp / "synth", progress=progress, jobs=2)
+            # vendor primitives (MULT18X18D) exist only in their own family
+            targets = ("ecp5",) if primitive_models(verilog_text) else ("ice40", "ecp5", "xc7")
+            resources = synth_counts(tmp / vfile, name, targets, workdir=tmp / "synth", progress=progress, jobs=2)
             times["synth_s"] = round(time.perf_counter() - t0, 1)
             shutil.rmtree(tmp / "synth", ignore_errors=True)
         (tmp / "plan.json").write_text(plan.dumps())
@@ -287,7 +289,7 @@ def make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, t
             "certificate": next((c for c in plan.meta.get("certificate", {}).get("servos", [])
                                  if c["name"] == sf.name), None),
         })
-    return {
+    report = {
         "robot": robot.name,
         "ikseries_version": plan.meta.get("ikseries_version"),
         "tolerance_pu": robot.tolerance_pu,
@@ -315,4 +317,7 @@ def make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, t
         "resources": resources,
         "times_s": times,
     }
+    if "primitives" in man:
+        report["primitives"] = man["primitives"]
+    return report
 

@@ -124,12 +124,15 @@ def render_markdown(r: dict) -> str:
             fits = (f"{DEVICES[tgt][0]}: " + ("yes (by cell count)" if not over else
                     "no: " + ", ".join(f"{k} {u}/{a}" for k, (u, a) in over.items())))
             out.append(_row([tgt, *(c.get(k, 0) for k in cats), fits, d.get("seconds", "")]))
+        if list(res) == ["ecp5"] and r.get("primitives"):
+            out += ["", "ECP5 only: the Verilog instantiates ECP5 "
+                    + ", ".join(r["primitives"]["cells"]) + " primitives."]
         out += ["", "Cell counts after synthesis, before place-and-route; carry cells are 1 bit (iCE40), "
                 "2 bits (ECP5) or 4 bits (xc7) each. "
                 + ("This fully pipelined, one-target-per-cycle design is sized for throughput, not area."
                    if r.get("initiation_interval", 1) == 1 else
-                   "This folded design trades throughput for area: the multipliers are shared over "
-                   "every operation" + (" and every leg." if r.get("legs", 1) > 1 else "."))]
+                   "This design trades throughput for area: its multipliers are shared over "
+                   "several operations" + (" and every leg." if r.get("legs", 1) > 1 else "."))]
     else:
         out.append("Synthesis was skipped (--no-synth).")
     out += ["", "## Coefficients", "",
