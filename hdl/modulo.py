@@ -102,7 +102,8 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     gets the fewest multipliers that fit: ceil(its multiplications / initiation_interval).
     Every cycle the ready multiplications take the free multipliers of their class at that
     phase, the one with the longest path to an output first; of those, the multiplier (and the
-    operand order) whose widths grow least. Additions, clamps and table reads have their own
+    operand order) that adds the fewest new sources to its operand multiplexers (products that
+    share an operand go to one multiplier), then whose widths grow least. Additions, clamps and table reads have their own
     hardware and run as soon as their operands are ready.
     """
     ii = initiation_interval
@@ -129,29 +130,35 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     unit: list = [None] * len(nodes)
     busy = [[False] * ii for _ in range(units)]
     widths = [(0, 0)] * units
+    sources = [(set(), set()) for _ in range(units)]   # operand nodes each multiplier port selects
     swap: list = [False] * len(nodes)
     pending = set(muls)
 
     def place(i, cycle):
-        """The free multiplier of i's class (and operand order) whose widths grow least, or None."""
+        """The free multiplier of i's class (and operand order) that needs the fewest new
+        operand sources (its multiplexers grow least), then whose widths grow least; or None."""
         wa, wb = (_signed_width(nodes[a]) for a in nodes[i].args)
+        na, nb = nodes[i].args
         pool = range(n_narrow, units) if i in wide else range(n_narrow)
         best = None
         for u in pool:
             if busy[u][cycle % ii]:
                 continue
             ua, ub = widths[u]
-            for sw, (x, y) in ((False, (wa, wb)), (True, (wb, wa))):
+            for sw, (x, y), (sx, sy) in ((False, (wa, wb), (na, nb)), (True, (wb, wa), (nb, na))):
                 grown = (max(ua, x), max(ub, y))
                 if u < n_narrow and not _fits(*grown, dsp):
                     continue
-                key = (grown[0] * grown[1] - ua * ub, u, sw)
+                new = (sx not in sources[u][0]) + (sy not in sources[u][1])
+                key = (new, grown[0] * grown[1] - ua * ub, u, sw)
                 if best is None or key < best[0]:
-                    best = (key, u, sw, grown)
+                    best = (key, u, sw, grown, sx, sy)
         if best is None:
             return None
-        _, u, sw, grown = best
+        _, u, sw, grown, sx, sy = best
         widths[u], swap[i] = grown, sw
+        sources[u][0].add(sx)
+        sources[u][1].add(sy)
         busy[u][cycle % ii] = True
         return u
 

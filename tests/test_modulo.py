@@ -122,3 +122,27 @@ def test_leg_core_on_dsp_primitives_has_a_fabric_twin_for_the_amaranth_simulator
     with pytest.raises(ValueError, match=r"^dsp_registers must be None without interval \(only the "
                                          r"modulo-scheduled evaluator instantiates DSP primitives\), not 'ecp5'$"):
         LegCore(plan, 400, multipliers=1, dsp_registers="ecp5")
+
+
+def test_schedule_puts_products_that_share_an_operand_on_one_multiplier():
+    """Placement prefers the multiplier that already reads an operand: its input multiplexer
+    does not grow (a*x and b*x on one unit, c*y and d*y on the other)."""
+    from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
+    b = PlanBuilder([PlanInput(n, "mm", 0, -100, 100, 8, True) for n in "xyabcd"])
+    v = b.input_nodes
+    # in this order the lowest free multiplier would pair d*y with a*x
+    terms = [b.mul(v["a"], v["x"]), b.mul(v["c"], v["y"]), b.mul(v["d"], v["y"]), b.mul(v["b"], v["x"])]
+    total = b.add(b.add(terms[0], terms[1]), b.add(terms[2], terms[3]))
+    plan = b.build([PlanOutput("s", total, total, "ticks", 1.0)])
+    sch = modulo_schedule(plan, 2, None)
+    assert sch.units == 2
+    ports = {}
+    for i, n in enumerate(plan.nodes):
+        if n.op == "mul":
+            x, y = n.args[::-1] if sch.swap[i] else n.args
+            ports.setdefault(sch.unit[i], (set(), set()))
+            ports[sch.unit[i]][0].add(x)
+            ports[sch.unit[i]][1].add(y)
+    assert sorted(min(len(a), len(b)) for a, b in ports.values()) == [1, 1]
+    simulate_bit_exact(ModuloEvaluator(plan, 2, dsp=None), plan,
+                       {k: np.random.default_rng(5).integers(-128, 128, 300) for k in "xyabcd"})
