@@ -661,7 +661,13 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tu
             return _fit_robot(robot, progress, certified, share)
         except FormatError as e:
             if n + 1 == len(shares):
-                raise
+                if len(shares) == 1:
+                    raise
+                p, q = operand_bits(robot)
+                raise FormatError(f"{e} ({share:.0%} of the tolerance) with every product fitting "
+                                  f"{p} x {q} DSP operands (fit.products = \"dsp\", hardware.dsp = "
+                                  f"{robot.dsp!r}); use fit.products = \"exact\", a wider DSP or a looser "
+                                  f"tolerance") from None
             progress(f"{e} with products fitting {operand_bits(robot)} DSP operands: refitting with "
                      f"{shares[n + 1]:.0%} of the tolerance for rounding")
     raise AssertionError("unreachable")

@@ -277,3 +277,19 @@ def test_products_dsp_give_rounding_a_larger_share_when_the_usual_one_is_too_sma
     with pytest.raises(fitter.FormatError):     # exact products: no second share
         fit_robot(small_robot, certified=False)
     assert seen == pytest.approx([0.10])
+
+
+def test_products_dsp_say_why_when_no_rounding_share_is_enough(small_robot, monkeypatch):
+    from ikseries.fit import fitter
+    from ikseries.robot import with_hardware
+
+    def never(robot, inputs, stage, fits, budget, progress):
+        raise fitter.FormatError(f"no fixed-point format keeps the certified rounding error within "
+                                 f"{budget.quantization:g} pu in 63-bit intermediates")
+    monkeypatch.setattr(fitter, "_choose_formats", never)
+    robot = with_hardware(small_robot, products="dsp", dsp="ice40")
+    with pytest.raises(fitter.FormatError, match=r"^no fixed-point format keeps the certified rounding error "
+                       r"within 1.6 pu in 63-bit intermediates \(40% of the tolerance\) with every product "
+                       r"fitting 16 x 16 DSP operands \(fit.products = \"dsp\", hardware.dsp = 'ice40'\); use "
+                       r"fit.products = \"exact\", a wider DSP or a looser tolerance$"):
+        fit_robot(robot, certified=False)
