@@ -341,31 +341,29 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
     info = {"robot": robot.name, "tolerance_pu": robot.tolerance_pu}
     specs: list[DesignSpec] = []
     points = None
+
+    def fitted(r, what: str, **extra):
+        """Fit ``r``, measure it on the verification points; (plan, max error, spec extras)."""
+        nonlocal points
+        t0 = time.perf_counter()
+        plan, _ = fit_robot(r)
+        points = verification_points(robot) if points is None else points
+        m = measure(r, plan, points)
+        err = {s: e["total"] for s, e in m["servos"].items()}
+        say(f"{what}: latency {plan.latency}, {plan.count('mul')} mul, max error "
+            + ", ".join(f"{s} {e:.4f}" for s, e in err.items()) + f" pu ({time.perf_counter() - t0:.0f} s)")
+        return plan, max(err.values()), {"max_error_pu_per_servo": err, "error_points": m["points"], **extra,
+                                         "certified_pu": _certified(plan.meta.get("certificate", {}))}
+
     poly_names = [d for d in designs if d in POLY_DESIGNS]
     if poly_names:
-        t0 = time.perf_counter()
-        plan, _ = fit_robot(robot)
-        points = verification_points(robot)
-        m = measure(robot, plan, points)
-        err = {s: e["total"] for s, e in m["servos"].items()}
-        extra = {"max_error_pu_per_servo": err, "error_points": m["points"],
-                 "certified_pu": _certified(plan.meta.get("certificate", {}))}
-        say(f"polynomial plan: latency {plan.latency}, {plan.count('mul')} mul, max error "
-            + ", ".join(f"{s} {e:.4f}" for s, e in err.items()) + f" pu ({time.perf_counter() - t0:.0f} s)")
-        specs += polynomial_specs(plan, max(err.values()), poly_names, extra)
+        plan, worst, extra = fitted(robot, "polynomial plan")
+        specs += polynomial_specs(plan, worst, poly_names, extra)
     dsp_names = [d for d in designs if d in DSP_DESIGNS]
     if dsp_names:
-        t0 = time.perf_counter()
-        drobot = with_hardware(robot, products="dsp", dsp="ecp5")
-        dplan, _ = fit_robot(drobot)
-        points = verification_points(robot) if points is None else points
-        m = measure(drobot, dplan, points)
-        err = {s: e["total"] for s, e in m["servos"].items()}
-        extra = {"max_error_pu_per_servo": err, "error_points": m["points"], "products": "dsp (18x18)",
-                 "certified_pu": _certified(dplan.meta.get("certificate", {}))}
-        say(f"DSP-sized plan: latency {dplan.latency}, {dplan.count('mul')} mul, max error "
-            + ", ".join(f"{s} {e:.4f}" for s, e in err.items()) + f" pu ({time.perf_counter() - t0:.0f} s)")
-        specs += dsp_specs(dplan, max(err.values()), dsp_names, extra)
+        plan, worst, extra = fitted(with_hardware(robot, products="dsp", dsp="ecp5"), "DSP-sized plan",
+                                    products="dsp (18x18)")
+        specs += dsp_specs(plan, worst, dsp_names, extra)
     if "cordic" in designs:
         points = verification_points(robot) if points is None else points
         if cordic_design:

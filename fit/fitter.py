@@ -655,21 +655,20 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> tu
     may not fit the usual 10 % of the tolerance; then the whole fit is redone with the next
     of ``QUANTIZATION_SHARES`` (the approximation budget shrinks by as much).
     """
-    shares = QUANTIZATION_SHARES if operand_bits(robot) is not None else QUANTIZATION_SHARES[:1]
-    for n, share in enumerate(shares):
+    bits = operand_bits(robot)
+    if bits is None:
+        return _fit_robot(robot, progress, certified, QUANTIZATION_SHARES[0])
+    for share, bigger in zip(QUANTIZATION_SHARES, QUANTIZATION_SHARES[1:] + (None,)):
         try:
             return _fit_robot(robot, progress, certified, share)
         except FormatError as e:
-            if n + 1 == len(shares):
-                if len(shares) == 1:
-                    raise
-                p, q = operand_bits(robot)
+            if bigger is None:
                 raise FormatError(f"{e} ({share:.0%} of the tolerance) with every product fitting "
-                                  f"{p} x {q} DSP operands (fit.products = \"dsp\", hardware.dsp = "
+                                  f"{bits[0]} x {bits[1]} DSP operands (fit.products = \"dsp\", hardware.dsp = "
                                   f"{robot.dsp!r}); use fit.products = \"exact\", a wider DSP or a looser "
                                   f"tolerance") from None
-            progress(f"{e} with products fitting {operand_bits(robot)} DSP operands: refitting with "
-                     f"{shares[n + 1]:.0%} of the tolerance for rounding")
+            progress(f"{e} with products fitting {bits} DSP operands: refitting with "
+                     f"{bigger:.0%} of the tolerance for rounding")
     raise AssertionError("unreachable")
 
 

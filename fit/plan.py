@@ -34,7 +34,8 @@ import contextlib
 import json
 from dataclasses import dataclass, field
 
-__all__ = ["DSP_SIZES", "quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for", "PLAN_FORMAT",
+__all__ = ["DSP_SIZES", "quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for",
+           "signed_bits", "PLAN_FORMAT",
            "PLAN_VERSION", "REGISTERED_OPS"]
 
 PLAN_FORMAT = "ikseries.plan"
@@ -74,6 +75,12 @@ def bits_for(lo: int, hi: int) -> tuple[int, bool]:
     return w, True
 
 
+def signed_bits(lo: int, hi: int) -> int:
+    """Two's complement width holding every integer in [lo, hi] (a signed operand)."""
+    w, signed = bits_for(lo, hi)
+    return w if signed else w + 1
+
+
 @dataclass(frozen=True)
 class Node:
     op: str
@@ -91,6 +98,11 @@ class Node:
     @property
     def signed(self) -> bool:
         return bits_for(self.lo, self.hi)[1]
+
+    @property
+    def signed_width(self) -> int:
+        """Bits of the value as a signed operand (an unsigned value needs one more)."""
+        return signed_bits(self.lo, self.hi)
 
 
 @dataclass(frozen=True)
@@ -387,9 +399,8 @@ class PlanBuilder:
         return p if frac is None else self.align(p, frac)
 
     def signed_width(self, a: int) -> int:
-        """Bits of node ``a`` as a signed operand (an unsigned value needs one more)."""
-        w, s = bits_for(self.nodes[a].lo, self.nodes[a].hi)
-        return w if s else w + 1
+        """Bits of node ``a`` as a signed operand (:attr:`Node.signed_width`)."""
+        return self.nodes[a].signed_width
 
     def _fit_operands(self, a: int, b: int) -> tuple[int, int]:
         wide, narrow = max(self.operand_bits), min(self.operand_bits)

@@ -168,7 +168,7 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
     }
     if getattr(core, "dsp_registers", None) == "ecp5":
         man["primitives"] = {
-            "cells": ["MULT18X18D"],
+            "family": "ecp5", "cells": ["MULT18X18D"],
             "note": "every product on a Lattice ECP5 MULT18X18D with its input and output registers; "
                     "synthesise for ECP5 (Yosys synth_ecp5, Lattice tools), simulate with "
                     "sim_models/MULT18X18D.v (a behavioural model of the configuration used)",

@@ -11,7 +11,6 @@ from amaranth.lib.wiring import In, Out
 from ..fit.plan import Plan
 from .evaluator import _shape, input_layout, node_expression, output_layout
 from .limbmul import _check_dsp
-from .schedule import _swidth
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
            "CLAMP_LATENCY"]
@@ -81,10 +80,6 @@ class ModuloSchedule:
         return last
 
 
-def _signed_width(node) -> int:
-    return _swidth(node.lo, node.hi)
-
-
 def _fits(wa: int, wb: int, dsp) -> bool:
     """A wa x wb signed product fits one ``dsp`` block (either orientation; any if no dsp)."""
     return dsp is None or (wa <= dsp[0] and wb <= dsp[1]) or (wa <= dsp[1] and wb <= dsp[0])
@@ -109,7 +104,7 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     ii = initiation_interval
     nodes = plan.nodes
     muls = [i for i, n in enumerate(nodes) if n.op == "mul"]
-    wide = {i for i in muls if not _fits(*(_signed_width(nodes[a]) for a in nodes[i].args), dsp)}
+    wide = {i for i in muls if not _fits(*(nodes[a].signed_width for a in nodes[i].args), dsp)}
     n_wide = -(-len(wide) // ii)
     n_narrow = -(-(len(muls) - len(wide)) // ii)
     units = n_narrow + n_wide          # narrow multipliers first, then the wide ones
@@ -137,7 +132,7 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     def place(i, cycle):
         """The free multiplier of i's class (and operand order) that needs the fewest new
         operand sources (its multiplexers grow least), then whose widths grow least; or None."""
-        wa, wb = (_signed_width(nodes[a]) for a in nodes[i].args)
+        wa, wb = (nodes[a].signed_width for a in nodes[i].args)
         na, nb = nodes[i].args
         pool = range(n_narrow, units) if i in wide else range(n_narrow)
         best = None
@@ -389,7 +384,7 @@ class ModuloEvaluator(wiring.Component):
         for i, n in enumerate(nodes):
             if n.op in _WIRING or n.op in ("const", "mul"):
                 continue
-            reg = chains[i][0] if chains[i] else Signal(_shape(n), name=f"n{i}_{n.op}_unread")
+            reg = chains[i][0]      # not a product: read at least in its ready cycle
             if n.op == "input" or _input_clamp(plan, i):    # input registers: the port, or clamped
                 port = self.i.payload[(nodes[n.args[0]] if n.args else n).param]
                 with m.If(self.i.ready):

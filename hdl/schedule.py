@@ -62,7 +62,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..fit.plan import DSP_SIZES, REGISTERED_OPS, Plan, bits_for
+from ..fit.plan import DSP_SIZES, REGISTERED_OPS, Plan, signed_bits
 from .limbmul import _check_dsp, limb_split
 
 __all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "READ_DELAY", "WRITE_DELAY", "compile_program",
@@ -100,12 +100,6 @@ def resolve_view(plan: Plan, idx: int) -> tuple[int, int, int]:
 def _view_interval(lo: int, hi: int, view: tuple[int, int]) -> tuple[int, int]:
     a, b = view
     return (lo >> a) << b, (hi >> a) << b
-
-
-def _swidth(lo: int, hi: int) -> int:
-    """Signed (two's complement) width holding [lo, hi]."""
-    w, signed = bits_for(lo, hi)
-    return w if signed else w + 1
 
 
 @dataclass
@@ -243,7 +237,7 @@ def _lower(plan: Plan):
         if n.op == "add":
             ops.append(MicroOp("alu", tuple(args), out, prim, alu="add", raw=(n.lo, n.hi)))
         elif n.op == "mul":
-            w = [_swidth(*values[x]) for x in args]
+            w = [signed_bits(*values[x]) for x in args]
             if w[1] > w[0]:
                 args.reverse()
             ops.append(MicroOp("mul", tuple(args), out, prim, raw=(n.lo, n.hi)))
@@ -357,15 +351,15 @@ def compile_program(plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | Non
     prog = Program(plan, multipliers, dsp, ops, values, const_value, outputs, tables)
 
     muls = [o for o in ops if o.kind == "mul"]
-    wa = max([_swidth(*values[o.args[0]]) for o in muls] + [2])
-    wb = max([_swidth(*values[o.args[1]]) for o in muls] + [2])
+    wa = max([signed_bits(*values[o.args[0]]) for o in muls] + [2])
+    wb = max([signed_bits(*values[o.args[1]]) for o in muls] + [2])
     prog.mul_widths = (wa, wb)
     prog.limb_bits, prog.limbs, _ = limb_split(wa, wb, dsp)
-    prog.acc_width = max([_swidth(*o.raw) for o in muls] + [2])
-    prog.store_width = max(_swidth(lo, hi) for lo, hi in values)
-    in_w = max(_swidth(*i.port_range) for i in plan.inputs) if plan.inputs else 1
+    prog.acc_width = max([signed_bits(*o.raw) for o in muls] + [2])
+    prog.store_width = max(signed_bits(lo, hi) for lo, hi in values)
+    in_w = max(signed_bits(*i.port_range) for i in plan.inputs) if plan.inputs else 1
     if tables:
-        prog.lut_width = max(_swidth(min(t), max(t)) for t in tables)
+        prog.lut_width = max(signed_bits(min(t), max(t)) for t in tables)
         prog.lut_index_bits = max(1, max(len(t) - 1 for t in tables).bit_length())
     prog.wb_width = max(prog.store_width + 1, prog.acc_width, in_w, prog.lut_width)
 

@@ -225,14 +225,14 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         for model in primitive_models(verilog_text):   # vendor primitives: our simulation model
             (tmp / "sim_models").mkdir(exist_ok=True)
             shutil.copyfile(model, tmp / "sim_models" / model.name)
+        family = getattr(core, "dsp_registers", None)   # the family of those primitives, if any
         (tmp / f"{name}.sdc").write_text(clock_sdc(name, robot.clock_hz))
         resources = None
         if synth:
-            from .synth import synth_counts
+            from .synth import TARGETS, synth_counts
             t0 = time.perf_counter()
-            # vendor primitives (MULT18X18D) exist only in their own family
-            targets = ("ecp5",) if primitive_models(verilog_text) else ("ice40", "ecp5", "xc7")
-            resources = synth_counts(tmp / vfile, name, targets, workdir=tmp / "synth", progress=progress, jobs=2)
+            resources = synth_counts(tmp / vfile, name, (family,) if family else TARGETS,
+                                     workdir=tmp / "synth", progress=progress, jobs=2)
             times["synth_s"] = round(time.perf_counter() - t0, 1)
             shutil.rmtree(tmp / "synth", ignore_errors=True)
         (tmp / "plan.json").write_text(plan.dumps())

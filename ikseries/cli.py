@@ -85,8 +85,9 @@ def _hardware_overrides(robot, args):
     labels = {"architecture": "--architecture", "multipliers": "--multipliers", "interval": "--interval",
               "dsp": "--dsp", "fit_device": "--fit-device", "dsp_primitives": "--dsp-primitives"}
     given = {k for k in ("architecture", "multipliers", "interval", "dsp", "fit_device")
-             if getattr(args, k, None) is not None} | ({"dsp_primitives", "dsp"} if getattr(args, "dsp_primitives", False)
-                                                         else set())
+             if getattr(args, k, None) is not None}
+    if "dsp_primitives" in opts:        # its error names --dsp too
+        given |= {"dsp_primitives", "dsp"}
     if given & {"architecture", "fit_device"}:   # either names the other in the error
         given |= {"architecture", "fit_device"}
     new = with_hardware(robot, {k: v for k, v in labels.items() if k in given}, **opts) if opts else robot

@@ -184,11 +184,11 @@ def report_build(build_dir, devices: Iterable[str] = tuple(PNR_DEVICES), *, seed
     ii = max(1, round(1 / tpc))
     work = Path(tempfile.mkdtemp(prefix=".pnr-", dir=build_dir))
 
-    cells = man.get("primitives", {}).get("cells", [])
+    prims = man.get("primitives")
 
     def one(dev: str) -> dict:
-        if cells and PNR_DEVICES[dev].family != "ecp5":      # vendor cells of another family
-            why = f"not run: the Verilog instantiates ECP5 {', '.join(cells)} primitives"
+        if prims and PNR_DEVICES[dev].family != prims["family"]:    # vendor cells of another family
+            why = f"not run: the Verilog instantiates {prims['family'].upper()} {', '.join(prims['cells'])} primitives"
             say(f"{dev}: {why}")
             return {"fits": False, "error": why, "stage": "primitives", "overflow": {}}
         say(f"{dev}: synthesis, place and route ...")

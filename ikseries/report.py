@@ -124,8 +124,9 @@ def render_markdown(r: dict) -> str:
             fits = (f"{DEVICES[tgt][0]}: " + ("yes (by cell count)" if not over else
                     "no: " + ", ".join(f"{k} {u}/{a}" for k, (u, a) in over.items())))
             out.append(_row([tgt, *(c.get(k, 0) for k in cats), fits, d.get("seconds", "")]))
-        if list(res) == ["ecp5"] and r.get("primitives"):
-            out += ["", "ECP5 only: the Verilog instantiates ECP5 "
+        if r.get("primitives"):
+            fam = r["primitives"]["family"].upper()
+            out += ["", f"{fam} only: the Verilog instantiates {fam} "
                     + ", ".join(r["primitives"]["cells"]) + " primitives."]
         out += ["", "Cell counts after synthesis, before place-and-route; carry cells are 1 bit (iCE40), "
                 "2 bits (ECP5) or 4 bits (xc7) each. "

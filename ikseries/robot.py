@@ -365,9 +365,12 @@ NON_FIT_FIELDS = ("name", "description", "legs", "architecture", "multipliers", 
 def fit_record(record: dict) -> dict:
     """The part of a :func:`robot_record` that decides the fitted plan (``dsp`` too when
     ``fit.products = "dsp"`` sizes the products by it)."""
-    dsp_sized = record.get("products", "exact") != "exact"
-    return {k: v for k, v in record.items()
-            if (k not in NON_FIT_FIELDS or (k == "dsp" and dsp_sized)) and (k != "products" or dsp_sized)}
+    skip = set(NON_FIT_FIELDS)
+    if record.get("products", "exact") == "exact":
+        skip.add("products")    # so records written before fit.products existed still match
+    else:
+        skip.discard("dsp")     # the DSP family sizes the products
+    return {k: v for k, v in record.items() if k not in skip}
 
 
 def robot_from_record(d: dict) -> Robot:

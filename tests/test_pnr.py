@@ -269,7 +269,7 @@ def test_report_skips_other_families_for_a_build_with_ecp5_primitives(wide_veril
     (bdir / "manifest.json").write_text(json.dumps({
         "module": "wide", "clock": {"port": "clk", "frequency_hz": CLOCK}, "reset": {"port": "rst"},
         "latency_cycles": 2, "throughput": {"targets_per_cycle": 1},
-        "primitives": {"cells": ["MULT18X18D"]}}))
+        "primitives": {"family": "ecp5", "cells": ["MULT18X18D"]}}))
     (bdir / "report.md").write_text("# report\n")
     pnr = report_build(bdir, [ICE40])
     why = "not run: the Verilog instantiates ECP5 MULT18X18D primitives"
