@@ -75,8 +75,10 @@ class Device:
     nextpnr_args: tuple[str, ...]
     user_io: int                      # user I/O pins of the package
     clock_pin: str
-    #: resource -> (regex over Yosys cell types, capacity): checked before nextpnr
-    cell_limits: tuple[tuple[str, str, int], ...]
+    #: resource -> (regex over Yosys cell types, capacity): checked before nextpnr; regex None:
+    #: the category of :func:`ikseries.synth.categorise` (``LUT``: on ECP5 with the LUT4s of the
+    #: carry chains, which nextpnr places in the same slots)
+    cell_limits: tuple[tuple[str, str | None, int], ...]
     #: report column -> nextpnr utilisation key (BEL type)
     bels: tuple[tuple[str, str], ...]
 
@@ -92,7 +94,7 @@ PNR_DEVICES: dict[str, Device] = {
     "ecp5-25f-cabga381": Device(
         "ecp5-25f-cabga381", "ecp5", "Lattice ECP5 LFE5U-25F, CABGA381 package",
         ("--25k", "--package", "CABGA381"), 197, "G2",
-        (("LUT", r"LUT4", 24288), ("FF", r"TRELLIS_FF|FD1[PS]3\w+", 24288), ("DSP", r"MULT18X18D", 28),
+        (("LUT", None, 24288), ("FF", r"TRELLIS_FF|FD1[PS]3\w+", 24288), ("DSP", r"MULT18X18D", 28),
          ("ALU54B", r"ALU54B", 14), ("BRAM", r"DP16KD|PDPW16KD", 56)),
         (("LC", "TRELLIS_COMB"), ("FF", "TRELLIS_FF"), ("DSP", "MULT18X18D"), ("BRAM", "DP16KD"),
          ("IO", "TRELLIS_IO"))),
@@ -132,7 +134,8 @@ class PnrResult:
     ``utilisation`` maps a resource to ``{"used": n, "available": m}``: ``LC`` (iCE40 logic
     cells; ECP5 LUT4 slots, carry halves included), ``FF``, ``DSP``, ``BRAM``, ``IO`` and, on
     iCE40, ``SPRAM`` are from nextpnr's placed design (iCE40 ``FF`` from Yosys); ``LUT`` and
-    ``carry`` are Yosys cell counts (carry: SB_CARRY = 1 bit, CCU2C = 2 bits).
+    ``carry`` are Yosys counts (:func:`ikseries.synth.categorise`: ECP5 ``LUT`` includes the two
+    LUT4s of each CCU2C; carry: SB_CARRY = 1 bit, CCU2C = 2 bits).
     """
     device: str
     top: str
@@ -372,7 +375,7 @@ def place_and_route(verilog: str, top: str, device: str, clock_hz: int, workdir:
     cells = syn["cells"]
     over = {}
     for res, rx, cap in dev.cell_limits:
-        used = sum(n for c, n in cells.items() if re.fullmatch(rx, c))
+        used = syn["counts"][res] if rx is None else sum(n for c, n in cells.items() if re.fullmatch(rx, c))
         if used > cap:
             over[res] = (used, cap)
     if over:

@@ -72,7 +72,7 @@ def render_markdown(results: dict, latency_cycles: int, initiation_interval: int
         u, f = r["utilisation"], r["fmax_mhz"]
         mark = "" if r["meets_clock"] else f" (misses {r['clock_hz'] / 1e6:g})"
         rows.append("| " + " | ".join([
-            dev, f"{f:.1f}{mark}", f"{u['LUT']['used']:,} LUT4, {_cell(u['LC'])} LC", _cell(u["FF"]),
+            dev, f"{f:.1f}{mark}", f"{u['LUT']['used']:,} LUT, {_cell(u['LC'])} LC", _cell(u["FF"]),
             f"{u['carry']['used']:,}", _cell(u["DSP"]), _cell(u["BRAM"]),
             _cell(u.get("IO")) + (" (harness)" if r["harness"] else ""), str(latency_cycles),
             f"{latency_cycles / f * 1e3:.1f}", f"{f * 1e6 / initiation_interval:,.0f}"]) + " |")
@@ -103,7 +103,9 @@ def render_section(pnr: dict) -> str:
         notes.append(line + ".")
     out += notes
     out += ["", "LC: iCE40 logic cells (LUT4 + FF + carry each); ECP5 LUT4 slots including carry halves. "
-            "LUT4 and carry are Yosys cell counts (carry: SB_CARRY 1 bit, CCU2C 2 bits). Tools: "
+            "LUT and carry are Yosys counts: LUT the LUT4s the logic occupies (on ECP5 with the two of "
+            "each CCU2C, as Lattice counts ripple logic), carry the carry cells (SB_CARRY 1 bit, CCU2C "
+            "2 bits). Tools: "
             + ", ".join(f"{k} {v}" for k, v in pnr["tools"].items()) + ".", ""]
     return "\n".join(out)
 

@@ -15,7 +15,8 @@ The result of :func:`synth_counts` is a JSON-serialisable dict, one entry per ta
                    "LUTRAM": 0, "mux": 0, "io": 0, "other": 0},
         "cells": {"SB_LUT4": 812, ...},     # raw stat num_cells_by_type, $scopeinfo dropped
         "other_cells": {},                  # the raw cells counted as "other"
-        "num_cells": 1761,                  # == sum(cells.values()) == sum(counts.values())
+        "num_cells": 1761,                  # == sum(cells.values()); == sum(counts.values())
+                                            # except on ECP5 (+ 2 LUT per CCU2C, see below)
         "seconds": 12.3,                    # wall time of the Yosys process
         "yosys_seconds": 11.9,              # Yosys' own "End of script" time
         "top_passes": [["abc9_exe", 61, 7], ...]}  # Yosys' "Time spent" line: pass, %, seconds
@@ -26,7 +27,7 @@ Categories (every raw cell falls in exactly one; unknown cells go to "other"):
 ================  ====================  ==========================  ===============================
 category          iCE40 (UP5K)          ECP5                        Xilinx 7-series
 ================  ====================  ==========================  ===============================
-LUT               SB_LUT4               LUT4                        LUT1..LUT6, LUT6_2, INV
+LUT               SB_LUT4               LUT4, + 2 per CCU2C         LUT1..LUT6, LUT6_2, INV
 FF                SB_DFF*               TRELLIS_FF, FD1P3*/FD1S3*   FD*E, FD*E_1, FDRSE, FDCPE, LD*
 carry             SB_CARRY              CCU2C (2 bits each)         CARRY4 (4 bits each)
 DSP               SB_MAC16              MULT18X18D, ALU54B, ALU24B  DSP48E1
@@ -37,7 +38,14 @@ mux               -                     PFUMX, L6MUX21              MUXF7, MUXF8
 io                SB_IO*, SB_GB*        TRELLIS_IO, IB/OB/BB*, DCCA IBUF/OBUF/IOBUF/OBUFT, BUFG*
 ================  ====================  ==========================  ===============================
 
-``synth_xilinx`` inserts I/O and clock buffers for the top module (hence "io"); synth_ice40 and
+``LUT`` counts the look-up tables the logic occupies, the measure of the devices' capacity
+(:data:`DEVICES`). On the iCE40 and the 7-series an adder's sum bits are LUTs of their own
+beside the hard carry cells. An ECP5 CCU2C is a slice in ripple mode: it occupies both of the
+slice's LUT4s (two adder bits), so ECP5 ``LUT`` = LUT4 cells + 2 per CCU2C, the way Lattice's
+map report counts LUT4s ("logic" plus "ripple") against the LFE5U-25F's 24288. Without that an
+ECP5 design's adders would be free. ``carry`` still counts the carry cells themselves, so
+ECP5 ``LUT`` - 2 ``carry`` is the plain LUT4 cells; ``sum(counts)`` is the number of cells
+plus 2 per CCU2C there. ``synth_xilinx`` inserts I/O and clock buffers for the top module (hence "io"); synth_ice40 and
 synth_ecp5 do not. ``mux`` cells are the hard wide-function multiplexers that combine LUTs; they
 use no extra LUTs.
 """
@@ -57,7 +65,7 @@ from typing import Callable, Iterable, Sequence
 
 from .wasm_cache import warm_yosys
 
-__all__ = ["CATEGORIES", "DEVICES", "FIT_DEVICES", "TARGETS", "overflows", "SynthError", "categorise", "synth_counts", "yosys_command"]
+__all__ = ["CATEGORIES", "DEVICES", "RIPPLE_LUTS", "FIT_DEVICES", "TARGETS", "overflows", "SynthError", "categorise", "synth_counts", "yosys_command"]
 
 CATEGORIES = ("LUT", "FF", "carry", "DSP", "BRAM", "SPRAM", "LUTRAM", "mux", "io", "other")
 
@@ -93,6 +101,10 @@ def overflows(target: str, counts: dict) -> dict[str, tuple[int, int]]:
     _, cap = DEVICES[target]
     return {k: (counts.get(k, 0), v) for k, v in cap.items() if counts.get(k, 0) > v}
 
+
+#: family -> LUTs each of its ``carry`` cells occupies: an ECP5 CCU2C (a slice in ripple mode)
+#: uses both LUT4s of its slice; iCE40 SB_CARRY and 7-series CARRY4 are hard cells beside the LUTs
+RIPPLE_LUTS: dict[str, int] = {"ecp5": 2}
 
 # (category, regex) in order; the first full match wins.
 _RULES: dict[str, list[tuple[str, str]]] = {
@@ -158,7 +170,8 @@ def categorise(family: str, cells: dict[str, int]) -> tuple[dict[str, int], dict
     """Sort raw ``num_cells_by_type`` into :data:`CATEGORIES`.
 
     ``family`` is ``"ice40"``, ``"ecp5"`` or ``"xilinx"``. ``$scopeinfo`` is ignored. Returns
-    ``(counts, other_cells)``; ``sum(counts.values())`` equals the raw total without $scopeinfo.
+    ``(counts, other_cells)``; ``sum(counts.values())`` equals the raw total without $scopeinfo,
+    plus, on ECP5, the two LUT4s of every CCU2C, which ``LUT`` includes (:data:`RIPPLE_LUTS`).
     """
     rules = _COMPILED[family]
     counts = dict.fromkeys(CATEGORIES, 0)
@@ -173,6 +186,7 @@ def categorise(family: str, cells: dict[str, int]) -> tuple[dict[str, int], dict
         else:
             counts["other"] += int(n)
             other[name] = other.get(name, 0) + int(n)
+    counts["LUT"] += RIPPLE_LUTS.get(family, 0) * counts["carry"]
     return counts, other
 
 

@@ -101,9 +101,9 @@ def test_verdicts_on_hand_made_records(records):
     _, bench = records
     base = {"kind": "polynomial", "status": "placed", "overflow": None, "error": None, "max_error_pu": 0.4}
     poly = {**base, "design": "folded2", "device": bench.ECP5, "fmax_mhz": 100.0, "latency_ns": 300.0,
-            "throughput_per_s": 3.3e6, "LUT": 900, "DSP": 4}
+            "throughput_per_s": 3.3e6, "LUT": 900, "DSP": 4, "FF": 800}
     cordic = {**base, "kind": "cordic", "design": "cordic", "device": bench.ECP5, "fmax_mhz": 160.0,
-              "latency_ns": 250.0, "throughput_per_s": 160e6, "LUT": 5000, "DSP": 2}
+              "latency_ns": 250.0, "throughput_per_s": 160e6, "LUT": 5000, "DSP": 2, "FF": 600}
     speed = bench.verdict_ecp5_speed([poly, cordic])     # the target is the polynomial core's
     assert speed[0].endswith("polynomial cores): folded2")
     assert any("latency 300 ns <= 200 ns: NOT MET (by 100 ns, 50%)" in s for s in speed)
@@ -117,6 +117,8 @@ def test_verdicts_on_hand_made_records(records):
     assert pv[-1].startswith("  read as the sum LUT + DSP (5002 for CORDIC), latency no worse: not met")
     pv = bench.verdict_poly_vs_cordic([{**poly, "DSP": 2, "latency_ns": 200.0}, cordic])
     assert pv[-2] == "  verdict: MET by folded2 (LUT and DSP each, latency no worse)"
+    # where the winner still loses is said, with the ratio
+    assert pv[1].endswith("-> wins; also loses on FF 800 vs 600 (1.3x); throughput 3.3 vs 160 M/s (0.021x)")
     assert pv[-1].startswith("  read as the sum LUT + DSP (5002 for CORDIC), latency no worse: met by folded2")
 
 
