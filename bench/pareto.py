@@ -17,7 +17,10 @@ For the cylinder-leg robot, the IK cores alone (no PWM), as flat-port stream top
                cocotb with the primitive's model (``sim/models/MULT18X18D.v``, tests); its
                accuracy column is that plan's own;
 ``cordic``     ``CordicLegSolver``, sized with ``size_cordic(margin_pu=0.075)`` (about 1.5 min)
-               unless ``--cordic-design JSON`` gives the design;
+               unless ``--cordic-design JSON`` gives the design; fully pipelined;
+``cordic_iter`` the same design iterative: each CORDIC and the square root on one set of
+               registers, one target every ``longest_loop`` cycles (17 for the sized design),
+               the same values at the same latency;
 
 and ``hexapod``: the hexapod preset's shared robot core (``RobotCore``: one folded evaluator
 for 6 legs, the configuration ``choose_architecture`` picks, iCE40 DSP size, plus the 18-channel
@@ -42,7 +45,7 @@ latency in ns at Fmax on y, Pareto front of the placed cylinder-leg cores marked
 verdicts for the issue's targets.
 
     python bench/pareto.py [--devices ice40-up5k-sg48,ecp5-25f-cabga381]
-                           [--designs pipelined,modulo4,modulo8,modulo12,modulo4d,modulo7d,modulo16d,folded1,folded2,cordic,hexapod]
+                           [--designs pipelined,modulo4,modulo8,modulo12,modulo4d,modulo7d,modulo16d,folded1,folded2,cordic,cordic_iter,hexapod]
                            [--jobs 2]
                            [--clock-mhz 100] [--cordic-design JSON] [--out build/bench/pareto.json]
 """
@@ -62,9 +65,10 @@ ICE40, ECP5 = "ice40-up5k-sg48", "ecp5-25f-cabga381"
 MODULO_II = (4, 8, 12)
 MODULO_DSP_II = (4, 7, 16)   # ECP5 only: DSP-sized plan, MULT18X18D with its own registers
 DESIGNS = ("pipelined", *(f"modulo{ii}" for ii in MODULO_II), *(f"modulo{ii}d" for ii in MODULO_DSP_II),
-           "folded1", "folded2", "cordic", "hexapod")
+           "folded1", "folded2", "cordic", "cordic_iter", "hexapod")
+CORDIC_DESIGNS = ("cordic", "cordic_iter")
 DSP_DESIGNS = tuple(f"modulo{ii}d" for ii in MODULO_DSP_II)
-POLY_DESIGNS = tuple(d for d in DESIGNS if d not in ("cordic", "hexapod", *DSP_DESIGNS))
+POLY_DESIGNS = tuple(d for d in DESIGNS if d not in (*CORDIC_DESIGNS, "hexapod", *DSP_DESIGNS))
 TARGET_FMAX_MHZ, TARGET_LATENCY_NS, TARGET_THROUGHPUT = 150.0, 200.0, 20e6
 HEXAPOD_DSP, HEXAPOD_LC, HEXAPOD_REFRESH_HZ = 8, 5280, 1000.0
 
@@ -150,14 +154,19 @@ def folded_specs(plan, max_error_pu: float | None, names, extra: dict) -> list[D
     return specs
 
 
-def cordic_spec(robot, design, max_error_pu: float, extra: dict) -> DesignSpec:
-    """Spec of the pipelined CORDIC leg solver of ``design``."""
+def cordic_spec(robot, design, max_error_pu: float, extra: dict, iterative: bool = False) -> DesignSpec:
+    """Spec of the CORDIC leg solver of ``design``: pipelined, or iterative (each loop on one
+    set of registers, a target every ``longest_loop`` cycles)."""
     from ikseries.hdl.cordic import CordicLegSolver
     from ikseries.hdl.flat import stream_verilog
 
-    return DesignSpec("cordic", "cordic", "CORDIC, fully pipelined (CordicLegSolver, margin 0.075 pu)",
-                      lambda dev: (stream_verilog(CordicLegSolver(robot, design), "cordic_solver"), "cordic_solver"),
-                      lambda dev: CordicLegSolver(robot, design).latency, lambda dev: 1, max_error_pu, extra=extra)
+    ii = CordicLegSolver(robot, design).longest_loop if iterative else 1
+    name, top = ("cordic_iter", "cordic_iterative") if iterative else ("cordic", "cordic_solver")
+    what = f"iterative, a target every {ii} cycles" if iterative else "fully pipelined"
+    return DesignSpec(name, "cordic", f"CORDIC, {what} (CordicLegSolver, margin 0.075 pu)",
+                      lambda dev: (stream_verilog(CordicLegSolver(robot, design, ii), top), top),
+                      lambda dev: CordicLegSolver(robot, design, ii).latency, lambda dev: ii, max_error_pu,
+                      extra=extra)
 
 
 def hexapod_spec(clock_hz_for_refresh=None) -> DesignSpec:
@@ -262,18 +271,10 @@ def verdict_hexapod(records) -> list[str]:
             f"  verdict: {'MET' if dsp_ok and lc_ok and hz_ok else 'NOT MET'}"]
 
 
-def verdict_poly_vs_cordic(records) -> list[str]:
-    """Target 3: polynomial < CORDIC in LUT and DSP on ECP5 at no worse latency; each core's
-    line also says where else it loses to CORDIC (FF, throughput, accuracy) and by how much."""
-    cor = [r for r in _by(records, ECP5, "cordic") if r["status"] == "placed"]
-    poly = [r for r in _by(records, ECP5, "polynomial") if r["status"] == "placed"]
-    if not cor or not poly:
-        return ["polynomial vs CORDIC on ECP5: needs a placed CORDIC and a placed polynomial core - not decided"]
-    c = cor[0]
-    lines = [f"polynomial vs CORDIC on ECP5 (CORDIC: {c['LUT']} LUT, {c['DSP']} DSP, {c['latency_ns']} ns, "
-             f"{c['throughput_per_s'] / 1e6:.4g} M/s, max error {c['max_error_pu']:.4f} pu; LUT counts the "
-             "LUT4s of the carry chains):"]
-    winners = []
+def _against(poly, c) -> tuple[list[str], list[str]]:
+    """One line per polynomial core against CORDIC record ``c`` (LUT, DSP, latency decide;
+    where it still loses, FF, throughput, accuracy, is said with the ratio), and the winners."""
+    lines, winners = [], []
     for p in sorted(poly, key=lambda r: r["latency_ns"]):
         lut, dsp, lat = p["LUT"] < c["LUT"], p["DSP"] <= c["DSP"], p["latency_ns"] <= c["latency_ns"]
         elsewhere = [f"{n} {p[k]:,} vs {c[k]:,} ({p[k] / c[k]:.2g}x)" for n, k in (("FF", "FF"),) if p[k] > c[k]]
@@ -292,6 +293,29 @@ def verdict_poly_vs_cordic(records) -> list[str]:
                      + (f"; also loses on {'; '.join(elsewhere)}" if elsewhere else ""))
         if lut and dsp and lat:
             winners.append(p["design"])
+    return lines, winners
+
+
+def _cordic_head(c) -> str:
+    return (f"{c['LUT']} LUT, {c['DSP']} DSP, {c['latency_ns']} ns, {c['throughput_per_s'] / 1e6:.4g} M/s, "
+            f"max error {c['max_error_pu']:.4f} pu")
+
+
+def verdict_poly_vs_cordic(records) -> list[str]:
+    """Target 3: polynomial < CORDIC in LUT and DSP on ECP5 at no worse latency, against the
+    pipelined CORDIC (the issue's "CORDIC stages"); each core's line also says where else it
+    loses and by how much. When the iterative CORDIC was placed too, the same comparison
+    against it follows (a CORDIC at a throughput like the modulo cores')."""
+    placed = [r for r in _by(records, ECP5, "cordic") if r["status"] == "placed"]
+    cor = [r for r in placed if r["design"] == "cordic"]
+    poly = [r for r in _by(records, ECP5, "polynomial") if r["status"] == "placed"]
+    if not cor or not poly:
+        return ["polynomial vs CORDIC on ECP5: needs a placed CORDIC and a placed polynomial core - not decided"]
+    c = cor[0]
+    lines = [f"polynomial vs CORDIC on ECP5 (pipelined CORDIC: {_cordic_head(c)}; LUT counts the LUT4s of the "
+             "carry chains):"]
+    body, winners = _against(poly, c)
+    lines += body
     lines.append(f"  verdict: {'MET by ' + ', '.join(winners) if winners else 'NOT MET'} (LUT and DSP each, "
                  "latency no worse)")
     summed = [p["design"] for p in poly if p["LUT"] + p["DSP"] < c["LUT"] + c["DSP"]
@@ -299,6 +323,13 @@ def verdict_poly_vs_cordic(records) -> list[str]:
     lines.append(f"  read as the sum LUT + DSP ({c['LUT'] + c['DSP']} for CORDIC), latency no worse: "
                  + (f"met by {', '.join(summed)}" if summed else "not met")
                  + " (a DSP block counted as one LUT: this reading favours the DSP-heavy cores)")
+    for it in (r for r in placed if r["design"] == "cordic_iter"):
+        lines.append(f"against the iterative CORDIC (a target every {it['initiation_interval']} cycles: "
+                     f"{_cordic_head(it)}):")
+        body, winners = _against(poly, it)
+        lines += body
+        lines.append(f"  verdict: {'met by ' + ', '.join(winners) if winners else 'not met'} (LUT and DSP each, "
+                     "latency no worse)")
     return lines
 
 
@@ -375,7 +406,8 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
         plan, worst, extra = fitted(with_hardware(robot, products="dsp", dsp="ecp5"), "DSP-sized plan",
                                     products="dsp (18x18)")
         specs += dsp_specs(plan, worst, dsp_names, extra)
-    if "cordic" in designs:
+    cordic_names = [d for d in designs if d in CORDIC_DESIGNS]
+    if cordic_names:
         points = verification_points(robot) if points is None else points
         if cordic_design:
             try:
@@ -390,9 +422,10 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
         m = measure_cordic(robot, design, points)
         err = {s: e["total"] for s, e in m["servos"].items()}
         say(f"CORDIC {design.as_dict()}: max error " + ", ".join(f"{s} {e:.4f}" for s, e in err.items()) + " pu")
-        specs.append(cordic_spec(robot, design, max(err.values()),
-                                 {"cordic_design": design.as_dict(), "sized": sized,
-                                  "max_error_pu_per_servo": err, "error_points": m["points"]}))
+        extra = {"cordic_design": design.as_dict(), "sized": sized, "max_error_pu_per_servo": err,
+                 "error_points": m["points"]}
+        specs += [cordic_spec(robot, design, max(err.values()), extra, iterative=n == "cordic_iter")
+                  for n in cordic_names]
     if "hexapod" in designs:
         specs.append(hexapod_spec())
     return specs, info

@@ -47,7 +47,7 @@ from dataclasses import dataclass, fields
 
 from .plan import PlanInput, bits_for
 
-__all__ = ["CordicDesign", "CordicPlan", "IntervalOps", "OperatorOps", "Iv", "datapath", "cordic_gain",
+__all__ = ["CordicDesign", "CordicPlan", "IntervalOps", "LoopOps", "OperatorOps", "isqrt_stages", "Iv", "datapath", "cordic_gain",
            "DEFAULT_DESIGN", "ITERATION_FIELDS", "WIDTH_FIELDS", "csd", "SHIFT_ADD_DIGITS"]
 
 ITERATION_FIELDS = ("rot_iters", "xy_iters", "uv_iters", "law_iters")
@@ -168,7 +168,35 @@ def _iv(lo: int, hi: int, what: str) -> Iv:
     return Iv(int(lo), int(hi))
 
 
-class OperatorOps:
+class LoopOps:
+    """How a back end runs the datapath's loops (CORDIC micro-rotations, square-root steps):
+    unrolled, one ``stage`` per iteration (the analysis, the golden model, the pipelined RTL).
+    The folded RTL (``ikseries.hdl.cordic.FoldedAmaranthOps``) runs each loop on one set of
+    registers instead; its iteration number is then a signal, hence ``table``."""
+
+    def loop(self, tag: str, n: int, step, live: dict, hints=None) -> dict:
+        """``n`` iterations ``live = step(ops, live, i)``, stages ``tag0`` .. ``tag{n-1}``;
+        ``hints(i)``: the interval hints of iteration ``i`` (analysis only)."""
+        for i in range(n):
+            live = self.stage(f"{tag}{i}", step(self, live, i), hints(i) if hints else None)
+        return live
+
+    def table(self, values, i):
+        """``values[i]`` as a constant (``i`` is the iteration number)."""
+        return self.c(values[i])
+
+    def isqrt(self, live: dict, xname: str, rname: str, xhi: int, tag: str) -> dict:
+        """``live`` with ``xname`` replaced by ``rname`` = floor(sqrt(live[xname])), one result
+        bit per stage (see :func:`_isqrt`)."""
+        return _isqrt(self, live, xname, rname, xhi, tag)
+
+
+def isqrt_stages(xhi: int) -> int:
+    """Stages of the square root of a value in [0, xhi]: one per result bit."""
+    return max(1, (xhi.bit_length() + 1) // 2)
+
+
+class OperatorOps(LoopOps):
     """The datapath operations that are plain Python operators on the value type (shared by
     the numpy golden model and the Amaranth back end)."""
 
@@ -200,7 +228,7 @@ class OperatorOps:
         return ~a
 
 
-class IntervalOps:
+class IntervalOps(LoopOps):
     """Datapath back end over integer intervals: the range of every pipeline register.
 
     ``layout`` maps each register, keyed ``(stage index, name)``, to its ``(lo, hi)``;
@@ -323,22 +351,25 @@ def _norm_bound(x: Iv, y: Iv) -> float:
 
 def _micro_rotations(ops, live, n, table, cordics, tag, steer, hint):
     """``n`` CORDIC micro-rotations of every ``(x, y, a)`` in ``cordics`` (register names), one
-    pipeline stage each: with ``s, ns = steer(ops, x, y, a)`` (the step direction and its
-    negation), ``x -= y >> i`` where ``s`` (else ``+=``), ``y -= x >> i`` where ``ns``, ``a -= t_i``
-    where ``s``. ``hint(xn, i)`` gives the interval hints of ``(x, y)`` in analysis mode."""
-    for i in range(n):
-        new, hints = dict(live), {}
+    pipeline stage each (``ops.loop``): with ``s, ns = steer(ops, x, y, a)`` (the step direction
+    and its negation), ``x -= y >> i`` where ``s`` (else ``+=``), ``y -= x >> i`` where ``ns``,
+    ``a -= t_i`` where ``s``. ``hint(xn, i)`` gives the interval hints of ``(x, y)`` in analysis mode."""
+    def step(ops, live, i):
+        new = dict(live)
         for xn, yn, an in cordics:
             x, y, a = live[xn], live[yn], live[an]
             s, ns = steer(ops, x, y, a)
-            dx, dy, t = ops.shr(y, i), ops.shr(x, i), ops.c(table[i])
-            new[xn] = ops.addsub(x, dx, s)
-            new[yn] = ops.addsub(y, dy, ns)
-            new[an] = ops.addsub(a, t, s)
-            if ops.analysis:
-                hints[xn], hints[yn] = hint(xn, i)
-        live = ops.stage(f"{tag}{i}", new, hints)
-    return live
+            new[xn] = ops.addsub(x, ops.shr(y, i), s)
+            new[yn] = ops.addsub(y, ops.shr(x, i), ns)
+            new[an] = ops.addsub(a, ops.table(table, i), s)
+        return new
+
+    def hints(i):
+        out = {}
+        for xn, yn, _ in cordics:
+            out[xn], out[yn] = hint(xn, i)
+        return out
+    return ops.loop(tag, n, step, live, hints if ops.analysis else None)
 
 
 def _rotate(ops, live, n, table, cordics, tag):
@@ -391,7 +422,7 @@ def _isqrt(ops, live, xname, rname, xhi, tag):
     """Pipelined restoring square root: ``rname`` = floor(sqrt(live[xname])), one result bit
     per stage, MSB first. After the step for bit b, root = floor(sqrt(X) / 2**b) and
     rem = X - root**2 * 4**b < (2 root + 1) * 4**b."""
-    nb = max(1, (xhi.bit_length() + 1) // 2)
+    nb = isqrt_stages(xhi)
     rmax = math.isqrt(xhi)
     root, rem = ops.c(0), live[xname]
     live = {k: v for k, v in live.items() if k != xname}
@@ -462,7 +493,7 @@ def datapath(ops, cp: "CordicPlan") -> dict:
     live = ops.stage("pq", {"s1": live["s1"], "auv": live["auv"], "n": live["n"], "e": live["e"],
                             "pq": ops.mul(live["p"], live["q"])},
                      {"pq": (0, pq_hi)} if ops.analysis else None)
-    live = _isqrt(ops, live, "pq", "h", pq_hi, "sqrt")
+    live = ops.isqrt(live, "pq", "h", pq_hi, "sqrt")
     # two vectoring CORDICs in parallel: alpha = atan2(H, N), S3 = atan2(H, d^2 - f^2 - t^2)
     xa, ya, aa = _vector_prerotate(ops, live["n"], live["h"], k["deg90"])
     xe, ye, ae = _vector_prerotate(ops, live["e"], live["h"], k["deg90"])

@@ -3,16 +3,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import numpy as np
 import pytest
-from amaranth.hdl import Module, Signal, signed
+from amaranth.hdl import Const, Module, Mux, Signal, signed
 
 from ikseries.fit import cordic as fc
 from ikseries.fit.cordic import DEFAULT_DESIGN, CordicDesign, CordicPlan, IntervalOps
 from ikseries.fit.plan import bits_for
 from ikseries.fit.cordic_sizing import SizingError, measure_cordic, size_cordic
-from ikseries.hdl.cordic import AmaranthOps, CordicLegSolver, cordic_input_layout, cordic_output_layout
+from ikseries.hdl.cordic import (AmaranthOps, CordicLegSolver, FoldedAmaranthOps, cordic_input_layout,
+                                 cordic_output_layout)
 from ikseries.hdl.evaluator import input_layout, output_layout
 from ikseries.sim import cordic_golden
 from ikseries.sim.amaranth_sim import simulate_leg
@@ -218,13 +220,19 @@ def test_too_wide_design_is_refused(robot):
 
 
 # -- RTL --------------------------------------------------------------------------------------
+def _bit_exact(robot, core, targets, **drive):
+    """Simulate ``core`` on ``targets``; every output equals the golden model's."""
+    res = simulate_leg(core, targets, **drive)
+    exp = cordic_golden.outputs(robot, core.plan, targets)
+    for s in exp:
+        assert np.array_equal(res.outputs[s], exp[s]), s
+    return res
+
+
 def test_rtl_bit_exact_with_golden(robot):
     core = CordicLegSolver(robot, SIZED)
     t = _targets(core.plan, 300, 21)
-    res = simulate_leg(core, t)
-    exp = cordic_golden.outputs(robot, core.plan, t)
-    for s in exp:
-        assert np.array_equal(res.outputs[s], exp[s]), s
+    res = _bit_exact(robot, core, t)
     assert set(res.latencies.tolist()) == {core.latency} == {core.plan.latency}
     assert core.latency == 86
 
@@ -232,11 +240,83 @@ def test_rtl_bit_exact_with_golden(robot):
 def test_rtl_under_backpressure_and_gaps(robot):
     core = CordicLegSolver(robot, SIZED)
     t = random_targets(core.plan, 150, 4)
-    res = simulate_leg(core, t, ready_prob=0.5, valid_prob=0.6, seed=3)
-    exp = cordic_golden.outputs(robot, core.plan, t)
-    for s in exp:
-        assert np.array_equal(res.outputs[s], exp[s]), s
+    res = _bit_exact(robot, core, t, ready_prob=0.5, valid_prob=0.6, seed=3)
     assert res.latencies.min() == core.latency
+
+
+@pytest.fixture(scope="module")
+def iterative(robot):
+    return CordicLegSolver(robot, SIZED, CordicLegSolver(robot, SIZED).longest_loop)
+
+
+def test_iterative_rtl_bit_exact_with_golden_at_the_same_latency(robot, iterative):
+    """Each loop on one set of registers: the pipelined core's values and latency, a target
+    every ``longest_loop`` cycles (the square root's 17 steps here)."""
+    core = iterative
+    assert core.longest_loop == max(SIZED.rot_iters, SIZED.xy_iters, SIZED.uv_iters, SIZED.law_iters,
+                                    fc.isqrt_stages(core.plan.layout[core.plan.stage_names.index("pq")]["pq"][1]))
+    assert core.initiation_interval == core.longest_loop == 17
+    t = _targets(core.plan, 120, 22)
+    res = _bit_exact(robot, core, t)
+    assert set(res.latencies.tolist()) == {core.latency} == {CordicLegSolver(robot, SIZED).latency}
+    assert set(np.diff(res.input_cycles).tolist()) == {core.initiation_interval}
+
+
+def test_iterative_rtl_under_backpressure_and_gaps(robot, iterative):
+    core = iterative
+    t = random_targets(core.plan, 60, 8)
+    res = _bit_exact(robot, core, t, ready_prob=0.5, valid_prob=0.6, seed=5)
+    assert res.latencies.min() == core.latency
+    assert np.diff(res.input_cycles).min() >= core.initiation_interval
+
+
+@pytest.mark.parametrize("ii", [0, 2, 16, True, 17.0, "17"])
+def test_iterative_interval_errors(robot, ii):
+    with pytest.raises(ValueError, match=rf"^initiation_interval must be 1 \(pipelined\) or an integer >= 17 "
+                                         rf"\(the longest loop of this design\), not {re.escape(repr(ii))}$"):
+        CordicLegSolver(robot, SIZED, ii)
+
+
+def test_iterative_square_root_exhaustive():
+    """The iterative digit-by-digit root gives floor(sqrt(x)) for every x of a 10-bit range,
+    targets back to back, and holds a value it only carries."""
+    from amaranth.sim import Simulator
+    xhi = 1023
+    nb = fc.isqrt_stages(xhi)
+
+    def build(ops):
+        return ops.isqrt(ops.stage("in", {"x": ops.port("x"), "k": ops.port("k")}), "x", "h", xhi, "sq")
+
+    ia = IntervalOps({"x": (0, xhi), "k": (0, 7)})
+    build(ia)
+    m = Module()
+    x, k, phase = Signal(10), Signal(3), Signal(range(nb))
+    m.d.sync += phase.eq(Mux(phase == nb - 1, 0, phase + 1))
+    out = build(FoldedAmaranthOps(m, Const(1), {"x": x, "k": k}, ia.layout, phase, nb))
+    res = []
+
+    async def driver(ctx):                    # a new radicand every nb cycles, when phase is 0
+        for v in range(xhi + 1):
+            while ctx.get(phase) != 0:
+                await ctx.tick()
+            ctx.set(x, v)
+            ctx.set(k, v & 7)
+            await ctx.tick()
+
+    async def reader(ctx):                    # each result in the cycle after its last iteration
+        while ctx.get(phase) != 0:
+            await ctx.tick()
+        await ctx.tick().repeat(nb + 1)       # the "in" register, then iterations 0 .. nb - 1
+        for _ in range(xhi + 1):
+            res.append((ctx.get(out["h"]), ctx.get(out["k"])))
+            await ctx.tick().repeat(nb)
+
+    sim = Simulator(m)
+    sim.add_clock(1e-6)
+    sim.add_testbench(driver)
+    sim.add_testbench(reader)
+    sim.run()
+    assert res == [(math.isqrt(v), v & 7) for v in range(xhi + 1)]
 
 
 def test_same_stream_interface_as_polynomial_evaluator(robot, plan):

@@ -120,6 +120,14 @@ def test_verdicts_on_hand_made_records(records):
     # where the winner still loses is said, with the ratio
     assert pv[1].endswith("-> wins; also loses on FF 800 vs 600 (1.3x); throughput 3.3 vs 160 M/s (0.021x)")
     assert pv[-1].startswith("  read as the sum LUT + DSP (5002 for CORDIC), latency no worse: met by folded2")
+    # an iterative CORDIC, when placed, gets the same comparison after the target's verdict
+    it = {**cordic, "design": "cordic_iter", "initiation_interval": 17, "LUT": 800, "DSP": 2, "FF": 500,
+          "latency_ns": 900.0, "throughput_per_s": 9e6}
+    pv = bench.verdict_poly_vs_cordic([{**poly, "DSP": 2, "latency_ns": 200.0}, cordic, it])
+    assert pv[2] == "  verdict: MET by folded2 (LUT and DSP each, latency no worse)"
+    assert pv[4].startswith("against the iterative CORDIC (a target every 17 cycles: 800 LUT, 2 DSP, 900.0 ns")
+    assert "-> loses on LUT; also loses on FF 800 vs 500 (1.6x); throughput 3.3 vs 9 M/s (0.37x)" in pv[5]
+    assert pv[6] == "  verdict: not met (LUT and DSP each, latency no worse)"
 
 
 def test_jobs_must_be_one_or_two(tmp_path):
@@ -137,3 +145,19 @@ def test_bench_dsp_designs_are_ecp5_modulo_cores_on_mult18x18d_primitives():
         text, top = s.verilog(bench.ECP5)
         assert top == f"poly_{s.name}" and "MULT18X18D" in text
     assert not set(bench.DSP_DESIGNS) & set(bench.POLY_DESIGNS)
+
+
+def test_bench_iterative_cordic_spec(robot):
+    """``cordic_iter``: the same CORDIC design, iterative, a target every ``longest_loop`` cycles,
+    at the pipelined one's latency."""
+    from test_cordic import SIZED
+
+    from ikseries.hdl.cordic import CordicLegSolver
+    bench = _bench()
+    pipe, it = (bench.cordic_spec(robot, SIZED, 0.4, {}, iterative=i) for i in (False, True))
+    assert (pipe.name, it.name) == ("cordic", "cordic_iter") and it.kind == pipe.kind == "cordic"
+    assert pipe.initiation_interval(bench.ECP5) == 1
+    assert it.initiation_interval(bench.ECP5) == CordicLegSolver(robot, SIZED).longest_loop == 17
+    assert it.latency_cycles(bench.ECP5) == pipe.latency_cycles(bench.ECP5)
+    text, top = it.verilog(bench.ECP5)
+    assert top == "cordic_iterative" and f"module {top}" in text and "phase" in text
