@@ -277,7 +277,7 @@ def _against(poly, c) -> tuple[list[str], list[str]]:
     lines, winners = [], []
     for p in sorted(poly, key=lambda r: r["latency_ns"]):
         lut, dsp, lat = p["LUT"] < c["LUT"], p["DSP"] <= c["DSP"], p["latency_ns"] <= c["latency_ns"]
-        elsewhere = [f"{n} {p[k]:,} vs {c[k]:,} ({p[k] / c[k]:.2g}x)" for n, k in (("FF", "FF"),) if p[k] > c[k]]
+        elsewhere = [f"{n} {p[k]} vs {c[k]} ({p[k] / c[k]:.2g}x)" for n, k in (("FF", "FF"),) if p[k] > c[k]]
         if p["throughput_per_s"] < c["throughput_per_s"]:
             elsewhere.append(f"throughput {p['throughput_per_s'] / 1e6:.4g} vs {c['throughput_per_s'] / 1e6:.4g} M/s "
                              f"({p['throughput_per_s'] / c['throughput_per_s']:.2g}x)")

@@ -211,13 +211,16 @@ def plot_device(records: Sequence[dict], device: str, path: Path) -> list[str]:
     missing = [r["design"] for r in records if r["device"] == device and r["status"] != "placed"]
     front = [placed[i] for i in pareto_front([(r["area"], r["latency_ns"]) for r in placed])]
     fig, ax = plt.subplots(figsize=(7, 5), constrained_layout=True)
-    for r in placed:
+    for k, r in enumerate(placed):
         on = r in front
         ax.scatter(r["area"], r["latency_ns"], s=60, marker="o" if on else "s",
                    color="C3" if on else "C0", zorder=3)
+        # points within 2 % of an earlier one on both axes: the label goes one line pair higher
+        same = sum(abs(r["area"] / q["area"] - 1) < 0.02 and abs(r["latency_ns"] / q["latency_ns"] - 1) < 0.02
+                   for q in placed[:k])
         ax.annotate(f"{r['design']}\n{r['fmax_mhz']:.0f} MHz, {r['DSP']} DSP, "
                     f"{r['throughput_per_s'] / 1e6:.3g} M/s", (r["area"], r["latency_ns"]),
-                    textcoords="offset points", xytext=(6, 4), fontsize=8)
+                    textcoords="offset points", xytext=(6, 4 + 24 * same), fontsize=8)
     if front:
         f = sorted(front, key=lambda r: r["area"])
         ax.step([r["area"] for r in f], [r["latency_ns"] for r in f], where="post", color="C3",
