@@ -273,11 +273,16 @@ def verdict_hexapod(records) -> list[str]:
 
 def _against(poly, c) -> tuple[list[str], list[str]]:
     """One line per polynomial core against CORDIC record ``c`` (LUT, DSP, latency decide;
-    where it still loses, FF, throughput, accuracy, is said with the ratio), and the winners."""
+    where it still loses, FF, BRAM, Fmax, throughput, accuracy, is said with the ratio), and
+    the winners."""
     lines, winners = [], []
     for p in sorted(poly, key=lambda r: r["latency_ns"]):
         lut, dsp, lat = p["LUT"] < c["LUT"], p["DSP"] <= c["DSP"], p["latency_ns"] <= c["latency_ns"]
         elsewhere = [f"{n} {p[k]} vs {c[k]} ({p[k] / c[k]:.2g}x)" for n, k in (("FF", "FF"),) if p[k] > c[k]]
+        if p["BRAM"] > c["BRAM"]:
+            elsewhere.append(f"BRAM {p['BRAM']} vs {c['BRAM']}")
+        if p["fmax_mhz"] < c["fmax_mhz"]:
+            elsewhere.append(f"Fmax {p['fmax_mhz']:.1f} vs {c['fmax_mhz']:.1f} MHz ({p['fmax_mhz'] / c['fmax_mhz']:.2g}x)")
         if p["throughput_per_s"] < c["throughput_per_s"]:
             elsewhere.append(f"throughput {p['throughput_per_s'] / 1e6:.4g} vs {c['throughput_per_s'] / 1e6:.4g} M/s "
                              f"({p['throughput_per_s'] / c['throughput_per_s']:.2g}x)")
@@ -290,7 +295,9 @@ def _against(poly, c) -> tuple[list[str], list[str]]:
                      f"{p['max_error_pu']:.4f} pu -> "
                      + ("wins" if lut and dsp and lat else "loses on " + ", ".join(
                          n for n, ok in (("LUT", lut), ("DSP", dsp), ("latency", lat)) if not ok))
-                     + (f"; also loses on {'; '.join(elsewhere)}" if elsewhere else ""))
+                     + (f"; also loses on {'; '.join(elsewhere)}" if elsewhere else "")
+                     + (f"; nextpnr's placed LUT4 slots say the opposite on LUT: LC {p['LC']} vs {c['LC']}"
+                        if p.get("LC") and c.get("LC") and (p["LC"] < c["LC"]) != lut else ""))
         if lut and dsp and lat:
             winners.append(p["design"])
     return lines, winners

@@ -101,9 +101,9 @@ def test_verdicts_on_hand_made_records(records):
     _, bench = records
     base = {"kind": "polynomial", "status": "placed", "overflow": None, "error": None, "max_error_pu": 0.4}
     poly = {**base, "design": "folded2", "device": bench.ECP5, "fmax_mhz": 100.0, "latency_ns": 300.0,
-            "throughput_per_s": 3.3e6, "LUT": 900, "DSP": 4, "FF": 800}
+            "throughput_per_s": 3.3e6, "LUT": 900, "DSP": 4, "FF": 800, "BRAM": 5}
     cordic = {**base, "kind": "cordic", "design": "cordic", "device": bench.ECP5, "fmax_mhz": 160.0,
-              "latency_ns": 250.0, "throughput_per_s": 160e6, "LUT": 5000, "DSP": 2, "FF": 600}
+              "latency_ns": 250.0, "throughput_per_s": 160e6, "LUT": 5000, "DSP": 2, "FF": 600, "BRAM": 0}
     speed = bench.verdict_ecp5_speed([poly, cordic])     # the target is the polynomial core's
     assert speed[0].endswith("polynomial cores): folded2")
     assert any("latency 300 ns <= 200 ns: NOT MET (by 100 ns, 50%)" in s for s in speed)
@@ -118,16 +118,20 @@ def test_verdicts_on_hand_made_records(records):
     pv = bench.verdict_poly_vs_cordic([{**poly, "DSP": 2, "latency_ns": 200.0}, cordic])
     assert pv[-2] == "  verdict: MET by folded2 (LUT and DSP each, latency no worse)"
     # where the winner still loses is said, with the ratio
-    assert pv[1].endswith("-> wins; also loses on FF 800 vs 600 (1.3x); throughput 3.3 vs 160 M/s (0.021x)")
+    assert pv[1].endswith("-> wins; also loses on FF 800 vs 600 (1.3x); BRAM 5 vs 0; Fmax 100.0 vs 160.0 MHz (0.62x); "
+                         "throughput 3.3 vs 160 M/s (0.021x)")
     assert pv[-1].startswith("  read as the sum LUT + DSP (5002 for CORDIC), latency no worse: met by folded2")
     # an iterative CORDIC, when placed, gets the same comparison after the target's verdict
     it = {**cordic, "design": "cordic_iter", "initiation_interval": 17, "LUT": 800, "DSP": 2, "FF": 500,
-          "latency_ns": 900.0, "throughput_per_s": 9e6}
+          "latency_ns": 900.0, "throughput_per_s": 9e6, "fmax_mhz": 90.0}
     pv = bench.verdict_poly_vs_cordic([{**poly, "DSP": 2, "latency_ns": 200.0}, cordic, it])
     assert pv[2] == "  verdict: MET by folded2 (LUT and DSP each, latency no worse)"
     assert pv[4].startswith("against the iterative CORDIC (a target every 17 cycles: 800 LUT, 2 DSP, 900.0 ns")
-    assert "-> loses on LUT; also loses on FF 800 vs 500 (1.6x); throughput 3.3 vs 9 M/s (0.37x)" in pv[5]
+    assert "-> loses on LUT; also loses on FF 800 vs 500 (1.6x); BRAM 5 vs 0; throughput 3.3 vs 9 M/s (0.37x)" in pv[5]
     assert pv[6] == "  verdict: not met (LUT and DSP each, latency no worse)"
+    # when the placed LUT4 slots disagree with Yosys' LUT count, the line says so
+    pv = bench.verdict_poly_vs_cordic([{**poly, "DSP": 2, "latency_ns": 200.0, "LC": 5200}, {**cordic, "LC": 5100}])
+    assert pv[1].endswith("; nextpnr's placed LUT4 slots say the opposite on LUT: LC 5200 vs 5100")
 
 
 def test_jobs_must_be_one_or_two(tmp_path):
