@@ -270,6 +270,20 @@ def test_iterative_rtl_under_backpressure_and_gaps(robot, iterative):
     assert np.diff(res.input_cycles).min() >= core.initiation_interval
 
 
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_iterative_rtl_random_designs(robot, seed):
+    """Seeded random designs (loops of 1 to 20 iterations, any formats) at an interval at or
+    above the longest loop: bit-exact with the golden model under backpressure."""
+    rng = np.random.default_rng(seed)
+    d = CordicDesign(**{f: int(rng.integers(1, 21)) for f in fc.ITERATION_FIELDS},
+                     len_frac=int(rng.integers(5, 14)), area_frac=int(rng.integers(0, 6)),
+                     angle_frac=int(rng.integers(8, 14)), gain_frac=int(rng.integers(12, 21)),
+                     scale_frac=int(rng.integers(0, 4)))
+    core = CordicLegSolver(robot, d, CordicLegSolver(robot, d).longest_loop + int(rng.integers(0, 3)))
+    res = _bit_exact(robot, core, _targets(core.plan, 40, seed), ready_prob=0.8, valid_prob=0.9, seed=seed)
+    assert res.latencies.min() == core.latency
+
+
 @pytest.mark.parametrize("ii", [0, 2, 16, True, 17.0, "17"])
 def test_iterative_interval_errors(robot, ii):
     with pytest.raises(ValueError, match=rf"^initiation_interval must be 1 \(pipelined\) or an integer >= 17 "
