@@ -129,7 +129,8 @@ def render_markdown(r: dict) -> str:
             out += ["", f"{fam} only: the Verilog instantiates {fam} "
                     + ", ".join(r["primitives"]["cells"]) + " primitives."]
         out += ["", "Cell counts after synthesis, before place-and-route; carry cells are 1 bit (iCE40), "
-                "2 bits (ECP5) or 4 bits (xc7) each. "
+                "2 bits (ECP5) or 4 bits (xc7) each. ECP5 LUT includes the two LUT4s of every CCU2C "
+                "carry cell (a slice in ripple mode), as Lattice counts LUT4s against the device. "
                 + ("This fully pipelined, one-target-per-cycle design is sized for throughput, not area."
                    if r.get("initiation_interval", 1) == 1 else
                    "This design trades throughput for area: its multipliers are shared over "
