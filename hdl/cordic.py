@@ -132,7 +132,7 @@ class FoldedAmaranthOps(AmaranthOps):
         """(load, busy, i) of a loop of ``n`` iterations starting now: ``load`` in the cycle of
         iteration 0; ``busy`` in every iteration's cycle; ``i`` the iteration number."""
         if n > self._ii:
-            raise ValueError(f"loop {tag} has {n} iterations, more than the initiation interval {self._ii}")
+            raise ValueError(f"initiation_interval must be >= the {n} iterations of loop {tag!r}, not {self._ii!r}")
         m = self._m
         done = Signal(range(n + 1), init=n, name=f"{tag}_iter")  # iterations done; n: idle
         load = Signal(name=f"{tag}_load")
@@ -151,10 +151,10 @@ class FoldedAmaranthOps(AmaranthOps):
 
     def loop(self, tag, n, step, live, hints=None):
         s = self._stage
+        load, busy, i = self._iterations(tag, n)
         bounds = self._layout[s:s + n]
         regs = {k: Signal(_shape(min(b[k][0] for b in bounds), max(b[k][1] for b in bounds)),
                           name=f"{tag}_{k}") for k in bounds[0]}
-        load, busy, i = self._iterations(tag, n)
         new = step(self, {k: Mux(load, live[k], r) for k, r in regs.items()}, i)
         with self._m.If(self._en & busy):
             self._m.d.sync += [r.eq(new[k]) for k, r in regs.items()]

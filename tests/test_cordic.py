@@ -291,6 +291,16 @@ def test_iterative_interval_errors(robot, ii):
         CordicLegSolver(robot, SIZED, ii)
 
 
+def test_folded_ops_refuse_a_loop_longer_than_the_interval():
+    m = Module()
+    ia = IntervalOps({"x": (0, 15)})
+    ia.stage("in", {"x": ia.port("x")})
+    ops = FoldedAmaranthOps(m, Const(1), {"x": Signal(4)}, ia.layout, Signal(2), 3)
+    live = ops.stage("in", {"x": ops.port("x")})
+    with pytest.raises(ValueError, match=r"^initiation_interval must be >= the 4 iterations of loop 'r', not 3$"):
+        ops.loop("r", 4, lambda ops, live, i: live, live)
+
+
 def test_iterative_square_root_exhaustive():
     """The iterative digit-by-digit root gives floor(sqrt(x)) for every x of a 10-bit range,
     targets back to back, and holds a value it only carries."""
