@@ -8,7 +8,9 @@ operation interface (``ops``); three back ends run it:
   width, of every pipeline register (the register *layout*);
 - ``ikseries.sim.cordic_golden.NumpyOps``: the bit-exact integer model (int64 numpy), which
   also checks every register value against its analysed range;
-- ``ikseries.hdl.cordic.AmaranthOps``: the RTL; ``ops.stage`` becomes a pipeline register.
+- ``ikseries.hdl.cordic.AmaranthOps``: the RTL; ``ops.stage`` becomes a pipeline register
+  (``FoldedAmaranthOps``: each loop, ``ops.loop`` / ``ops.isqrt``, on one set of registers
+  instead, an iteration per cycle).
 
 Combinational operations are exact in every back end (numpy int64 is exact because the
 analysis proves every intermediate below 2**62; Amaranth widens ``+``, ``*``, shifts
