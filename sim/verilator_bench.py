@@ -11,9 +11,14 @@ Vectors file: little-endian int64 records, one per target, ``[input..., expected
 in plan order (:func:`write_vectors`).
 
 Latency check: with ``stall`` (random ``o_ready`` low) the pipeline holds, so the bench counts
-the cycles in which the pipeline advanced (``i_ready`` high) between a target's input transfer
-and its output transfer; that count must equal ``latency`` for every target. Without stalls it is
-the plain cycle count.
+the cycles in which the pipeline advanced between a target's input transfer and its output
+transfer; that count must equal ``latency`` for every target. Without stalls it is the plain
+cycle count. "Advanced" is ``i_ready`` high for a core that takes a target every cycle, or
+``advance="enable"``: ``~o_valid | o_ready``, the pipeline enable of any core with the
+global-stall handshake, also one that takes a target every N cycles (the iterative CORDIC).
+
+Besides the polynomial leg core, the tests run both CORDIC cores' flat stream tops through it
+(:class:`~ikseries.fit.cordic.CordicPlan` gives the same stream fields).
 
 Example::
 
@@ -35,7 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fit.plan import Plan
+from ..fit.cordic import CordicPlan
+from ..fit.plan import Plan, bits_for
 from .runner import _verilator_make_fixes, _verilator_path, primitive_models, simulator_available
 
 __all__ = ["VerilatorTestbench", "write_vectors", "testbench_cpp", "build_testbench", "run_testbench"]
@@ -52,16 +58,21 @@ class VerilatorTestbench:
     build_s: float
 
 
-def _fields(plan: Plan) -> tuple[list[tuple[str, int]], list[tuple[str, int]]]:
+def _fields(plan) -> tuple[list[tuple[str, int]], list[tuple[str, int]]]:
+    """(name, width) of the stream's input and output fields: a :class:`Plan`'s, or those of a
+    :class:`~ikseries.fit.cordic.CordicPlan` (the CORDIC core has the same stream fields)."""
     ins = [(i.name, i.width) for i in plan.inputs]
-    outs = [(o.name, plan.nodes[o.node].width) for o in plan.outputs]
+    if isinstance(plan, Plan):
+        outs = [(o.name, plan.nodes[o.node].width) for o in plan.outputs]
+    else:
+        outs = [(s, bits_for(*plan.limits)[0]) for s in plan.servos]
     for n, w in ins + outs:
         if w > 64:
             raise ValueError(f"port widths must be <= 64 bits for this bench, not {w} (field {n!r})")
     return ins, outs
 
 
-def write_vectors(path, plan: Plan, targets: dict, expected: dict) -> int:
+def write_vectors(path, plan: Plan | CordicPlan, targets: dict, expected: dict) -> int:
     """Write the vectors file; returns the number of records."""
     ins, outs = _fields(plan)
     cols = [np.asarray(targets[n], dtype=np.int64) for n, _ in ins] \
@@ -73,8 +84,17 @@ def write_vectors(path, plan: Plan, targets: dict, expected: dict) -> int:
     return lens.pop()
 
 
-def testbench_cpp(plan: Plan, top: str) -> str:
-    """C++ source of the testbench for ``V<top>`` (see the module docstring)."""
+#: when the pipeline advances, per ``advance`` (C++ over the top's ports): "i_ready" for a core
+#: that takes a target every cycle; "enable" for any core with the global-stall handshake (its
+#: pipeline enable is ``~o_valid | o_ready``), such as one that takes a target every N cycles
+ADVANCE = {"i_ready": "t->i_ready", "enable": "!t->o_valid || t->o_ready"}
+
+
+def testbench_cpp(plan: Plan | CordicPlan, top: str, advance: str = "i_ready") -> str:
+    """C++ source of the testbench for ``V<top>`` (see the module docstring); the latency is
+    counted in cycles in which the pipeline advances (:data:`ADVANCE`)."""
+    if advance not in ADVANCE:
+        raise ValueError(f"advance must be one of {sorted(ADVANCE)}, not {advance!r}")
     ins, outs = _fields(plan)
     nin, nout = len(ins), len(outs)
 
@@ -160,7 +180,7 @@ int main(int argc, char** argv) {{
         t->o_ready = !(stall > 0 && uniform() < stall);
         t->clk = 0;
         t->eval();
-        const bool adv = t->i_ready;          // the pipeline moves at this edge
+        const bool adv = {ADVANCE[advance]};   // the pipeline moves at this edge
         if (t->o_valid && t->o_ready) {{
             if (out_i >= in_i) {{
                 spurious++;
@@ -201,8 +221,8 @@ int main(int argc, char** argv) {{
 """
 
 
-def build_testbench(plan: Plan, verilog: str, top: str, workdir, *, cxx_opt: str = "-O2",
-                    jobs: int = 2) -> VerilatorTestbench:
+def build_testbench(plan: Plan | CordicPlan, verilog: str, top: str, workdir, *, cxx_opt: str = "-O2",
+                    jobs: int = 2, advance: str = "i_ready") -> VerilatorTestbench:
     """Verilate ``verilog`` (module ``top``) with the testbench into ``workdir/obj/V<top>``.
 
     Raises ``RuntimeError`` if Verilator is unavailable or the build fails (quoting its output).
@@ -218,7 +238,7 @@ def build_testbench(plan: Plan, verilog: str, top: str, workdir, *, cxx_opt: str
     workdir = Path(workdir).resolve()
     workdir.mkdir(parents=True, exist_ok=True)
     (workdir / f"{top}.v").write_text(verilog)
-    (workdir / "tb.cpp").write_text(testbench_cpp(plan, top))
+    (workdir / "tb.cpp").write_text(testbench_cpp(plan, top, advance))
     path = _verilator_path()
     env = dict(os.environ, PATH=path)
     # run-once code at -O0 (see runner.run)

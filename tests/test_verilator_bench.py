@@ -15,7 +15,7 @@ from ikseries.hdl.leg import LegCore
 from ikseries.sim import golden
 from ikseries.sim.runner import simulator_available
 from ikseries.sim.targets import corner_targets, random_targets
-from ikseries.sim.verilator_bench import VerilatorTestbench, run_testbench, write_vectors
+from ikseries.sim.verilator_bench import VerilatorTestbench, build_testbench, run_testbench, write_vectors
 
 pytestmark = pytest.mark.skipif(not simulator_available("verilator")[0],
                                 reason=simulator_available("verilator")[1] or "verilator")
@@ -96,3 +96,53 @@ def test_parameter_errors(bench_run, tmp_path):
     t = random_targets(plan, 5, 1)
     with pytest.raises(ValueError, match=r"^targets and expected outputs must have one length, not \[4, 5\]$"):
         write_vectors(tmp_path / "x.bin", plan, t, {"y": np.zeros(4, dtype=np.int64)})
+
+
+# -- the CORDIC baseline's exported Verilog, pipelined and iterative -------------------------------
+@pytest.fixture(scope="module")
+def cordic_benches(robot, tmp_path_factory):
+    """Both CORDIC cores of the sized test design built into Verilator testbenches, and 3000
+    random targets plus every corner with the golden model's outputs."""
+    from ikseries.hdl.cordic import CordicLegSolver
+    from ikseries.hdl.flat import stream_verilog
+    from ikseries.sim import cordic_golden
+    from test_cordic import SIZED
+    wd = tmp_path_factory.mktemp("cordic_tb")
+    pipe = CordicLegSolver(robot, SIZED)
+    it = CordicLegSolver(robot, SIZED, pipe.longest_loop)
+    tbs = {name: (core, build_testbench(core.plan, stream_verilog(core, name), name, wd / name, cxx_opt="-O0",
+                                        advance="i_ready" if core.initiation_interval == 1 else "enable"))
+           for name, core in (("cordic_pipelined", pipe), ("cordic_iterative", it))}
+    c, r = corner_targets(pipe.plan, port_extremes=True), random_targets(pipe.plan, 3000, 4)
+    targets = {k: np.concatenate([c[k], r[k]]) for k in c}
+    write_vectors(wd / "v.bin", pipe.plan, targets, cordic_golden.outputs(robot, pipe.plan, targets))
+    return tbs, wd / "v.bin", targets
+
+
+@pytest.mark.parametrize("name", ["cordic_pipelined", "cordic_iterative"])
+@pytest.mark.parametrize("stall, bubble", [(0.0, 0.0), (0.3, 0.2)])
+def test_cordic_verilog_bit_exact_on_verilator(cordic_benches, name, stall, bubble):
+    tbs, vectors, targets = cordic_benches
+    core, tb = tbs[name]
+    n = len(targets["r"])
+    r = run_testbench(tb, vectors, core.latency, stall=stall, bubble=bubble, seed=7,
+                      max_cycles=4 * n * core.initiation_interval + 1000)
+    assert r["passed"] and r["outputs_checked"] == n, r     # latency counted in advancing cycles
+    assert r["latency_cycles_min"] >= core.latency
+    if stall == 0 and bubble == 0:     # back to back: one target every initiation_interval cycles
+        assert r["latency_cycles_min"] == r["latency_cycles_max"] == core.latency
+        assert r["cycles"] <= n * core.initiation_interval + core.latency + 8
+
+
+def test_iterative_cordic_latency_needs_the_enable_count(cordic_benches, tmp_path):
+    """Counting only the cycles with i_ready high (right for one target per cycle) makes the
+    iterative core's latency look wrong: the bench can fail."""
+    tbs, vectors, targets = cordic_benches
+    core, _ = tbs["cordic_iterative"]
+    from ikseries.hdl.flat import stream_verilog
+    tb = build_testbench(core.plan, stream_verilog(core, "cordic_iterative"), "cordic_iterative", tmp_path,
+                         cxx_opt="-O0", advance="i_ready")
+    r = run_testbench(tb, vectors, core.latency, max_cycles=4 * len(targets["r"]) * core.initiation_interval)
+    assert not r["passed"] and r["mismatches"] == 0 and r["latency_errors"] == len(targets["r"])
+    with pytest.raises(ValueError, match=r"^advance must be one of \['enable', 'i_ready'\], not 'ready'$"):
+        build_testbench(core.plan, "", "x", tmp_path, advance="ready")
