@@ -13,6 +13,8 @@ streams the targets twice:
 Every output transfer is compared bit-exactly with the golden model and every target's latency
 is checked (pipeline-advance cycles between its input and output transfers == the core's
 latency). Prints the figures, writes JSON, and exits with status 1 if anything mismatched.
+Pipelined and modulo-scheduled builds (a target every N cycles: the latency is counted in cycles
+of the pipeline enable); folded and shared builds handshake differently and are refused.
 
     python bench/verilator_throughput.py [BUILD_DIR] [-n 1000000] [--seed 1] [--json out.json]
     python bench/verilator_throughput.py --fit [--preset cylinder-leg] ...
@@ -37,8 +39,13 @@ from ikseries.sim.verilator_bench import build_testbench, run_testbench, write_v
 TOP = "leg_core"
 
 
-def _load(args) -> tuple[Plan, str, str, int, str]:
-    """(plan, Verilog text, top module, latency, where it came from)."""
+#: architectures whose leg top stalls as a whole when an output waits (the bench counts latency
+#: in cycles of that pipeline enable); the folded and shared cores handshake differently
+GLOBAL_STALL = ("pipelined", "modulo")
+
+
+def _load(args) -> tuple[Plan, str, str, int, int, str]:
+    """(plan, Verilog text, top module, latency, initiation interval, where it came from)."""
     from ikseries.hdl.export import leg_verilog
     from ikseries.hdl.leg import LegCore
     if args.fit:
@@ -47,15 +54,20 @@ def _load(args) -> tuple[Plan, str, str, int, str]:
         robot = load_preset(args.preset)
         plan = fit_robot(robot)[0]
         core = LegCore(plan, robot.pwm_period_ticks)
-        return plan, leg_verilog(core, TOP), TOP, core.latency, f"fitted preset {args.preset}"
+        return plan, leg_verilog(core, TOP), TOP, core.latency, 1, f"fitted preset {args.preset}"
     bdir = Path(args.build_dir)
     if not (bdir / "manifest.json").is_file() or not (bdir / "plan.json").is_file():
         sys.exit(f"{str(bdir)!r} holds no ikseries build (no manifest.json / plan.json); run "
                  f"`ikseries build -o {bdir}` first or give --fit")
     man = json.loads((bdir / "manifest.json").read_text())
+    arch = man.get("architecture", {}).get("architecture", "pipelined")
+    if arch not in GLOBAL_STALL:
+        sys.exit(f"this bench runs pipelined and modulo-scheduled leg cores (the whole pipeline stalls "
+                 f"while an output waits), not a {arch!r} build ({bdir})")
     plan = Plan.from_json(json.loads((bdir / "plan.json").read_text()))
     vfile = bdir / f"{man['module']}.v"
-    return plan, vfile.read_text(), man["module"], int(man["latency_cycles"]), str(vfile)
+    return (plan, vfile.read_text(), man["module"], int(man["latency_cycles"]),
+            int(man.get("initiation_interval", 1)), str(vfile))
 
 
 def main(argv=None) -> int:
@@ -79,7 +91,7 @@ def main(argv=None) -> int:
             sys.exit(f"--{name} must be a probability in [0, 1), not {getattr(args, name)}")
 
     t0 = time.perf_counter()
-    plan, verilog, top, latency, source = _load(args)
+    plan, verilog, top, latency, ii, source = _load(args)
     prep_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     corners = corner_targets(plan, port_extremes=True)
@@ -99,11 +111,13 @@ def main(argv=None) -> int:
         n = write_vectors(wd / "vectors.bin", plan, targets, expected)
         print(f"{source}: {n:,} targets ({n - args.n} corners), golden model {golden_s:.1f} s; "
               f"building the Verilator testbench ({args.cxx_opt}) ...", flush=True)
-        tb = build_testbench(plan, verilog, top, wd, cxx_opt=args.cxx_opt)
+        tb = build_testbench(plan, verilog, top, wd, cxx_opt=args.cxx_opt, advance="i_ready" if ii == 1 else "enable")
         print(f"built in {tb.build_s:.1f} s", flush=True)
         passes = {}
         for name, stall, bubble in (("back_to_back", 0.0, 0.0), ("backpressure", args.stall, args.bubble)):
-            r = run_testbench(tb, wd / "vectors.bin", latency, stall=stall, bubble=bubble, seed=args.seed)
+            bound = int((n * ii + latency + 16) / ((1 - stall) * (1 - bubble)) * 4) + 1000
+            r = run_testbench(tb, wd / "vectors.bin", latency, stall=stall, bubble=bubble, seed=args.seed,
+                              max_cycles=bound)
             passes[name] = r
             print(f"{name:13}: {r['outputs_checked']:,}/{r['targets']:,} targets checked in {r['cycles']:,} "
                   f"cycles, {r['loop_seconds']:.2f} s -> {r['targets_per_second']:,} targets/s "
@@ -117,7 +131,7 @@ def main(argv=None) -> int:
             shutil.rmtree(tmp, ignore_errors=True)
 
     out = {"source": source, "targets": n, "random_targets": args.n, "corner_targets": n - args.n,
-           "seed": args.seed, "latency_cycles": latency, "cxx_opt": args.cxx_opt,
+           "seed": args.seed, "latency_cycles": latency, "initiation_interval": ii, "cxx_opt": args.cxx_opt,
            "rate_targets_per_second": passes["back_to_back"]["targets_per_second"],
            "mismatches": sum(p["mismatches"] for p in passes.values()),
            "latency_errors": sum(p["latency_errors"] for p in passes.values()),

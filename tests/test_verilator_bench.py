@@ -146,3 +146,32 @@ def test_iterative_cordic_latency_needs_the_enable_count(cordic_benches, tmp_pat
     assert not r["passed"] and r["mismatches"] == 0 and r["latency_errors"] == len(targets["r"])
     with pytest.raises(ValueError, match=r"^advance must be one of \['enable', 'i_ready'\], not 'ready'$"):
         build_testbench(core.plan, "", "x", tmp_path, advance="ready")
+
+
+def _fake_build(bdir, plan, core, architecture):
+    (bdir / "plan.json").write_text(plan.dumps())
+    (bdir / "tiny_core.v").write_text(leg_verilog(core, "tiny_core"))
+    (bdir / "manifest.json").write_text(json.dumps({
+        "module": "tiny_core", "latency_cycles": core.latency, "initiation_interval": core.initiation_interval,
+        "architecture": {"architecture": architecture}}))
+
+
+def test_bench_runs_a_modulo_build(tmp_path):
+    """A modulo-scheduled build (a target every 3 cycles) passes, latency counted in cycles of
+    the pipeline enable; a folded build is refused with a message."""
+    plan = tiny_plan(3, clamp=(0, 100))
+    core = LegCore(plan, 1000, interval=3)
+    _fake_build(tmp_path, plan, core, "modulo")
+    jpath = tmp_path / "out.json"
+    code = _bench_main()([str(tmp_path), "-n", "600", "--cxx-opt=-O0", "--workdir", str(tmp_path / "w"),
+                          "--json", str(jpath)])
+    res = json.loads(jpath.read_text())
+    assert code == 0 and res["passed"] and res["initiation_interval"] == 3
+    b2b = res["passes"]["back_to_back"]
+    assert b2b["latency_cycles_min"] == b2b["latency_cycles_max"] == core.latency
+    assert b2b["cycles"] >= 3 * res["targets"]
+    folded = tmp_path / "folded"
+    folded.mkdir()
+    _fake_build(folded, plan, LegCore(plan, 1000, multipliers=1, dsp=(16, 16)), "folded")
+    with pytest.raises(SystemExit, match="this bench runs pipelined and modulo-scheduled leg cores .* not a 'folded' build"):
+        _bench_main()([str(folded), "-n", "10"])
