@@ -278,7 +278,9 @@ def _against(poly, c) -> tuple[list[str], list[str]]:
     lines, winners = [], []
     for p in sorted(poly, key=lambda r: r["latency_ns"]):
         lut, dsp, lat = p["LUT"] < c["LUT"], p["DSP"] <= c["DSP"], p["latency_ns"] <= c["latency_ns"]
-        elsewhere = [f"{n} {p[k]} vs {c[k]} ({p[k] / c[k]:.2g}x)" for n, k in (("FF", "FF"),) if p[k] > c[k]]
+        elsewhere = []
+        if p["FF"] > c["FF"]:
+            elsewhere.append(f"FF {p['FF']} vs {c['FF']} ({p['FF'] / c['FF']:.2g}x)")
         if p["BRAM"] > c["BRAM"]:
             elsewhere.append(f"BRAM {p['BRAM']} vs {c['BRAM']}")
         if p["fmax_mhz"] < c["fmax_mhz"]:

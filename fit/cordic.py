@@ -583,7 +583,18 @@ class CordicPlan:
         """Total pipeline register bits (constant registers included; synthesis removes them)."""
         return sum(bits_for(lo, hi)[0] for st in self.layout for lo, hi in st.values())
 
+    @property
+    def isqrt_stages(self) -> int:
+        """Stages of the square root (one per result bit)."""
+        return sum(n.startswith("sqrt") for n in self.stage_names)
+
+    @property
+    def longest_loop(self) -> int:
+        """Iterations of the longest loop (a CORDIC or the square root)."""
+        d = self.design
+        return max(d.rot_iters, d.xy_iters, d.uv_iters, d.law_iters, self.isqrt_stages)
+
     def summary(self) -> dict:
         return {"design": self.design.as_dict(), "latency": self.latency,
                 "register_bits": self.register_bits(),
-                "gains": self.k["gains"], "isqrt_stages": sum(n.startswith("sqrt") for n in self.stage_names)}
+                "gains": self.k["gains"], "isqrt_stages": self.isqrt_stages}

@@ -265,9 +265,7 @@ class CordicLegSolver(wiring.Component):
     @property
     def longest_loop(self) -> int:
         """Iterations of the design's longest loop: the smallest interval of the iterative form."""
-        d = self.design
-        return max(d.rot_iters, d.xy_iters, d.uv_iters, d.law_iters,
-                   sum(n.startswith("sqrt") for n in self._plan.stage_names))
+        return self._plan.longest_loop
 
     def elaborate(self, platform):
         m = Module()

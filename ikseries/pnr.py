@@ -87,7 +87,7 @@ PNR_DEVICES: dict[str, Device] = {
     "ice40-up5k-sg48": Device(
         "ice40-up5k-sg48", "ice40", "Lattice iCE40UP5K, SG48 package",
         ("--up5k", "--package", "sg48"), 39, "35",
-        (("LUT", r"SB_LUT4", 5280), ("FF", r"SB_DFF\w*", 5280), ("DSP", r"SB_MAC16", 8),
+        (("LUT", None, 5280), ("FF", r"SB_DFF\w*", 5280), ("DSP", r"SB_MAC16", 8),
          ("BRAM", r"SB_RAM40_4K\w*", 30), ("SPRAM", r"SB_SPRAM256KA", 4)),
         (("LC", "ICESTORM_LC"), ("DSP", "ICESTORM_DSP"), ("BRAM", "ICESTORM_RAM"),
          ("SPRAM", "ICESTORM_SPRAM"), ("IO", "SB_IO"))),

@@ -258,24 +258,27 @@ def build_testbench(plan: Plan | CordicPlan, verilog: str, top: str, workdir, *,
 
 
 def run_testbench(tb: VerilatorTestbench, vectors, latency: int, *, stall: float = 0.0, bubble: float = 0.0,
-                  seed: int = 1, max_cycles: int | None = None) -> dict:
+                  seed: int = 1, max_cycles: int | None = None, initiation_interval: int = 1) -> dict:
     """Run the testbench on a vectors file; returns its JSON result plus rates and wall time.
 
     ``stall``: probability of ``o_ready`` low in a cycle; ``bubble``: probability of
     ``i_valid`` low while targets remain. ``max_cycles`` (default: a generous bound from the
-    record count) stops a hung pipeline. Never raises on a mismatch: read ``mismatches``,
+    record count and the core's ``initiation_interval``, cycles per target) stops a hung
+    pipeline. Never raises on a mismatch: read ``mismatches``,
     ``latency_errors``, ``spurious_outputs`` and ``outputs_checked``.
     """
     for name, p in (("stall", stall), ("bubble", bubble)):
         if not 0.0 <= p < 1.0:
             raise ValueError(f"{name} must be a probability in [0, 1), not {p!r}")
+    if isinstance(initiation_interval, bool) or not isinstance(initiation_interval, int) or initiation_interval < 1:
+        raise ValueError(f"initiation_interval must be a positive integer, not {initiation_interval!r}")
     if isinstance(latency, bool) or not isinstance(latency, int) or latency < 1:
         raise ValueError(f"latency must be a positive integer, not {latency!r}")
     vectors = Path(vectors)
     rec = 8 * (len(tb.inputs) + len(tb.outputs))
     n = vectors.stat().st_size // rec
     if max_cycles is None:
-        max_cycles = int((n + latency + 16) / ((1 - stall) * (1 - bubble)) * 4) + 1000
+        max_cycles = int((n * initiation_interval + latency + 16) / ((1 - stall) * (1 - bubble)) * 4) + 1000
     t0 = time.perf_counter()
     proc = subprocess.run([str(tb.binary), str(vectors), str(latency), repr(float(stall)), repr(float(bubble)),
                            str(seed), str(max_cycles)], stdin=subprocess.DEVNULL, capture_output=True, text=True)

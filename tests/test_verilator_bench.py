@@ -93,6 +93,8 @@ def test_parameter_errors(bench_run, tmp_path):
         run_testbench(_testbench(plan, wd), tmp_path / "x.bin", core.latency, stall=1.0)
     with pytest.raises(ValueError, match=r"^latency must be a positive integer, not 0$"):
         run_testbench(_testbench(plan, wd), tmp_path / "x.bin", 0)
+    with pytest.raises(ValueError, match=r"^initiation_interval must be a positive integer, not 0$"):
+        run_testbench(_testbench(plan, wd), tmp_path / "x.bin", core.latency, initiation_interval=0)
     t = random_targets(plan, 5, 1)
     with pytest.raises(ValueError, match=r"^targets and expected outputs must have one length, not \[4, 5\]$"):
         write_vectors(tmp_path / "x.bin", plan, t, {"y": np.zeros(4, dtype=np.int64)})
@@ -126,7 +128,7 @@ def test_cordic_verilog_bit_exact_on_verilator(cordic_benches, name, stall, bubb
     core, tb = tbs[name]
     n = len(targets["r"])
     r = run_testbench(tb, vectors, core.latency, stall=stall, bubble=bubble, seed=7,
-                      max_cycles=4 * n * core.initiation_interval + 1000)
+                      initiation_interval=core.initiation_interval)
     assert r["passed"] and r["outputs_checked"] == n, r     # latency counted in advancing cycles
     assert r["latency_cycles_min"] >= core.latency
     if stall == 0 and bubble == 0:     # back to back: one target every initiation_interval cycles
@@ -142,7 +144,7 @@ def test_iterative_cordic_latency_needs_the_enable_count(cordic_benches, tmp_pat
     from ikseries.hdl.flat import stream_verilog
     tb = build_testbench(core.plan, stream_verilog(core, "cordic_iterative"), "cordic_iterative", tmp_path,
                          cxx_opt="-O0", advance="i_ready")
-    r = run_testbench(tb, vectors, core.latency, max_cycles=4 * len(targets["r"]) * core.initiation_interval)
+    r = run_testbench(tb, vectors, core.latency, initiation_interval=core.initiation_interval)
     assert not r["passed"] and r["mismatches"] == 0 and r["latency_errors"] == len(targets["r"])
     with pytest.raises(ValueError, match=r"^advance must be one of \['enable', 'i_ready'\], not 'ready'$"):
         build_testbench(core.plan, "", "x", tmp_path, advance="ready")
