@@ -32,8 +32,8 @@ import time
 from pathlib import Path
 
 from ikseries.accuracy import measure, verification_points
-from ikseries.fit.cordic import CordicDesign, CordicPlan
-from ikseries.fit.cordic_sizing import measure_cordic, size_cordic
+from ikseries.fit.baselines.cordic import CordicDesign, CordicPlan
+from ikseries.fit.baselines.cordic_sizing import measure_cordic, size_cordic
 from ikseries.fit.fitter import fit_robot
 from ikseries.hdl.cordic import CordicLegSolver
 from ikseries.hdl.evaluator import PlanEvaluator

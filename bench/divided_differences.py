@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from ikseries.fit.divided import render_markdown, run_divided_differences
+from ikseries.fit.baselines.divided import render_markdown, run_divided_differences
 from ikseries.planar_arm import PlanarArm
 from ikseries.robot import RobotError, load_preset
 

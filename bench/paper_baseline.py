@@ -1,6 +1,6 @@
 """Benchmark: the integer power series paper's procedure beside ikseries' own fit.
 
-Fits the robot both ways (``fit.fitter.fit_robot`` and ``fit.paper.fit_paper``), lowers both
+Fits the robot both ways (``fit.fitter.fit_robot`` and ``fit.baselines.paper.fit_paper``), lowers both
 to evaluation plans, measures both on the same >= 10**6 workspace points and prints a
 Markdown table; writes the figures as JSON. About a minute on one core for cylinder-leg.
 
@@ -15,9 +15,9 @@ import sys
 import time
 from pathlib import Path
 
-from ikseries.fit.comparison import compare, render_comparison
+from ikseries.fit.baselines.comparison import compare, render_comparison
 from ikseries.fit.fitter import fit_robot
-from ikseries.fit.paper import THETA_FITS, fit_paper, paper_errors, paper_plan
+from ikseries.fit.baselines.paper import THETA_FITS, fit_paper, paper_errors, paper_plan
 
 from ikseries.accuracy import verification_points
 from ikseries.robot import load_preset, preset_names

@@ -383,8 +383,8 @@ def _csv(value: str, allowed, what: str) -> list[str]:
 def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], dict]:
     """Fit / size / measure what ``designs`` needs and return their specs and robot info."""
     from ikseries.accuracy import measure, verification_points
-    from ikseries.fit.cordic import CordicDesign
-    from ikseries.fit.cordic_sizing import measure_cordic, size_cordic
+    from ikseries.fit.baselines.cordic import CordicDesign
+    from ikseries.fit.baselines.cordic_sizing import measure_cordic, size_cordic
     from ikseries.fit.fitter import fit_robot
     from ikseries.robot import load_preset, with_hardware
 

@@ -7,7 +7,7 @@ from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal, Value, signed, 
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ..fit.cordic import SHIFT_ADD_DIGITS, CordicDesign, CordicPlan, OperatorOps, csd, datapath, isqrt_stages
+from ..fit.baselines.cordic import SHIFT_ADD_DIGITS, CordicDesign, CordicPlan, OperatorOps, csd, datapath, isqrt_stages
 from ..fit.plan import bits_for
 
 __all__ = ["AmaranthOps", "FoldedAmaranthOps", "CordicLegSolver", "cordic_input_layout", "cordic_output_layout"]
@@ -189,7 +189,7 @@ class CordicLegSolver(wiring.Component):
     """Inverse kinematics of a cylinder-leg robot by CORDIC: pipelined (one target per clock)
     or iterative (each CORDIC and the square root on one set of registers).
 
-    The datapath is :func:`ikseries.fit.cordic.datapath` (see that module for the algorithm).
+    The datapath is :func:`ikseries.fit.baselines.cordic.datapath` (see that module for the algorithm).
     With ``initiation_interval`` 1 every ``stage`` of it is one register stage, every register
     as wide as its analysed range, so no in-range input overflows (out-of-range port values are
     clamped to the workspace in the first stage). Constant multiplies (gain compensation, pulse
@@ -206,7 +206,7 @@ class CordicLegSolver(wiring.Component):
     robot : ikseries.robot.Robot
         A robot with a cylinder-leg geometry.
     design : CordicDesign
-        Iterations and fixed-point formats (see ``ikseries.fit.cordic_sizing.size_cordic``).
+        Iterations and fixed-point formats (see ``ikseries.fit.baselines.cordic_sizing.size_cordic``).
     initiation_interval : int
         1 (default): pipelined; or at least :attr:`longest_loop`: iterative.
 

@@ -66,8 +66,8 @@ def _ikseries(robot, progress) -> tuple[dict, dict]:
 def _paper(robot, progress) -> tuple[dict, dict]:
     from .accuracy import verification_points
     from .fit.certify import certify
-    from .fit.comparison import compare, render_comparison
-    from .fit.paper import fit_paper, paper_plan
+    from .fit.baselines.comparison import compare, render_comparison
+    from .fit.baselines.paper import fit_paper, paper_plan
     try:
         pfit = fit_paper(robot)
     except ValueError as e:
@@ -94,7 +94,7 @@ def _paper(robot, progress) -> tuple[dict, dict]:
 
 
 def _divided(robot, progress) -> tuple[dict, dict]:
-    from .fit.divided import render_markdown, run_divided_differences
+    from .fit.baselines.divided import render_markdown, run_divided_differences
     from .planar_arm import PlanarArm
     if not isinstance(robot.geometry, PlanarArm):
         raise FitCommandError(f"--method divided-differences needs a planar-arm robot, not {robot.name!r} "

@@ -1,6 +1,6 @@
 """Bit-exact integer model of the CORDIC leg solver (numpy int64, vectorised).
 
-It runs the same datapath description as the RTL (:func:`ikseries.fit.cordic.datapath`):
+It runs the same datapath description as the RTL (:func:`ikseries.fit.baselines.cordic.datapath`):
 same operations, same order, same truncations, and the CORDIC gain compensation by the same
 integer constants. Every pipeline register value is checked against the register's analysed
 range (:attr:`CordicPlan.layout`): a value outside it would overflow the hardware register,
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..fit.cordic import CordicDesign, CordicPlan, OperatorOps, datapath
+from ..fit.baselines.cordic import CordicDesign, CordicPlan, OperatorOps, datapath
 from .golden import port_values
 
 __all__ = ["NumpyOps", "evaluate", "outputs", "errors_pu"]

@@ -18,7 +18,7 @@ cycle count. "Advanced" is ``i_ready`` high for a core that takes a target every
 global-stall handshake, also one that takes a target every N cycles (the iterative CORDIC).
 
 Besides the polynomial leg core, the tests run both CORDIC cores' flat stream tops through it
-(:class:`~ikseries.fit.cordic.CordicPlan` gives the same stream fields).
+(:class:`~ikseries.fit.baselines.cordic.CordicPlan` gives the same stream fields).
 
 Example::
 
@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fit.cordic import CordicPlan
+from ..fit.baselines.cordic import CordicPlan
 from ..fit.plan import Plan, bits_for
 from .runner import _verilator_make_fixes, _verilator_path, primitive_models, simulator_available
 
@@ -60,7 +60,7 @@ class VerilatorTestbench:
 
 def _fields(plan) -> tuple[list[tuple[str, int]], list[tuple[str, int]]]:
     """(name, width) of the stream's input and output fields: a :class:`Plan`'s, or those of a
-    :class:`~ikseries.fit.cordic.CordicPlan` (the CORDIC core has the same stream fields)."""
+    :class:`~ikseries.fit.baselines.cordic.CordicPlan` (the CORDIC core has the same stream fields)."""
     ins = [(i.name, i.width) for i in plan.inputs]
     if isinstance(plan, Plan):
         outs = [(o.name, plan.nodes[o.node].width) for o in plan.outputs]

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from amaranth.hdl import Const, Module, Mux, Signal, signed
 
-from ikseries.fit import cordic as fc
-from ikseries.fit.cordic import DEFAULT_DESIGN, CordicDesign, CordicPlan, IntervalOps
+from ikseries.fit.baselines import cordic as fc
+from ikseries.fit.baselines.cordic import DEFAULT_DESIGN, CordicDesign, CordicPlan, IntervalOps
 from ikseries.fit.plan import bits_for
-from ikseries.fit.cordic_sizing import SizingError, measure_cordic, size_cordic
+from ikseries.fit.baselines.cordic_sizing import SizingError, measure_cordic, size_cordic
 from ikseries.hdl.cordic import (AmaranthOps, CordicLegSolver, FoldedAmaranthOps, cordic_input_layout,
                                  cordic_output_layout)
 from ikseries.hdl.evaluator import input_layout, output_layout

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from ikseries.fit.divided import (DEFAULT_CASES, PathCase, divided_differences, incidence_weights, nearest_turn,
+from ikseries.fit.baselines.divided import (DEFAULT_CASES, PathCase, divided_differences, incidence_weights, nearest_turn,
                                   newton_derivatives, newton_eval, newton_to_power, path_interpolant, path_report,
                                   render_markdown, run_divided_differences)
 from ikseries.kinematics import CylinderLeg

@@ -1,11 +1,11 @@
-"""The integer power series paper's procedure (fit/paper.py) and the plan comparison."""
+"""The integer power series paper's procedure (fit/baselines/paper.py) and the plan comparison."""
 import json
 from decimal import Decimal
 
 import numpy as np
 import pytest
-from ikseries.fit.comparison import compare, render_comparison
-from ikseries.fit.paper import (
+from ikseries.fit.baselines.comparison import compare, render_comparison
+from ikseries.fit.baselines.paper import (
     R_ORDER,
     SIG_FIGS,
     THETA_TERMS,

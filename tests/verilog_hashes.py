@@ -78,7 +78,7 @@ def verilog_of(name: str, plan=None) -> str:
     robot = robot_of(name)
     kind = CONFIGS[name][2]
     if kind != "core":
-        from ikseries.fit.cordic import CordicDesign
+        from ikseries.fit.baselines.cordic import CordicDesign
         from ikseries.hdl.cordic import CordicLegSolver
         from ikseries.hdl.flat import stream_verilog
         sized = CordicDesign(rot_iters=13, xy_iters=13, uv_iters=14, law_iters=13, len_frac=11, area_frac=3,

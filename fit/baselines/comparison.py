@@ -6,8 +6,8 @@ constants and their bits, the sampled max error and the certified rounding bound
 """
 from __future__ import annotations
 
-from ..accuracy import measure
-from .plan import Plan
+from ...accuracy import measure
+from ..plan import Plan
 
 __all__ = ["compare", "plan_figures", "render_comparison"]
 

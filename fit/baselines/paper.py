@@ -34,10 +34,10 @@ from fractions import Fraction
 
 import numpy as np
 
-from .fitter import Budget, FitError, plan_inputs
-from .horner import horner
-from .plan import Plan, PlanBuilder, PlanOutput
-from .polyfit import fit_lawson
+from ..fitter import Budget, FitError, plan_inputs
+from ..horner import horner
+from ..plan import Plan, PlanBuilder, PlanOutput
+from ..polyfit import fit_lawson
 
 __all__ = [
     "R_ORDER",
@@ -376,7 +376,7 @@ def evaluate_servo(servo: PaperServo, r, theta, z) -> np.ndarray:
 def paper_errors(robot, fit: PaperFit, points: dict | None = None, chunk: int = 200_000) -> dict:
     """Max |series - exact pulse| per servo (pu, float64) on port-integer ``points``
     (default :func:`ikseries.accuracy.verification_points`), with where it occurs."""
-    from ..accuracy import verification_points
+    from ...accuracy import verification_points
     points = verification_points(robot) if points is None else points
     n = len(next(iter(points.values())))
     worst = {s.name: {"max_error_pu": 0.0, "at": None} for s in fit.servos}

@@ -20,8 +20,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..accuracy import verification_points
-from ..sim import cordic_golden
+from ...accuracy import verification_points
+from ...sim import cordic_golden
 from .cordic import DEFAULT_DESIGN, ITERATION_FIELDS, WIDTH_FIELDS, CordicDesign, CordicPlan
 
 __all__ = ["SizingError", "measure_cordic", "size_cordic", "SEARCH_ORDER"]

@@ -31,8 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..planar_arm import PlanarArm
-from .polyfit import fit_lawson, total_degree_terms, vander
+from ...planar_arm import PlanarArm
+from ..polyfit import fit_lawson, total_degree_terms, vander
 
 __all__ = ["divided_differences", "newton_eval", "newton_derivatives", "newton_to_power", "incidence_weights",
            "nearest_turn", "PathInterpolant", "path_interpolant", "PathCase", "DEFAULT_CASES", "path_report",
