@@ -25,7 +25,9 @@ import time
 from pathlib import Path
 
 from ikseries.fit import fitter
-from ikseries.fit.features import coordinate_stage
+from ikseries.fit.context import FitContext
+from ikseries.fit.fitter import QUANTIZATION_SHARES
+from ikseries.fit.lowering import MIX_EXTRA_MULTIPLIERS, FeatureNodes, output_multipliers, parity_variable, poly_inputs
 from ikseries.fit.horner import choose_split, estrin, poly_degrees
 from ikseries.fit.plan import PlanBuilder, PlanOutput
 from ikseries.robot import load_preset
@@ -33,18 +35,15 @@ from ikseries.robot import load_preset
 
 def rebuild(robot, plan, fits, extra: int | None, horner: bool = False, guard: int = 0):
     """The plan of ``fits`` (formats as fitted) with Horner or the mix; also the splits."""
-    inputs = fitter.plan_inputs(robot)
-    rmax = max(abs(robot.inputs[0].min), abs(robot.inputs[0].max))   # as fit_robot
-    stage = coordinate_stage(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)),
-                             table=robot.lowering == "mixed")
+    ctx = FitContext.for_robot(robot, QUANTIZATION_SHARES[0])   # the ports and stage of fit_robot
     fv = plan.meta["features"]["frac_bits"]
-    b = PlanBuilder(inputs)
-    nodes = fitter._Nodes(robot, stage, b, fv)
+    b = PlanBuilder(list(ctx.inputs))
+    nodes = FeatureNodes(ctx, b, fv)
     lo, hi = robot.pulse_limits_ticks()
     outs, splits = [], {}
     for sf in fits:
-        feats, coefficient = fitter.poly_inputs(b, sf.features, nodes[sf.features.kind], fv)
-        k = fitter.parity_variable(sf.features)
+        feats, coefficient = poly_inputs(b, sf.features, nodes[sf.features.kind], fv)
+        k = parity_variable(sf.features)
 
         def lower(split, sf=sf, feats=feats, k=k, coefficient=coefficient):
             return estrin(b, sf.poly, feats, sf.frac, coefficient, split=split, parity=k, guard=guard)
@@ -66,7 +65,7 @@ def measure(robot, plan, fits, extras, guards=()) -> dict:
     href = {o.name: ref[o.preround] for o in schemes["horner"][0].outputs}
     out = {}
     for name, (p, splits) in schemes.items():
-        bounds, st, mults = p.rounding_bounds(), p.stages(), fitter.output_multipliers(p)
+        bounds, st, mults = p.rounding_bounds(), p.stages(), output_multipliers(p)
         out[name] = {"latency": p.latency, "multipliers": p.count("mul"), "servos": [
             {"servo": o.name, "split": splits[o.name], "stage": st[o.node], "multipliers": mults[o.name],
              "rounding_bound_pu": bounds[o.preround] / robot.ticks_per_pu,
@@ -100,7 +99,7 @@ def main(argv=None):
           f"{plan.count('mul')} multipliers")
     t0 = time.perf_counter()
     res = measure(robot, plan, fits, [None, *args.extra], args.guard)
-    fitted = "horner" if robot.lowering == "horner" else f"mix+{fitter.MIX_EXTRA_MULTIPLIERS}"
+    fitted = "horner" if robot.lowering == "horner" else f"mix+{MIX_EXTRA_MULTIPLIERS}"
     if fitted in res and (res[fitted]["latency"], res[fitted]["multipliers"]) != (plan.latency, plan.count("mul")):
         raise SystemExit(f"the {fitted} rebuild does not reproduce the fitted plan")
     print(table(res))

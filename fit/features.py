@@ -24,6 +24,7 @@ import numpy as np
 from .horner import horner, lower_poly
 from .plan import PlanBuilder
 from .polyfit import fit_lawson, total_degree_terms, vander
+from .ports import plan_inputs
 
 __all__ = ["Cut", "TrigSeries", "TrigTable", "fit_trig", "fit_trig_table", "pow2_scale", "Normaliser", "CylindricalStage", "CartesianStage",
            "coordinate_stage"]
@@ -226,7 +227,7 @@ class CylindricalStage(_Stage):
         self.geometry = g
         self.offset = g.neutral_distance
         self.trig = fit_trig(th.min, th.max, trig_tol)
-        port = next(i for i in _plan_inputs(robot) if i.name == "theta")
+        port = next(i for i in plan_inputs(robot) if i.name == "theta")
         self.table = fit_trig_table(port, trig_tol) if table else None
         kx = pow2_scale(r.max)
         self.norms = (Normaliser(self.offset, kx), Normaliser(0.0, kx),
@@ -344,11 +345,6 @@ class CartesianStage(_Stage):
 
     def describe(self) -> str:
         return "coordinate stage: Cartesian inputs (normalising only)"
-
-
-def _plan_inputs(robot):
-    from .fitter import plan_inputs   # the port formats (fitter imports this module)
-    return plan_inputs(robot)
 
 
 def coordinate_stage(robot, trig_tol: float, table: bool = False):

@@ -59,15 +59,15 @@ def test_every_servo_within_the_multiplier_target(plan):
 
 def test_feature_analysis_detects_parity_and_dependence():
     from ikseries.fit.features import Normaliser
-    from ikseries.fit.fitter import _analyse
+    from ikseries.fit.structure import analyse
     rng = np.random.default_rng(3)
     c = [rng.uniform(-1, 1, 500), rng.uniform(-2, 2, 500), rng.uniform(1, 3, 500)]
     norms = [Normaliser(0.0, 0), Normaliser(0.0, 1), Normaliser(2.0, 0)]
-    fs = _analyse(lambda a, b, z: a ** 2 + np.sin(b) * 0 + 3.0, c, norms, "abz", "cartesian")
+    fs = analyse(lambda a, b, z: a ** 2 + np.sin(b) * 0 + 3.0, c, norms, "abz", "cartesian")
     assert fs.allowed == ("even", "none", "none") and fs.zero_free is None
-    fs = _analyse(lambda a, b, z: np.sin(a) + 7.0 + b * z, c, norms, "abz", "cartesian")
+    fs = analyse(lambda a, b, z: np.sin(a) + 7.0 + b * z, c, norms, "abz", "cartesian")
     assert fs.allowed == ("odd", "odd", "any") and fs.zero_free is None
-    fs = _analyse(lambda a, b, z: np.sin(a) * z, c, norms, "abz", "cartesian")
+    fs = analyse(lambda a, b, z: np.sin(a) * z, c, norms, "abz", "cartesian")
     assert fs.allowed == ("odd", "none", "any") and fs.zero_free == 0
 
 
@@ -131,10 +131,10 @@ def test_a_plan_that_fails_certification_is_refitted_then_refused(small_robot, m
         return dataclasses.replace(cert, servos=(cert.servos[0], s, *cert.servos[2:]))
 
     refits = []
-    orig_fit = fitter._fit_servo
+    orig_fit = fitter.fit_servo
     monkeypatch.setattr(fitter, "certify", failing)
-    monkeypatch.setattr(fitter, "_fit_servo",
-                        lambda *a: refits.append((a[3], a[7])) or orig_fit(*a))
+    monkeypatch.setattr(fitter, "fit_servo",
+                        lambda *a: refits.append((a[1], a[5])) or orig_fit(*a))
     with pytest.raises(FitError, match=r"^fit refused: servo s2: certified error [0-9.]+ pu exceeds "
                                        r"the tolerance 4 pu"):
         fit_robot(small_robot)
@@ -159,7 +159,7 @@ def test_coefficients_are_reoptimised_on_their_grid(fitted):
     """After quantization the coefficients are refitted one rounding at a time: every
     coefficient is exact on its 2**-frac grid (no coefficient rounding error is left in the
     certified bound), and the result is never worse than plain rounding."""
-    from ikseries.fit.fitter import _round_and_refit
+    from ikseries.fit.formats import round_and_refit
     from ikseries.fit.polyfit import vander
     plan, fits = fitted
     for sf in fits:
@@ -171,7 +171,7 @@ def test_coefficients_are_reoptimised_on_their_grid(fitted):
         data = sf.refit[0]
         terms = list(sf.poly)
         for frac in (sf.frac - 3, sf.frac - 6):
-            poly, err = _round_and_refit(sf, frac)
+            poly, err = round_and_refit(sf, frac)
             assert all(c * 2.0 ** frac == round(c * 2.0 ** frac) for c in np.ravel(list(poly.values())))
             naive = np.round(data.coef(sf.poly, terms) * 2.0 ** frac) / 2.0 ** frac
             assert err <= max(float(np.max(np.abs(vander(cpts, terms) @ n - ctarget)))
@@ -182,7 +182,8 @@ def test_piecewise_cells_of_the_fit_are_the_cells_of_the_plan():
     """The fitter's cell and offset of every port value (its data) equal what the plan
     computes from the port integer (index / mask), and the last, shorter cell is fitted on
     a full cell width."""
-    from ikseries.fit.fitter import Cut, FeatureSet
+    from ikseries.fit.features import Cut
+    from ikseries.fit.fitter import FeatureSet
     from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
     from ikseries.sim import golden
     port = PlanInput("z", "mm", 3, -7, 313, 10, True)
@@ -212,7 +213,7 @@ def test_trig_table_meets_its_tolerance_at_every_theta_port_value(robot):
     coarsest cells within the tolerance, at every theta port value; the plan's cell / offset
     nodes pick the same cell and offset."""
     from ikseries.fit.features import fit_trig_table
-    from ikseries.fit.fitter import plan_inputs
+    from ikseries.fit.ports import plan_inputs
     port = next(i for i in plan_inputs(robot) if i.name == "theta")
     tab = fit_trig_table(port, 2e-5)
     assert tab is not None and tab.max_error <= 2e-5 and tab.cut.cells <= 32
@@ -260,14 +261,14 @@ def test_products_dsp_give_rounding_a_larger_share_when_the_usual_one_is_too_sma
     from ikseries.fit import fitter
     from ikseries.robot import with_hardware
     seen, msgs = [], []
-    real = fitter._choose_formats
+    real = fitter.choose_formats
 
-    def choose(robot, inputs, stage, fits, budget, progress):
-        seen.append(budget.quantization / robot.tolerance_pu)
+    def choose(ctx, fits, progress):
+        seen.append(ctx.budget.quantization / ctx.robot.tolerance_pu)
         if len(seen) == 1:
             raise fitter.FormatError("no fixed-point format keeps the certified rounding error within 0.4 pu")
-        return real(robot, inputs, stage, fits, budget, progress)
-    monkeypatch.setattr(fitter, "_choose_formats", choose)
+        return real(ctx, fits, progress)
+    monkeypatch.setattr(fitter, "choose_formats", choose)
     robot = with_hardware(small_robot, products="dsp", dsp="ecp5")
     plan, _ = fit_robot(robot, msgs.append, certified=False)
     assert seen == pytest.approx([0.10, 0.25])
@@ -283,10 +284,10 @@ def test_products_dsp_say_why_when_no_rounding_share_is_enough(small_robot, monk
     from ikseries.fit import fitter
     from ikseries.robot import with_hardware
 
-    def never(robot, inputs, stage, fits, budget, progress):
+    def never(ctx, fits, progress):
         raise fitter.FormatError(f"no fixed-point format keeps the certified rounding error within "
-                                 f"{budget.quantization:g} pu in 63-bit intermediates")
-    monkeypatch.setattr(fitter, "_choose_formats", never)
+                                 f"{ctx.budget.quantization:g} pu in 63-bit intermediates")
+    monkeypatch.setattr(fitter, "choose_formats", never)
     robot = with_hardware(small_robot, products="dsp", dsp="ice40")
     with pytest.raises(fitter.FormatError, match=r"^no fixed-point format keeps the certified rounding error "
                        r"within 1.6 pu in 63-bit intermediates \(40% of the tolerance\) with every product "

@@ -48,6 +48,7 @@ import math
 from dataclasses import dataclass, fields
 
 from ..plan import PlanInput, bits_for
+from ..ports import plan_inputs
 
 __all__ = ["CordicDesign", "CordicPlan", "IntervalOps", "LoopOps", "OperatorOps", "isqrt_stages", "Iv", "datapath", "cordic_gain",
            "DEFAULT_DESIGN", "ITERATION_FIELDS", "WIDTH_FIELDS", "csd", "SHIFT_ADD_DIGITS"]
@@ -525,7 +526,6 @@ class CordicPlan:
 
     def __init__(self, robot, design: CordicDesign):
         from ...kinematics import CylinderLeg
-        from ..fitter import plan_inputs
         if not isinstance(design, CordicDesign):
             raise TypeError(f"design must be a CordicDesign, not {design!r}")
         geometry = getattr(robot, "geometry", None)

@@ -34,7 +34,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..fitter import Budget, FitError, plan_inputs
+from ..fitter import Budget, FitError
+from ..ports import plan_inputs
 from ..horner import horner
 from ..plan import Plan, PlanBuilder, PlanOutput
 from ..polyfit import fit_lawson

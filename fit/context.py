@@ -1,0 +1,92 @@
+"""What one fit of a robot reads: its ports, coordinate stage, error budget and product limits.
+
+A :class:`FitContext` is made once per fit attempt (:meth:`FitContext.for_robot`) and handed to
+every step of the fitter (structure search, format choice, lowering), so that none of them
+re-derives it from the robot description.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .features import coordinate_stage
+from .plan import DSP_SIZES, PlanInput
+from .ports import plan_inputs
+
+__all__ = ["FitError", "FormatError", "Budget", "FitContext", "operand_bits"]
+
+
+class FitError(RuntimeError):
+    """No plan meets the robot's tolerance."""
+
+
+class FormatError(FitError):
+    """No fixed-point format keeps the rounding error within the quantization budget."""
+
+
+@dataclass(frozen=True)
+class Budget:
+    """The tolerance (pu) split into output rounding, certified quantization and approximation,
+    with a 15 % margin."""
+    tolerance: float
+    rounding: float
+    quantization: float
+    approximation: float
+
+    @classmethod
+    def split(cls, tolerance: float, ticks_per_pu: float, quantization_share: float = 0.1) -> "Budget":
+        rounding = 0.5 / ticks_per_pu
+        quant = quantization_share * tolerance
+        approx = tolerance - rounding - quant - 0.15 * tolerance
+        if approx <= 0:
+            raise FitError(f"tolerance {tolerance:g} pu leaves no approximation budget after "
+                           f"output rounding ({rounding:g} pu); raise hardware.clock_hz or the tolerance")
+        return cls(tolerance, rounding, quant, approx)
+
+
+def operand_bits(robot) -> tuple[int, int] | None:
+    """The signed operand widths every plan multiplication must fit: those of the DSP block
+    of ``hardware.dsp`` when ``fit.products = "dsp"``; else None (exact products)."""
+    if getattr(robot, "products", "exact") != "dsp" or robot.dsp not in DSP_SIZES:
+        return None
+    return DSP_SIZES[robot.dsp]
+
+
+@dataclass(frozen=True)
+class FitContext:
+    """The fixed inputs of one fit attempt.
+
+    Attributes
+    ----------
+    robot : ikseries.robot.Robot
+        The robot description (reference IK, calibration, workspace, fit options).
+    inputs : tuple of PlanInput
+        Port formats of the plan (:func:`ikseries.fit.ports.plan_inputs`).
+    stage : CylindricalStage or CartesianStage
+        The coordinate stage shared by every servo.
+    budget : Budget
+        The error budget of this attempt.
+    operand_bits : (int, int) or None
+        Product operand limit of the plan builder (``fit.products = "dsp"``).
+    mixed : bool
+        ``fit.lowering = "mixed"``: the Horner/Estrin mix of least depth, else nested Horner.
+    """
+    robot: object
+    inputs: tuple[PlanInput, ...]
+    stage: object
+    budget: Budget
+    operand_bits: tuple[int, int] | None
+    mixed: bool
+
+    @classmethod
+    def for_robot(cls, robot, quantization_share: float) -> "FitContext":
+        """The context of ``robot`` with ``quantization_share`` of the tolerance for rounding."""
+        budget = Budget.split(robot.tolerance_pu, robot.ticks_per_pu, quantization_share)
+        mixed = getattr(robot, "lowering", "mixed") == "mixed"
+        # cos/sin error e moves the tip by up to R_max * e; keep that to ~1 % of the budget
+        rmax = max(abs(robot.inputs[0].min), abs(robot.inputs[0].max))
+        stage = coordinate_stage(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)), table=mixed)
+        return cls(robot, tuple(plan_inputs(robot)), stage, budget, operand_bits(robot), mixed)
+
+    @property
+    def ticks_per_pu(self) -> float:
+        return self.robot.ticks_per_pu

@@ -1,0 +1,112 @@
+"""Fixed-point formats of a fitted robot: the narrowest feature and accumulator precisions
+whose certified rounding bound meets the quantization budget, and the coefficients
+re-optimised on their integer grid."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .context import FormatError
+from .lowering import build_plan
+from .polyfit import fit_least_squares, vander
+from .structure import ServoFit
+
+__all__ = ["round_and_refit", "requantize", "choose_formats"]
+
+
+def round_and_refit(sf: ServoFit, frac: int):
+    """Coefficients on the grid 2**-frac, rounded one at a time (highest degree first) while
+    the rest are refitted (weighted least squares with the fit's final Lawson weights on its
+    working set) to absorb each rounding; plain rounding instead if that is better on the
+    check set (the refit is a heuristic for the maximum error). Piecewise: in every cell.
+    Returns (poly, max error on the check set) or None without fit data."""
+    if sf.refit is None:
+        return None
+    data, states, _ = sf.refit
+    terms = sorted(sf.poly, key=lambda e: (-sum(e), e))
+    grid = 2.0 ** frac
+    coefs, worst = [], 0.0
+    for orig, (xp, xt, w), (cpts, ctarget) in zip(data.coef(sf.poly, terms), states, data.check):
+        a = vander(xp, terms)
+        coef = orig.copy()
+        fixed = np.zeros(len(terms), dtype=bool)
+        for k in range(len(terms)):
+            coef[k] = np.round(coef[k] * grid) / grid
+            fixed[k] = True
+            free = ~fixed
+            if free.any():
+                rhs = xt - a[:, fixed] @ coef[fixed]
+                coef[free] = fit_least_squares(a[:, free], rhs, w)
+        ca = vander(cpts, terms)
+        err = float(np.max(np.abs(ca @ coef - ctarget)))
+        naive = np.round(orig * grid) / grid
+        naive_err = float(np.max(np.abs(ca @ naive - ctarget)))
+        if naive_err < err:          # the refit is a heuristic: never worse than plain rounding
+            coef, err = naive, naive_err
+        coefs.append(coef)
+        worst = max(worst, err)
+    return data.poly(terms, np.array(coefs)), worst
+
+
+def _rounding_pu(ctx, sf: ServoFit, fv: int) -> float:
+    """Certified rounding bound (pu) of ``sf`` alone in a plan with features of ``fv`` bits
+    (infinite when an intermediate would overflow 63 bits)."""
+    try:
+        plan = build_plan(ctx, [sf], fv)
+    except OverflowError:
+        return np.inf
+    return plan.rounding_bounds()[plan.outputs[0].preround] / ctx.ticks_per_pu
+
+
+def requantize(ctx, fits: list[ServoFit], fv: int, progress) -> list[ServoFit]:
+    """Re-optimise each servo's coefficients after quantization, then take the narrowest
+    accumulator format whose certified rounding bound still meets the quantization budget
+    and whose refitted polynomial still meets the approximation budget on the check set."""
+    out = []
+    for sf in fits:
+        best = None
+        for frac in range(sf.frac, max(-1, sf.frac - 4), -1):
+            r = round_and_refit(sf, frac)
+            if r is None or r[1] > sf.refit[2]:
+                break
+            trial = ServoFit(sf.name, sf.features, sf.degree, r[0], r[1], frac=frac)
+            if _rounding_pu(ctx, trial, fv) > ctx.budget.quantization:
+                break
+            best = trial
+        if best is not None:
+            progress(f"  {sf.name}: coefficients re-optimised on the 2^-{best.frac} grid "
+                     f"(was 2^-{sf.frac}), max fit error {best.fit_error_ticks:.4g} ticks")
+            sf = dataclasses.replace(sf, poly=best.poly, fit_error_ticks=best.fit_error_ticks, frac=best.frac)
+        out.append(sf)
+    return out
+
+
+def choose_formats(ctx, fits: list[ServoFit], progress) -> tuple[int, list[ServoFit]]:
+    """Narrowest feature precision ``fv`` and per-servo accumulator precision meeting the
+    certified quantization budget: returns ``fv`` and the fits with their ``frac`` set."""
+    quant = ctx.budget.quantization
+
+    def bound(sf, fv, frac):
+        return _rounding_pu(ctx, dataclasses.replace(sf, frac=frac), fv)
+
+    for fv in range(8, 40):
+        fracs = []
+        for sf in fits:
+            lo, hi = 0, 24
+            if bound(sf, fv, hi) > quant:
+                break
+            while lo < hi:           # the bound falls as frac grows: bisect
+                mid = (lo + hi) // 2
+                if bound(sf, fv, mid) <= quant:
+                    hi = mid
+                else:
+                    lo = mid + 1
+            fracs.append(lo)
+        if len(fracs) == len(fits):
+            fits = [dataclasses.replace(sf, frac=fr) for sf, fr in zip(fits, fracs)]
+            progress(f"  formats: features {fv} fractional bits, accumulators "
+                     + ", ".join(f"{sf.name} {sf.frac}" for sf in fits))
+            return fv, fits
+    raise FormatError(f"no fixed-point format keeps the certified rounding error within "
+                      f"{quant:g} pu in 63-bit intermediates")

@@ -1,0 +1,96 @@
+"""Servo polynomials -> plan operations: the feature nodes, each servo's Horner/Estrin
+lowering, the output rounding and clamp, and the multiplier count the structure search costs."""
+from __future__ import annotations
+
+from .horner import estrin, lower_poly
+from .plan import Plan, PlanBuilder, PlanOutput
+from .structure import FeatureSet, ServoFit, input_norms
+
+__all__ = ["FeatureNodes", "parity_variable", "poly_inputs", "servo_nodes", "build_plan", "output_multipliers",
+           "structure_cost", "MIX_EXTRA_MULTIPLIERS"]
+
+MIX_EXTRA_MULTIPLIERS = 2       # fit.lowering = "mixed": extra multiplications allowed per servo
+
+
+class FeatureNodes:
+    """Feature nodes of every kind on one builder, built on first use."""
+
+    def __init__(self, ctx, b: PlanBuilder, fv: int, mixed: bool = False):
+        self.ctx, self.b, self.fv, self.mixed = ctx, b, fv, mixed
+        self._kinds: dict = {}
+
+    def __getitem__(self, kind: str) -> list:
+        stage = self.ctx.stage
+        if "cartesian" not in self._kinds:
+            self._kinds["cartesian"] = stage.build(self.b, self.fv, self.fv + 4, self.mixed)
+        if kind not in self._kinds:
+            if kind == "radial":
+                self._kinds[kind] = stage.build_radial(self.b, self.fv)
+            else:
+                robot = self.ctx.robot
+                self._kinds[kind] = [nm.build(self.b, self.b.input_nodes[i.name], self.fv)
+                                     for nm, i in zip(input_norms(robot), robot.inputs)]
+        return self._kinds[kind]
+
+
+def parity_variable(fs: FeatureSet) -> int | None:
+    """The variable whose parity the lowering splits (the first even/odd one), or None."""
+    return next((j for j, a in enumerate(fs.allowed) if a in ("even", "odd")), None)
+
+
+def poly_inputs(b: PlanBuilder, fs: FeatureSet, feats: list[int], fv: int) -> tuple[list[int], object]:
+    """The variable nodes of a servo polynomial over ``fs`` and its coefficient builder: for a
+    piecewise polynomial the cut variable becomes the offset in the cell (exact, widened to the
+    features' ``fv`` fractional bits so that its powers keep them) and the coefficients are
+    looked up by cell (``b.lut``); else ``feats`` and None (constants)."""
+    if fs.cut is None:
+        return feats, None
+    port = next(i for i in b.inputs if i.name == fs.cut.port)
+    cell, off = fs.cut.build(b, port)
+    off = b.align(off, max(fv, b.frac(off)))
+    return feats[:fs.cut.var] + [off] + feats[fs.cut.var + 1:], lambda v, f: b.lut(cell, v, f)
+
+
+def servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], fv: int, frac: int,
+                mixed: bool = False) -> int:
+    """Lower one servo polynomial: nested Horner, or with ``mixed`` the Horner/Estrin mix of
+    least pipeline depth using at most ``MIX_EXTRA_MULTIPLIERS`` more multiplications
+    (:func:`ikseries.fit.horner.lower_poly`). For the first even/odd variable v,
+    ``E(..., v**2, ...) + v * O(..., v**2, ...)``. A piecewise polynomial (``fs.cut``) takes
+    the offset in the cell for the cut variable and looks its coefficients up by cell."""
+    feats, coefficient = poly_inputs(b, fs, feats, fv)
+    k = parity_variable(fs)
+    if mixed:
+        return lower_poly(b, poly, feats, frac, coefficient, parity=k, max_extra_muls=MIX_EXTRA_MULTIPLIERS)
+    return estrin(b, poly, feats, frac, coefficient, split=None, parity=k)
+
+
+def build_plan(ctx, fits: list[ServoFit], fv: int, mixed: bool | None = None) -> Plan:
+    """The plan of ``fits`` with features of ``fv`` fractional bits; ``mixed`` None: as the
+    context's lowering says."""
+    mixed = ctx.mixed if mixed is None else mixed
+    b = PlanBuilder(list(ctx.inputs), operand_bits=ctx.operand_bits)
+    nodes = FeatureNodes(ctx, b, fv, mixed)
+    lo, hi = ctx.robot.pulse_limits_ticks()
+    outs = []
+    for sf in fits:
+        acc = servo_nodes(b, sf.features, sf.poly, nodes[sf.features.kind], fv, sf.frac, mixed)
+        out = b.clamp(b.round(acc, 0), lo, hi)
+        outs.append(PlanOutput(sf.name, out, acc, "ticks", ctx.ticks_per_pu))
+    return b.build(outs)
+
+
+def output_multipliers(plan: Plan) -> dict:
+    """Multipliers each output needs, counting the shared coordinate stage in full."""
+    return {o.name: sum(1 for i in plan.cone(o.node) if plan.nodes[i].op == "mul") for o in plan.outputs}
+
+
+def structure_cost(ctx, fs: FeatureSet, terms: list) -> int:
+    """Multipliers of the servo evaluation (coordinate stage included) for ``terms``,
+    known before fitting: the structure alone decides it."""
+    # distinct coefficients: equal ones would share Horner sub-expressions
+    cells = fs.cut.cells if fs.cut else 0
+    sf = ServoFit("cost", fs, 0, {e: (1.0 + k / 4096,) * cells if cells else 1.0 + k / 4096
+                                  for k, e in enumerate(terms)}, 0.0, frac=16)
+    plan = build_plan(ctx, [sf], 16, mixed=False)
+    return output_multipliers(plan)["cost"]
