@@ -1,6 +1,10 @@
 """Shared fixtures: the default robot and its fitted plan (fitted once per test session)."""
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import dataclasses
 
 import pytest

@@ -48,7 +48,20 @@ _DEL = object()
     ("hardware.clock_hz", 1e6, "hardware.clock_hz must be an integer, not 1000000.0"),
     ("hardware.clock_hz", 1_000_000, "hardware.clock_hz must give at least one PWM tick per pulse unit (>= 2e+06 Hz), not 1000000"),
     ("hardware.pwm_period_us", 2000.0, "hardware.pwm_period_us must be > calibration.pulse_max_us (2500), not 2000.0"),
-    ("name", "my leg", "name must be a non-empty string of letters, digits, '-' and '_', not 'my leg'"),
+    ("name", "my leg", "name must be an ASCII letter followed by at most 63 ASCII letters, digits, '-' and '_' "
+                       "(it names the output files and the Verilog module), not 'my leg'"),
+    ("name", "3leg", "(it names the output files and the Verilog module), not '3leg'"),
+    ("name", "beinä", "(it names the output files and the Verilog module), not 'beinä'"),
+    ("name", "x" * 65, "name must be an ASCII letter followed by at most 63"),
+    ("fit.tolerance_pu", float("inf"), "fit.tolerance_pu must be finite, not inf"),
+    ("fit.tolerance_pu", float("nan"), "fit.tolerance_pu must be > 0 pu, not nan"),
+    ("fit.tolerance_pu", 0.02, "fit.tolerance_pu must be > 0.0277778 pu with 24 PWM ticks per pulse unit "
+                               "(rounding to whole ticks costs 0.0208333 pu; or raise hardware.clock_hz or "
+                               "calibration.pulse_unit_us to give more than 33.3333 ticks per pu), not 0.02"),
+    ("calibration.neutral_pulse_pu", 6000.0, "calibration.neutral_pulse_pu must give a pulse within "
+     "[pulse_min_us, pulse_max_us] = [500, 2500] us, i.e. within [1000, 5000] pu at pulse_unit_us = 0.5, not 6000.0"),
+    ("hardware.min_refresh_hz", 5e7, "hardware.min_refresh_hz must be at most 4.8e+07 Hz (one target per clock "
+                                     "cycle at hardware.clock_hz = 48000000 shared by legs = 1), not 50000000.0"),
     ("colour", "red", "unknown field colour"),
 ])
 def test_bad_description_names_field_and_value(path, value, message):
