@@ -706,7 +706,7 @@ def _fit_robot(robot, progress, certified: bool, quantization_share: float) -> t
         if not certified:
             return plan, fits
         progress("certifying the error bound over the continuous workspace")
-        cert = certify(robot, plan)
+        cert = certify(robot, plan, progress=progress)
         for line in cert.lines():
             progress("  " + line)
         rec = cert.to_json()    # without run times: the plan must be byte-identical on a rerun

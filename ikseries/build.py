@@ -15,7 +15,8 @@ import numpy as np
 from . import __version__
 from .accuracy import measure
 from .architecture import ArchitectureError, choose_architecture
-from .buildrecord import BuildRecordError, recorded_files, write_record
+from .buildrecord import (BuildRecordError, OutputDirError, check_output_dir, recorded_files, remove_created,
+                          write_record)
 from .constraints.timing import clock_sdc
 from .fit.fitter import FitError, fit_robot
 from .hdl.export import leg_verilog, manifest, module_name, robot_verilog
@@ -152,23 +153,6 @@ def _cocotb(plan_file: Path, period: int, simulators, workdir: Path, logdir: Pat
     return out, note
 
 
-def _check_output_dir(out_dir: Path) -> Path | None:
-    """Fail before any work if ``out_dir`` cannot be created or written (the build's
-    temporary directory is made inside it, so its parent need not be writable).
-
-    Returns the outermost directory the build will have to create (None: ``out_dir`` exists).
-    """
-    if out_dir.exists() and not out_dir.is_dir():
-        raise BuildError(f"output directory {str(out_dir)!r} exists and is not a directory")
-    anc, missing = out_dir, None
-    while not anc.exists():
-        anc, missing = anc.parent, anc
-    if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
-        raise BuildError(f"cannot create or write the output directory {str(out_dir)!r} "
-                         f"({str(anc)!r} is not a writable directory)")
-    return missing
-
-
 def planned_outputs(robot, *, vcd: bool, cocotb) -> set[str]:
     """Every name a build of ``robot`` with these options may write into its directory."""
     name = module_name(robot.name)
@@ -221,21 +205,6 @@ def _install(tmp: Path, out_dir: Path) -> list[str]:
     return written
 
 
-def _remove_created(out_dir: Path, created: Path | None) -> None:
-    """Remove the directories from ``out_dir`` up to ``created`` that the build made, if empty."""
-    if created is None:
-        return
-    d = out_dir
-    while True:
-        try:
-            d.rmdir()
-        except OSError:
-            return
-        if d == created:
-            return
-        d = d.parent
-
-
 def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print) -> dict:
     """Run the whole pipeline and write every artifact into ``out_dir``.
 
@@ -248,7 +217,10 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     ("auto": every installed one; empty: none).
     """
     out_dir = Path(out_dir)
-    created = _check_output_dir(out_dir)
+    try:
+        created = check_output_dir(out_dir)
+    except OutputDirError as e:
+        raise BuildError(str(e)) from None
     _check_foreign(out_dir, planned_outputs(robot, vcd=vcd, cocotb=cocotb))
     times = {}
     t0 = time.perf_counter()
@@ -291,7 +263,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         out_dir.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=".ikseries-tmp-", dir=out_dir))
     except OSError as e:
-        _remove_created(out_dir, created)
+        remove_created(out_dir, created)
         raise BuildError(f"cannot create the output directory {str(out_dir)!r}: {e.strerror}") from None
     done = False
     try:
@@ -334,7 +306,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         if not done:
-            _remove_created(out_dir, created)
+            remove_created(out_dir, created)
     progress(f"wrote {out_dir}/: " + ", ".join(written))
     return report
 

@@ -12,7 +12,8 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["RECORD_NAME", "RECORD_FORMAT", "BuildRecordError", "recorded_files", "write_record", "add_to_record"]
+__all__ = ["RECORD_NAME", "RECORD_FORMAT", "BuildRecordError", "OutputDirError", "check_output_dir", "remove_created", "recorded_files",
+           "write_record", "add_to_record"]
 
 RECORD_NAME = ".ikseries-build.json"
 RECORD_FORMAT = "ikseries-build-files"
@@ -20,6 +21,52 @@ RECORD_FORMAT = "ikseries-build-files"
 
 class BuildRecordError(ValueError):
     """A build record that exists but cannot be read as one."""
+
+
+class OutputDirError(ValueError):
+    """An output directory that cannot be created or written."""
+
+
+def check_output_dir(out_dir) -> Path | None:
+    """Fail before any work if ``out_dir`` cannot be created or written (temporary files go
+    inside it, so its parent need not be writable).
+
+    Returns
+    -------
+    Path or None
+        The outermost directory that will have to be created (None: ``out_dir`` exists).
+
+    Raises
+    ------
+    OutputDirError
+        Naming the directory and the ancestor that is not a writable directory.
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OutputDirError(f"output directory {str(out_dir)!r} exists and is not a directory")
+    anc, missing = out_dir, None
+    while not anc.exists():
+        anc, missing = anc.parent, anc
+    if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
+        raise OutputDirError(f"cannot create or write the output directory {str(out_dir)!r} "
+                             f"({str(anc)!r} is not a writable directory)")
+    return missing
+
+
+def remove_created(out_dir, created) -> None:
+    """Remove the directories from ``out_dir`` up to ``created`` (as returned by
+    :func:`check_output_dir`), as far as they are empty."""
+    if created is None:
+        return
+    d = Path(out_dir)
+    while True:
+        try:
+            d.rmdir()
+        except OSError:
+            return
+        if d == created:
+            return
+        d = d.parent
 
 
 def recorded_files(build_dir) -> set[str]:
@@ -58,6 +105,9 @@ def write_record(build_dir, names) -> None:
     text = json.dumps({"format": RECORD_FORMAT, "files": sorted(set(names))}, indent=1) + "\n"
     fd, tmp = tempfile.mkstemp(prefix=".ikseries-build-", suffix=".tmp", dir=build_dir)
     try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)      # like the build's other files (mkstemp makes it 0600)
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             f.write(text)
         os.replace(tmp, build_dir / RECORD_NAME)

@@ -62,8 +62,14 @@ def small_robot(robot):
 
 
 @pytest.fixture(scope="session")
-def small_plan(small_robot):
-    return fit_robot(small_robot)[0]
+def small_fitted(small_robot):
+    """(plan, servo fits) of :func:`small_robot`."""
+    return fit_robot(small_robot)
+
+
+@pytest.fixture(scope="session")
+def small_plan(small_fitted):
+    return small_fitted[0]
 
 
 @pytest.fixture(scope="session")
