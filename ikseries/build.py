@@ -205,24 +205,8 @@ def _install(tmp: Path, out_dir: Path) -> list[str]:
     return written
 
 
-def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print) -> dict:
-    """Run the whole pipeline and write every artifact into ``out_dir``.
-
-    Files are written to a hidden temporary directory inside ``out_dir`` and moved into
-    place at the end, so a failed or interrupted build leaves nothing half-written. Only
-    entries of the directory's build record (:mod:`ikseries.buildrecord`) are replaced or
-    removed; a build that would replace any other file is refused before the fit. ``vcd`` also
-    writes the waveform of the verification simulation (``sim.vcd``); ``cocotb``
-    names simulators ("icarus", "verilator") that also run the exported Verilog
-    ("auto": every installed one; empty: none).
-    """
-    out_dir = Path(out_dir)
-    try:
-        created = check_output_dir(out_dir)
-    except OutputDirError as e:
-        raise BuildError(str(e)) from None
-    _check_foreign(out_dir, planned_outputs(robot, vcd=vcd, cocotb=cocotb))
-    times = {}
+def _fit_and_measure(robot, progress, times: dict):
+    """(plan, fits, accuracy) of ``robot``, refused unless the sampled error meets the tolerance."""
     t0 = time.perf_counter()
     progress(f"fitting {robot.name} (tolerance ±{robot.tolerance_pu:g} pu)")
     try:
@@ -244,7 +228,51 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     if worst[1]["total"] > robot.tolerance_pu:
         raise BuildError(f"servo {worst[0]} misses the tolerance: {worst[1]['total']:.4f} pu > "
                          f"{robot.tolerance_pu:g} pu at {worst[1]['at']}")
+    return plan, fits, acc
 
+
+@contextlib.contextmanager
+def _staging(out_dir: Path, created: Path | None):
+    """A hidden temporary directory inside ``out_dir`` (made with it if need be) for the
+    build's files; removed on leaving, and with it the directories the build created unless
+    the body completed (a failure or an interrupt leaves nothing behind)."""
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".ikseries-tmp-", dir=out_dir))
+    except OSError as e:
+        remove_created(out_dir, created)
+        raise BuildError(f"cannot create the output directory {str(out_dir)!r}: {e.strerror}") from None
+    done = False
+    try:
+        yield tmp
+        done = True
+    except OSError as e:
+        raise BuildError(f"cannot write the build output to {str(out_dir)!r}: {e}") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if not done:
+            remove_created(out_dir, created)
+
+
+def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print) -> dict:
+    """Run the whole pipeline and write every artifact into ``out_dir``.
+
+    Files are written to a hidden temporary directory inside ``out_dir`` and moved into
+    place at the end, so a failed or interrupted build leaves nothing half-written. Only
+    entries of the directory's build record (:mod:`ikseries.buildrecord`) are replaced or
+    removed; a build that would replace any other file is refused before the fit. ``vcd`` also
+    writes the waveform of the verification simulation (``sim.vcd``); ``cocotb``
+    names simulators ("icarus", "verilator") that also run the exported Verilog
+    ("auto": every installed one; empty: none).
+    """
+    out_dir = Path(out_dir)
+    try:
+        created = check_output_dir(out_dir)
+    except OutputDirError as e:
+        raise BuildError(str(e)) from None
+    _check_foreign(out_dir, planned_outputs(robot, vcd=vcd, cocotb=cocotb))
+    times = {}
+    plan, fits, acc = _fit_and_measure(robot, progress, times)
     name = module_name(robot.name)
     try:
         choice = choose_architecture(robot, plan, progress=progress)
@@ -259,14 +287,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     verilog_text = robot_verilog(core, name) if isinstance(core, RobotCore) else leg_verilog(core, name)
     times["verilog_s"] = round(time.perf_counter() - t0, 1)
 
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=".ikseries-tmp-", dir=out_dir))
-    except OSError as e:
-        remove_created(out_dir, created)
-        raise BuildError(f"cannot create the output directory {str(out_dir)!r}: {e.strerror}") from None
-    done = False
-    try:
+    with _staging(out_dir, created) as tmp:
         sim = _simulate(core, plan, progress, vcd=str(tmp / "sim.vcd") if vcd else None)
         vfile = f"{name}.v"
         (tmp / vfile).write_text(verilog_text)
@@ -300,13 +321,6 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         (tmp / "report.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
         (tmp / "report.md").write_text(render_markdown(report))
         written = _install(tmp, out_dir)
-        done = True
-    except OSError as e:
-        raise BuildError(f"cannot write the build output to {str(out_dir)!r}: {e}") from None
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-        if not done:
-            remove_created(out_dir, created)
     progress(f"wrote {out_dir}/: " + ", ".join(written))
     return report
 
