@@ -9,6 +9,10 @@ Fits the robot (or loads a plan), measures the sampled error on >= 10**6 points
 """
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import argparse
 import json
 import sys

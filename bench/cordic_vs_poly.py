@@ -25,6 +25,10 @@ Whole run on 2 cores: about 15 minutes, mostly Yosys on the polynomial design.
 """
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import argparse
 import json
 import sys

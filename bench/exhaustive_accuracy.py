@@ -10,6 +10,10 @@ about 10 minutes on one core) and prints and writes the measured maxima.
 """
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import argparse
 import json
 import sys

@@ -11,6 +11,10 @@ whole leg fitted in <= 30 s on 2 cores.
 """
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import argparse
 import json
 import sys

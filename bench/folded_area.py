@@ -9,6 +9,10 @@ iCE40UP5K. Prints a table and writes JSON.
 """
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import argparse
 import json
 import time

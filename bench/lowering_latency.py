@@ -19,6 +19,10 @@ coordinate stage as ``fit_robot`` configures it.
 """
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import argparse
 import json
 import time

@@ -9,6 +9,10 @@ Markdown table; writes the figures as JSON. About a minute on one core for cylin
 """
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import argparse
 import json
 import sys

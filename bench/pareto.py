@@ -51,6 +51,10 @@ verdicts for the issue's targets.
 """
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import argparse
 import json
 import sys

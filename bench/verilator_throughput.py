@@ -21,6 +21,10 @@ of the pipeline enable); folded and shared builds handshake differently and are 
 """
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import argparse
 import json
 import shutil

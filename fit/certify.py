@@ -489,6 +489,22 @@ def _split_axis(contrib, lo, hi, box_width):
     return axis
 
 
+#: seconds between progress lines during refinement (a round of many cells can take long)
+PROGRESS_SECONDS = 2.0
+
+
+def _throttled(progress, seconds: float):
+    """``progress`` passing on a message at most once every ``seconds`` (the first at once)."""
+    last = [-np.inf]
+
+    def say(msg):
+        now = time.perf_counter()
+        if now - last[0] >= seconds:
+            last[0] = now
+            progress(msg)
+    return say
+
+
 def _refine(err, names, box_lo, box_hi, target, per_axis, max_cells, progress, label, edges=None, cut=None):
     """Adaptive cover of the box; returns the summary of the final cells."""
     lo, hi = _initial_cells(box_lo, box_hi, per_axis, edges, cut)
@@ -507,9 +523,13 @@ def _refine(err, names, box_lo, box_hi, target, per_axis, max_cells, progress, l
             f_lo, f_hi = min(f_lo, float(fl.min())), max(f_hi, float(fh.max()))
 
     rnd = 0
+    say = _throttled(progress, PROGRESS_SECONDS)
     while len(lo):
-        parts = [_cell_bounds(err, names, lo[s:s + _CHUNK], hi[s:s + _CHUNK])
-                 for s in range(0, len(lo), _CHUNK)]
+        parts = []
+        for s in range(0, len(lo), _CHUNK):
+            parts.append(_cell_bounds(err, names, lo[s:s + _CHUNK], hi[s:s + _CHUNK]))
+            say(f"  {label}: round {rnd + 1}: {evaluated + s + len(parts[-1][0])} cells evaluated, "
+                f"round max bound so far {max(float(np.max(p[0])) for p in parts):.4g} ticks")
         bound = np.concatenate([p[0] for p in parts])
         contrib = np.concatenate([p[1] for p in parts])
         sampled = max(sampled, max(float(np.max(p[2].mag)) for p in parts))
@@ -525,8 +545,8 @@ def _refine(err, names, box_lo, box_hi, target, per_axis, max_cells, progress, l
             order = todo[np.argsort(bound[todo])[::-1]]
             keep, todo = order[room:], order[:room]
             leaf(bound[keep], lo[keep], hi[keep], flo[keep], fhi[keep])
-        progress(f"  {label}: round {rnd}: {len(lo)} cells, max bound {bound.max():.4g} ticks, "
-                 f"{len(todo)} to split")
+        say(f"  {label}: round {rnd}: {len(lo)} cells, {evaluated} evaluated, max bound {bound.max():.4g} "
+            f"ticks (target {target:.4g}), {len(todo)} to split")
         if not len(todo):
             break
         sel_lo, sel_hi = lo[todo], hi[todo]

@@ -15,6 +15,8 @@ import numpy as np
 from . import __version__
 from .accuracy import measure
 from .architecture import ArchitectureError, choose_architecture
+from .buildrecord import (BuildRecordError, OutputDirError, check_output_dir, recorded_files, remove_created,
+                          write_record)
 from .constraints.timing import clock_sdc
 from .fit.fitter import FitError, fit_robot
 from .hdl.export import leg_verilog, manifest, module_name, robot_verilog
@@ -30,10 +32,8 @@ from .sim.targets import corner_targets, random_targets
 __all__ = ["BuildError", "build", "default_output_dir"]
 
 
-#: files a build writes only with some options; an earlier build's copies are removed
-# written only with some options (or by `ikseries report --pnr` on the build directory): a
-# rebuild removes them so they never describe older Verilog
-OPTIONAL_ARTIFACTS = ("sim.vcd", "pnr.json", *(f"cocotb_{sim}.log" for sim in SIMULATORS))
+#: files every build writes, besides ``<module>.v`` and ``<module>.sdc``
+FIXED_ARTIFACTS = ("plan.json", "manifest.json", "report.json", "report.md", "error_map.png")
 
 
 def default_output_dir(robot) -> Path:
@@ -153,30 +153,60 @@ def _cocotb(plan_file: Path, period: int, simulators, workdir: Path, logdir: Pat
     return out, note
 
 
-def _check_output_dir(out_dir: Path) -> None:
-    """Fail before any work if ``out_dir`` cannot be created or written."""
-    if out_dir.exists() and not out_dir.is_dir():
-        raise BuildError(f"output directory {str(out_dir)!r} exists and is not a directory")
-    anc = out_dir
-    while not anc.exists():
-        anc = anc.parent
-    if not anc.is_dir() or not os.access(anc, os.W_OK | os.X_OK):
-        raise BuildError(f"cannot create or write the output directory {str(out_dir)!r} "
-                         f"({str(anc)!r} is not a writable directory)")
+def planned_outputs(robot, *, vcd: bool, cocotb) -> set[str]:
+    """Every name a build of ``robot`` with these options may write into its directory."""
+    name = module_name(robot.name)
+    out = {f"{name}.v", f"{name}.sdc", *FIXED_ARTIFACTS}
+    if vcd:
+        out.add("sim.vcd")
+    out |= {f"cocotb_{s}.log" for s in (SIMULATORS if cocotb == "auto" else cocotb)}
+    if robot.dsp_primitives:          # the only builds that instantiate vendor primitives
+        out.add("sim_models")
+    return out
 
 
-def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print) -> dict:
-    """Run the whole pipeline and write every artifact into ``out_dir``.
+def _check_foreign(out_dir: Path, names) -> set[str]:
+    """The build record of ``out_dir``; fail if any of ``names`` exists there unrecorded (a
+    file ikseries did not write, which a build must not replace)."""
+    if not out_dir.is_dir():
+        return set()
+    try:
+        recorded = recorded_files(out_dir)
+    except BuildRecordError as e:
+        raise BuildError(str(e)) from None
+    foreign = sorted(n for n in names if os.path.lexists(out_dir / n) and n not in recorded)
+    if foreign:
+        raise BuildError(f"output directory {str(out_dir)!r} holds {', '.join(foreign)}, not written by an "
+                         f"ikseries build there; a build would replace {'them' if len(foreign) > 1 else 'it'}: "
+                         f"move {'them' if len(foreign) > 1 else 'it'} away or choose another -o")
+    return recorded
 
-    Files are written to a temporary directory next to ``out_dir`` and moved into
-    place at the end, so a failed build leaves nothing half-written. ``vcd`` also
-    writes the waveform of the verification simulation (``sim.vcd``); ``cocotb``
-    names simulators ("icarus", "verilator") that also run the exported Verilog
-    ("auto": every installed one; empty: none).
-    """
-    out_dir = Path(out_dir)
-    _check_output_dir(out_dir)
-    times = {}
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif os.path.lexists(path):
+        path.unlink()
+
+
+def _install(tmp: Path, out_dir: Path) -> list[str]:
+    """Move every entry of ``tmp`` into ``out_dir``, removing what the previous build there
+    recorded and this one did not write; entries not in the record are never touched."""
+    written = sorted(f.name for f in tmp.iterdir())
+    recorded = _check_foreign(out_dir, written)
+    # recorded first: an interrupted move leaves only entries the record names
+    write_record(out_dir, recorded | set(written))
+    for stale in sorted(recorded - set(written)):
+        _remove(out_dir / stale)
+    for name in written:
+        _remove(out_dir / name)
+        shutil.move(tmp / name, out_dir / name)
+    write_record(out_dir, written)
+    return written
+
+
+def _fit_and_measure(robot, progress, times: dict):
+    """(plan, fits, accuracy) of ``robot``, refused unless the sampled error meets the tolerance."""
     t0 = time.perf_counter()
     progress(f"fitting {robot.name} (tolerance ±{robot.tolerance_pu:g} pu)")
     try:
@@ -198,7 +228,51 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     if worst[1]["total"] > robot.tolerance_pu:
         raise BuildError(f"servo {worst[0]} misses the tolerance: {worst[1]['total']:.4f} pu > "
                          f"{robot.tolerance_pu:g} pu at {worst[1]['at']}")
+    return plan, fits, acc
 
+
+@contextlib.contextmanager
+def _staging(out_dir: Path, created: Path | None):
+    """A hidden temporary directory inside ``out_dir`` (made with it if need be) for the
+    build's files; removed on leaving, and with it the directories the build created unless
+    the body completed (a failure or an interrupt leaves nothing behind)."""
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".ikseries-tmp-", dir=out_dir))
+    except OSError as e:
+        remove_created(out_dir, created)
+        raise BuildError(f"cannot create the output directory {str(out_dir)!r}: {e.strerror}") from None
+    done = False
+    try:
+        yield tmp
+        done = True
+    except OSError as e:
+        raise BuildError(f"cannot write the build output to {str(out_dir)!r}: {e}") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if not done:
+            remove_created(out_dir, created)
+
+
+def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print) -> dict:
+    """Run the whole pipeline and write every artifact into ``out_dir``.
+
+    Files are written to a hidden temporary directory inside ``out_dir`` and moved into
+    place at the end, so a failed or interrupted build leaves nothing half-written. Only
+    entries of the directory's build record (:mod:`ikseries.buildrecord`) are replaced or
+    removed; a build that would replace any other file is refused before the fit. ``vcd`` also
+    writes the waveform of the verification simulation (``sim.vcd``); ``cocotb``
+    names simulators ("icarus", "verilator") that also run the exported Verilog
+    ("auto": every installed one; empty: none).
+    """
+    out_dir = Path(out_dir)
+    try:
+        created = check_output_dir(out_dir)
+    except OutputDirError as e:
+        raise BuildError(str(e)) from None
+    _check_foreign(out_dir, planned_outputs(robot, vcd=vcd, cocotb=cocotb))
+    times = {}
+    plan, fits, acc = _fit_and_measure(robot, progress, times)
     name = module_name(robot.name)
     try:
         choice = choose_architecture(robot, plan, progress=progress)
@@ -213,12 +287,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     verilog_text = robot_verilog(core, name) if isinstance(core, RobotCore) else leg_verilog(core, name)
     times["verilog_s"] = round(time.perf_counter() - t0, 1)
 
-    try:
-        out_dir.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}-", dir=out_dir.parent))
-    except OSError as e:
-        raise BuildError(f"cannot create the output directory {str(out_dir)!r}: {e.strerror}") from None
-    try:
+    with _staging(out_dir, created) as tmp:
         sim = _simulate(core, plan, progress, vcd=str(tmp / "sim.vcd") if vcd else None)
         vfile = f"{name}.v"
         (tmp / vfile).write_text(verilog_text)
@@ -251,20 +320,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         (tmp / "manifest.json").write_text(json.dumps(man, indent=1, sort_keys=True) + "\n")
         (tmp / "report.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
         (tmp / "report.md").write_text(render_markdown(report))
-        out_dir.mkdir(parents=True, exist_ok=True)
-        written = sorted(f.name for f in tmp.iterdir())
-        for stale in OPTIONAL_ARTIFACTS:   # left by an earlier build with other options
-            if stale not in written and (out_dir / stale).is_file():
-                (out_dir / stale).unlink()
-        for f in sorted(tmp.iterdir()):
-            dest = out_dir / f.name
-            if dest.is_dir():
-                shutil.rmtree(dest)
-            shutil.move(f, dest)
-    except OSError as e:
-        raise BuildError(f"cannot write the build output to {str(out_dir)!r}: {e}") from None
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        written = _install(tmp, out_dir)
     progress(f"wrote {out_dir}/: " + ", ".join(written))
     return report
 

@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -114,28 +117,62 @@ def cmd_build(args):
           f"every leg refreshed {rep['refresh_hz']:,.0f} times/s, output in {out}/")
 
 
-def _cached_plan(robot, path):
-    """The plan in ``path`` (or build/<robot>/plan.json when it was built from this robot)."""
+def _read_plan(robot, path: Path, given: bool):
+    """The plan in ``path`` if it was fitted for ``robot``'s fit fields. A ``given`` path
+    (``--plan``) that is missing, unreadable, not a plan or for another robot is an error;
+    otherwise such a file is passed over (None)."""
     import json
 
-    from .build import default_output_dir
     from .fit.plan import Plan
     from .robot import fit_record, robot_record
-    given = path is not None
-    path = Path(path) if given else default_output_dir(robot) / "plan.json"
+
+    def refuse(msg):
+        if given:
+            raise CliError(msg)
+        return None
     if not path.exists():
-        if given:
-            raise CliError(f"plan file {str(path)!r} does not exist")
-        return None
+        return refuse(f"--plan must be an existing plan file, not {str(path)!r} (it does not exist)")
+    if not path.is_file():
+        return refuse(f"--plan must be a plan file, not {str(path)!r} (a directory or other non-file)")
     try:
-        plan = Plan.from_json(json.loads(path.read_text()))
-    except (ValueError, KeyError, TypeError) as e:
-        raise CliError(f"{path}: not a valid ikseries plan: {e}") from None
-    if fit_record(robot_record(robot)) != fit_record(plan.meta.get("robot_description") or {}):
-        if given:
-            raise CliError(f"{path} was fitted for a different robot description than {robot.name!r}")
-        return None
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(data, dict):
+            raise ValueError(f"a plan is a JSON object, not a {type(data).__name__}")
+        plan = Plan.from_json(data)
+        described = plan.meta.get("robot_description") or {}
+        same = fit_record(robot_record(robot)) == fit_record(described)
+    except OSError as e:
+        return refuse(f"cannot read plan file {str(path)!r}: {e.strerror}")
+    except (ValueError, KeyError, TypeError, AttributeError, IndexError) as e:   # JSON of another shape
+        return refuse(f"{path}: not a valid ikseries plan: {e}")
+    if not same:
+        return refuse(f"{path} was fitted for a different robot description than {robot.name!r}")
     return plan
+
+
+def _eval_plan(robot, args, say):
+    """(plan, line saying which plan it is): ``--plan``, else the robot's build under
+    build/, else the per-user cache (:mod:`ikseries.plancache`), else a fit that is cached."""
+    from .build import default_output_dir
+    from .fit.fitter import FitError, fit_robot
+    from .plancache import cached_plan_path, store_plan
+    from .robot import robot_record
+    if args.plan is not None:
+        return _read_plan(robot, Path(args.plan), True), f"plan: {args.plan}"
+    for path, what in ((default_output_dir(robot) / "plan.json", "the build"), (cached_plan_path(robot), "cached")):
+        plan = _read_plan(robot, path, False)
+        if plan is not None:
+            return plan, f"plan: {path} ({what})"
+    say(f"no plan for {robot.name} under build/ or in the cache: fitting")
+    try:
+        plan = fit_robot(robot, say)[0]
+    except FitError as e:
+        raise CliError(str(e)) from None
+    plan.meta["robot_description"] = robot_record(robot)
+    try:
+        return plan, f"plan: fitted and cached in {store_plan(robot, plan.dumps())}"
+    except OSError as e:
+        return plan, f"plan: fitted, not cached ({e.strerror}: {e.filename})"
 
 
 def cmd_fit(args):
@@ -161,7 +198,6 @@ def cmd_fit(args):
 def cmd_eval(args):
     import numpy as np
 
-    from .fit.fitter import fit_robot
     from .kinematics import UnreachableError
     from .sim import golden
     robot = _robot(args)
@@ -172,10 +208,7 @@ def cmd_eval(args):
     for v, spec in zip(vals, robot.inputs):
         if not np.isfinite(v) or not spec.min <= v <= spec.max:
             raise CliError(f"{spec.name} must be within [{spec.min:g}, {spec.max:g}] {spec.unit}, not {v:g}")
-    plan = _cached_plan(robot, args.plan)
-    if plan is None:
-        _progress(args.quiet)(f"no plan.json for {robot.name} under build/: fitting")
-        plan = fit_robot(robot, _progress(args.quiet))[0]
+    plan, which = _eval_plan(robot, args, _progress(args.quiet))
     ints = golden.quantize_inputs(plan, dict(zip([i.name for i in robot.inputs], [[v] for v in vals])))
     q = [float(ints[i.name][0]) * 2.0 ** -i.frac_bits for i in robot.inputs]
     try:
@@ -183,6 +216,7 @@ def cmd_eval(args):
     except UnreachableError as e:
         raise CliError(str(e)) from None
     outs = golden.outputs(plan, ints)
+    print(which)
     print("input (port integers): " + ", ".join(f"{i.name}={int(ints[i.name][0])}" for i in robot.inputs)
           + "  = " + ", ".join(f"{i.name}={v:g} {i.unit}" for i, v in zip(robot.inputs, q)))
     print(f"{'servo':6} {'reference pu':>14} {'golden ticks':>13} {'golden pu':>11} {'error pu':>9}")
@@ -199,9 +233,10 @@ def cmd_report(args):
     if not 0 <= args.seed < 2 ** 31:
         raise CliError(f"--seed must be an integer in [0, 2**31), not {args.seed}")
     bdir = Path(args.build_dir) if args.build_dir else default_output_dir(_robot(args))
+    from .buildrecord import BuildRecordError
     try:
         pnr = report_build(bdir, seed=args.seed, progress=_progress(args.quiet))
-    except NoBuildError as e:
+    except (NoBuildError, BuildRecordError) as e:
         raise CliError(str(e)) from None
     for dev, r in pnr["devices"].items():
         if r["fits"]:
@@ -214,7 +249,7 @@ def cmd_report(args):
     print(f"wrote {bdir / 'pnr.json'} and the place-and-route section of {bdir / 'report.md'}")
 
 
-def main(argv=None):
+def _parser() -> argparse.ArgumentParser:
     from . import __version__
     from .synth import FIT_DEVICES
     p = argparse.ArgumentParser(prog="ikseries", description=__doc__)
@@ -274,7 +309,46 @@ def main(argv=None):
     r.add_argument("--preset", help="with no BUILD_DIR: this preset's default build directory")
     r.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
     r.add_argument("-q", "--quiet", action="store_true")
-    args = p.parse_args(argv)
+    return p
+
+
+@contextlib.contextmanager
+def _signals_interrupt():
+    """Within this context SIGINT and SIGTERM raise KeyboardInterrupt (carrying the signal
+    number) in the main thread, so every ``finally`` runs: an interrupted build removes its
+    temporary directory. Signals after the first are ignored, so that cleanup finishes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    sigs = (signal.SIGINT, signal.SIGTERM)
+
+    def interrupt(signum, frame):
+        for s in sigs:
+            signal.signal(s, signal.SIG_IGN)
+        raise KeyboardInterrupt(signum)
+    old = {s: signal.signal(s, interrupt) for s in sigs}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def main(argv=None):
+    """The ``ikseries`` command; returns its exit status."""
+    from .threads import single_threaded_blas
+    single_threaded_blas()       # before anything imports numpy
+    args = _parser().parse_args(argv)
+    try:
+        with _signals_interrupt():
+            return _dispatch(args)
+    except KeyboardInterrupt as e:
+        signum = e.args[0] if e.args and isinstance(e.args[0], int) else signal.SIGINT
+        print("ikseries: interrupted", file=sys.stderr)
+        return 128 + int(signum)
+
+
+def _dispatch(args) -> int:
     from .build import BuildError
     from .pnr import PnrError
     from .robot import RobotError

@@ -16,6 +16,7 @@ import tempfile
 from pathlib import Path
 
 from .accuracy import measure
+from .buildrecord import OutputDirError, check_output_dir, remove_created
 from .fit.fitter import FitError, fit_robot, output_multipliers
 from .robot import robot_record
 
@@ -110,23 +111,31 @@ def run_fit(robot, method: str, out_dir, progress=print) -> dict:
     if method not in METHODS:
         raise FitCommandError(f"method must be one of {list(METHODS)}, not {method!r}")
     run = {"ikseries": _ikseries, "paper": _paper, "divided-differences": _divided}[method]
+    out_dir = Path(out_dir)
+    try:
+        created = check_output_dir(out_dir)     # before the fit, which takes minutes
+    except OutputDirError as e:
+        raise FitCommandError(str(e)) from None
     try:
         files, rec = run(robot, progress)
     except FitError as e:
         raise FitCommandError(str(e)) from None
-    out_dir = Path(out_dir)
+    done = False
     try:
-        out_dir.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}-", dir=out_dir.parent))
+        out_dir.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".ikseries-tmp-", dir=out_dir))
         try:
             for name, text in files.items():
                 (tmp / name).write_text(text)
-            out_dir.mkdir(exist_ok=True)
             for name in files:
                 shutil.move(tmp / name, out_dir / name)
+            done = True
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
     except OSError as e:
         raise FitCommandError(f"cannot write the fit output to {str(out_dir)!r}: {e}") from None
+    finally:
+        if not done:
+            remove_created(out_dir, created)
     progress(f"wrote {out_dir}/: " + ", ".join(sorted(files)))
     return rec

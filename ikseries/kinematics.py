@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-__all__ = ["UnreachableError", "CylinderLeg", "Calibration", "NUMPY_MATH", "RAD2DEG"]
+__all__ = ["UnreachableError", "CylinderLeg", "Calibration", "NUMPY_MATH", "RAD2DEG", "format_point"]
 
 RAD2DEG = 180.0 / np.pi
 
@@ -27,7 +27,7 @@ class UnreachableError(ValueError):
     """A tip target that the leg cannot reach."""
 
 
-def _fmt_point(names, values):
+def format_point(names, values):
     return "(" + ", ".join(f"{n}={float(v):g}" for n, v in zip(names, values)) + ")"
 
 
@@ -127,7 +127,7 @@ class CylinderLeg:
             i = np.flatnonzero(np.ravel(bad))[0]
             pt = [np.ravel(a)[i] for a in (x, y, z)]
             raise UnreachableError(
-                f"target {_fmt_point(self.cartesian_names, pt)} is unreachable: tip distance "
+                f"target {format_point(self.cartesian_names, pt)} is unreachable: tip distance "
                 f"from the femur axis {np.ravel(d)[i]:.6g} mm must be within "
                 f"[{abs(f - t):g}, {f + t:g}] mm")
         s2 = np.degrees(np.arccos(c2) - np.arctan2(v, u))
@@ -147,7 +147,7 @@ class CylinderLeg:
                 except UnreachableError as e:
                     pt = (r[idx], theta[idx], z[idx])
                     raise UnreachableError(
-                        f"target {_fmt_point(self.inputs, pt)} is unreachable: "
+                        f"target {format_point(self.inputs, pt)} is unreachable: "
                         + str(e).split(": ", 1)[1]) from None
             raise
 

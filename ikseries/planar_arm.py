@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kinematics import NUMPY_MATH, RAD2DEG, UnreachableError, _fmt_point
+from .kinematics import NUMPY_MATH, RAD2DEG, UnreachableError, format_point
 
 __all__ = ["PlanarArm"]
 
@@ -105,7 +105,7 @@ class PlanarArm:
         if np.any(bad):
             i = np.flatnonzero(np.ravel(bad))[0]
             raise UnreachableError(
-                f"target {_fmt_point(self.inputs, (np.ravel(x)[i], np.ravel(y)[i]))} is unreachable: "
+                f"target {format_point(self.inputs, (np.ravel(x)[i], np.ravel(y)[i]))} is unreachable: "
                 f"wrist distance from the shoulder {math.sqrt(np.ravel(d2)[i]):.6g} mm must be within "
                 f"[{lo:g}, {hi:g}] mm and > 0")
         s1, s2 = self.angles(NUMPY_MATH, x, y)

@@ -27,6 +27,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterable
 
+from .buildrecord import add_to_record
 from .pnr import PNR_DEVICES, DoesNotFitError, place_and_route
 
 __all__ = ["PNR_FORMAT", "SECTION_TITLE", "NoBuildError", "render_markdown", "render_section",
@@ -222,4 +223,5 @@ def report_build(build_dir, devices: Iterable[str] = tuple(PNR_DEVICES), *, seed
     md = insert_section((build_dir / "report.md").read_text(), render_section(pnr))
     _atomic_write(build_dir / "pnr.json", json.dumps(pnr, indent=1, sort_keys=True) + "\n")
     _atomic_write(build_dir / "report.md", md)
+    add_to_record(build_dir, "pnr.json")    # a rebuild then removes it with the Verilog it describes
     return pnr

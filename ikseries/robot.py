@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import tomllib
 from dataclasses import dataclass
 from importlib import resources
@@ -13,6 +14,7 @@ import numpy as np
 from .hexapod_leg import HexapodLeg
 from .kinematics import Calibration, CylinderLeg, UnreachableError
 from .planar_arm import PlanarArm
+from .reach import ReachUnprovenError, prove_box_reachable
 from .quadruped import QuadrupedFore, QuadrupedHind
 from .synth import FIT_DEVICES
 
@@ -161,8 +163,10 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
         raise RobotError(f"{source}: a robot description must be a table")
     _no_extra(data, {"name", "description", "legs", "geometry", "workspace", "calibration", "fit", "hardware"}, "")
     name = data.get("name")
-    if not isinstance(name, str) or not name or not all(c.isalnum() or c in "-_" for c in name):
-        raise RobotError(f"name must be a non-empty string of letters, digits, '-' and '_', not {name!r}")
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
+        raise RobotError(f"name must be an ASCII letter followed by at most {NAME_MAX - 1} ASCII letters, "
+                         f"digits, '-' and '_' (it names the output files and the Verilog module), "
+                         f"not {name!r}")
     desc = data.get("description", "")
     if not isinstance(desc, str):
         raise RobotError(f"description must be a string, not {desc!r}")
@@ -225,6 +229,8 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
     tol = fit.get("tolerance_pu", 0.5)
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not tol > 0:
         raise RobotError(f"fit.tolerance_pu must be > 0 pu, not {tol!r}")
+    if not np.isfinite(tol):
+        raise RobotError(f"fit.tolerance_pu must be finite, not {tol!r}")
     lowering = fit.get("lowering", "mixed")
     if lowering not in LOWERINGS:
         raise RobotError(f"fit.lowering must be one of {', '.join(LOWERINGS)}, not {lowering!r}")
@@ -257,9 +263,16 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
     if robot.ticks_per_pu < 1:
         raise RobotError(f"hardware.clock_hz must give at least one PWM tick per pulse unit "
                          f"(>= {1 / (robot.pulse_unit_us * 1e-6):g} Hz), not {clk!r}")
+    _check_pulses(robot)
+    _check_refresh(robot)
     _check_reachable(robot)
     return robot
 
+
+#: robot names: they name the output files and, as ``<name>_core`` with '-' as '_', the
+#: Verilog module, so ASCII only and a letter first
+NAME_MAX = 64
+NAME_PATTERN = re.compile(rf"[A-Za-z][A-Za-z0-9_-]{{0,{NAME_MAX - 1}}}")
 
 #: option -> how errors name it (TOML field names; the CLI passes its option names)
 HARDWARE_LABELS = {"legs": "legs", "architecture": "hardware.architecture",
@@ -331,11 +344,14 @@ def with_hardware(robot: Robot, labels: dict | None = None, **options) -> Robot:
     ``dsp``, ...), validated; ``labels`` maps an option to the name errors use for it."""
     new = dataclasses.replace(robot, **options)
     _check_hardware(new, labels)
+    _check_refresh(new, labels)
     return new
 
 
 def _check_reachable(robot: Robot) -> None:
-    """The neutral pose and a grid over the workspace box (corners included) must be reachable."""
+    """The neutral pose and every target of the workspace box must be reachable: a grid over
+    the box (corners included) is checked first, then the whole box is proven by interval
+    analysis (:func:`ikseries.reach.prove_box_reachable`)."""
     try:
         robot.geometry.ik(*(robot.neutral_pose[i.name] for i in robot.inputs))
     except UnreachableError as e:
@@ -344,8 +360,45 @@ def _check_reachable(robot: Robot) -> None:
     grid = [g.ravel() for g in np.meshgrid(*axes, indexing="ij")]
     try:
         robot.geometry.ik(*grid)
-    except UnreachableError as e:
+        prove_box_reachable(robot.geometry, [i.min for i in robot.inputs], [i.max for i in robot.inputs])
+    except (UnreachableError, ReachUnprovenError) as e:
         raise RobotError(f"workspace: {e}") from None
+
+
+#: share of fit.tolerance_pu the fit keeps for the plan's own rounding and its safety margin
+#: (``ikseries.fit.fitter.Budget.split``: 10 % quantization, 15 % margin); the output's
+#: rounding to whole PWM ticks must leave the rest a positive approximation budget
+FIT_RESERVED_SHARE = 0.25
+
+
+def _check_pulses(robot: Robot) -> None:
+    """Fit-free checks of the pulse format: the neutral pulse within the pulse limits, and one
+    PWM tick fine enough that rounding to it leaves the fit an approximation budget."""
+    neutral_us = robot.neutral_pulse_pu * robot.pulse_unit_us
+    if not robot.pulse_min_us <= neutral_us <= robot.pulse_max_us:
+        raise RobotError(f"calibration.neutral_pulse_pu must give a pulse within [pulse_min_us, pulse_max_us] = "
+                         f"[{robot.pulse_min_us:g}, {robot.pulse_max_us:g}] us, i.e. within "
+                         f"[{robot.pulse_min_us / robot.pulse_unit_us:g}, {robot.pulse_max_us / robot.pulse_unit_us:g}] "
+                         f"pu at pulse_unit_us = {robot.pulse_unit_us:g}, not {robot.neutral_pulse_pu!r}")
+    rounding = 0.5 / robot.ticks_per_pu     # pu: half a tick
+    if rounding >= (1.0 - FIT_RESERVED_SHARE) * robot.tolerance_pu:
+        need = 0.5 / ((1.0 - FIT_RESERVED_SHARE) * robot.tolerance_pu)   # ticks per pu
+        raise RobotError(f"fit.tolerance_pu must be > {rounding / (1.0 - FIT_RESERVED_SHARE):.6g} pu with "
+                         f"{robot.ticks_per_pu:g} PWM ticks per pulse unit (rounding to whole ticks costs "
+                         f"{rounding:.6g} pu; or raise hardware.clock_hz or calibration.pulse_unit_us to "
+                         f"give more than {need:.6g} ticks per pu), not {robot.tolerance_pu!r}")
+
+
+def _check_refresh(robot: Robot, labels: dict | None = None) -> None:
+    """hardware.min_refresh_hz must be reachable: no architecture takes more than one target
+    per clock cycle, and the legs share it, so no leg is refreshed more than clock_hz / legs
+    times a second."""
+    lab = {**HARDWARE_LABELS, **(labels or {})}
+    best = robot.clock_hz / robot.legs
+    if robot.min_refresh_hz > best:
+        raise RobotError(f"{lab['min_refresh_hz']} must be at most {best:.6g} Hz (one target per clock "
+                         f"cycle at hardware.clock_hz = {robot.clock_hz} shared by {lab['legs']} = "
+                         f"{robot.legs}), not {robot.min_refresh_hz!r}")
 
 
 def robot_record(robot: Robot) -> dict:
@@ -391,9 +444,14 @@ def robot_from_record(d: dict) -> Robot:
 def load_robot(path) -> Robot:
     path = Path(path)
     try:
-        text = path.read_text()
+        raw = path.read_bytes()
     except OSError as e:
         raise RobotError(f"cannot read robot description {str(path)!r}: {e.strerror}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise RobotError(f"robot description {str(path)!r} must be UTF-8 text (TOML), not bytes like "
+                         f"{raw[e.start:e.start + 4]!r} at byte {e.start}") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

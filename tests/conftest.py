@@ -1,6 +1,10 @@
 """Shared fixtures: the default robot and its fitted plan (fitted once per test session)."""
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import dataclasses
 
 import pytest
@@ -58,8 +62,14 @@ def small_robot(robot):
 
 
 @pytest.fixture(scope="session")
-def small_plan(small_robot):
-    return fit_robot(small_robot)[0]
+def small_fitted(small_robot):
+    """(plan, servo fits) of :func:`small_robot`."""
+    return fit_robot(small_robot)
+
+
+@pytest.fixture(scope="session")
+def small_plan(small_fitted):
+    return small_fitted[0]
 
 
 @pytest.fixture(scope="session")

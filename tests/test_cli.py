@@ -1,6 +1,7 @@
 """The command line: presets, eval, build, and one-line errors."""
 import json
 import re
+import shutil
 
 import pytest
 
@@ -40,8 +41,9 @@ def built(small_toml, tmp_path_factory):
 
 def test_build_writes_every_artifact(built):
     names = sorted(p.name for p in built.iterdir())
-    assert names == ["cocotb_icarus.log", "error_map.png", "manifest.json", "plan.json", "report.json",
-                     "report.md", "sim.vcd", "small_leg_core.sdc", "small_leg_core.v"]
+    assert names == [".ikseries-build.json", "cocotb_icarus.log", "error_map.png", "manifest.json", "plan.json",
+                     "report.json", "report.md", "sim.vcd", "small_leg_core.sdc", "small_leg_core.v"]
+    assert json.loads((built / ".ikseries-build.json").read_text())["files"] == names[1:]
     assert (built / "error_map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     vcd = (built / "sim.vcd").read_text()
     assert "$enddefinitions" in vcd and "pwm_s1" in vcd
@@ -71,12 +73,12 @@ def test_build_writes_every_artifact(built):
 
 def test_build_is_byte_identical(built, small_toml, tmp_path):
     out = tmp_path / "again"
-    out.mkdir()
-    (out / "sim.vcd").write_text("stale waveform of an earlier build")
+    shutil.copytree(built, out)     # an earlier build with --vcd and cocotb on icarus
     assert main(["build", str(small_toml), "--no-synth", "--cocotb", "none", "-q", "-o", str(out)]) == 0
     for f in ("small_leg_core.v", "plan.json", "manifest.json"):
         assert (out / f).read_bytes() == (built / f).read_bytes(), f
-    assert not (out / "sim.vcd").exists()   # not written by this build: the stale copy is gone
+    # recorded by the earlier build, not written by this one: the stale copies are gone
+    assert not (out / "sim.vcd").exists() and not (out / "cocotb_icarus.log").exists()
 
 
 def test_eval_with_plan(capsys, built, small_toml):
@@ -138,8 +140,34 @@ def test_unmeetable_tolerance_writes_nothing(capsys, tmp_path):
     tight.write_text(preset_text("cylinder-leg").replace("tolerance_pu = 0.5 ", "tolerance_pu = 0.01 "))
     out = tmp_path / "out"
     code, _, err = run(capsys, "build", str(tight), "-q", "-o", str(out))
-    assert code == 1 and "tolerance 0.01 pu leaves no approximation budget" in err and err.count("\n") == 1
+    assert code == 2 and err.startswith("ikseries: error: fit.tolerance_pu must be > 0.0277778 pu with 24 PWM "
+                                        "ticks per pulse unit") and err.count("\n") == 1
     assert not out.exists() and sorted(tmp_path.iterdir()) == [tight]
+
+
+def test_robot_file_not_utf8_is_one_line(capsys, tmp_path):
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes(preset_text("cylinder-leg").replace("Futaba-style", "Futaba-st\u00fcle").encode("latin-1"))
+    code, _, err = run(capsys, "build", str(bad), "-q", "-o", str(tmp_path / "out"))
+    assert code == 2 and err.startswith(f"ikseries: error: robot description '{bad}' must be UTF-8 text (TOML), "
+                                        "not bytes like b'\\xfcle ' at byte 250\n")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("content, message", [
+    (None, "--plan must be a plan file, not '{path}' (a directory or other non-file)"),
+    ("[1, 2]", "{path}: not a valid ikseries plan: a plan is a JSON object, not a list"),
+    ('{"format": "ikseries.plan", "version": 1, "inputs": 3}', "{path}: not a valid ikseries plan: "),
+    ("{", "{path}: not a valid ikseries plan: Expecting property name"),
+])
+def test_bad_plan_file_is_one_line(capsys, tmp_path, content, message):
+    path = tmp_path / "plan.json"
+    if content is None:
+        path.mkdir()
+    else:
+        path.write_text(content)
+    code, _, err = run(capsys, "eval", "--plan", str(path), "-q", "10", "45", "5")
+    assert code == 2 and err.startswith("ikseries: error: " + message.format(path=path)) and err.count("\n") == 1
 
 
 def test_fit_divided_differences_writes_its_report(capsys, tmp_path):

@@ -48,7 +48,20 @@ _DEL = object()
     ("hardware.clock_hz", 1e6, "hardware.clock_hz must be an integer, not 1000000.0"),
     ("hardware.clock_hz", 1_000_000, "hardware.clock_hz must give at least one PWM tick per pulse unit (>= 2e+06 Hz), not 1000000"),
     ("hardware.pwm_period_us", 2000.0, "hardware.pwm_period_us must be > calibration.pulse_max_us (2500), not 2000.0"),
-    ("name", "my leg", "name must be a non-empty string of letters, digits, '-' and '_', not 'my leg'"),
+    ("name", "my leg", "name must be an ASCII letter followed by at most 63 ASCII letters, digits, '-' and '_' "
+                       "(it names the output files and the Verilog module), not 'my leg'"),
+    ("name", "3leg", "(it names the output files and the Verilog module), not '3leg'"),
+    ("name", "beinä", "(it names the output files and the Verilog module), not 'beinä'"),
+    ("name", "x" * 65, "name must be an ASCII letter followed by at most 63"),
+    ("fit.tolerance_pu", float("inf"), "fit.tolerance_pu must be finite, not inf"),
+    ("fit.tolerance_pu", float("nan"), "fit.tolerance_pu must be > 0 pu, not nan"),
+    ("fit.tolerance_pu", 0.02, "fit.tolerance_pu must be > 0.0277778 pu with 24 PWM ticks per pulse unit "
+                               "(rounding to whole ticks costs 0.0208333 pu; or raise hardware.clock_hz or "
+                               "calibration.pulse_unit_us to give more than 33.3333 ticks per pu), not 0.02"),
+    ("calibration.neutral_pulse_pu", 6000.0, "calibration.neutral_pulse_pu must give a pulse within "
+     "[pulse_min_us, pulse_max_us] = [500, 2500] us, i.e. within [1000, 5000] pu at pulse_unit_us = 0.5, not 6000.0"),
+    ("hardware.min_refresh_hz", 5e7, "hardware.min_refresh_hz must be at most 4.8e+07 Hz (one target per clock "
+                                     "cycle at hardware.clock_hz = 48000000 shared by legs = 1), not 50000000.0"),
     ("colour", "red", "unknown field colour"),
 ])
 def test_bad_description_names_field_and_value(path, value, message):
@@ -97,3 +110,54 @@ def test_products_dsp_makes_the_dsp_family_part_of_the_fit():
     assert rec["products"] == "dsp" and rec["dsp"] == "ecp5"
     assert fit_record(robot_record(with_hardware(r, dsp="ice40"))) != rec
     assert operand_bits(with_hardware(r, dsp="none")) is None
+
+
+def _pocket(tibia):
+    """A cylinder leg whose femur-tibia reach has a hole of radius |femur - tibia| around the
+    femur axis, inside the workspace but between the points of the 9-point grid."""
+    d = base()
+    d["geometry"].update(neutral_distance=30.0, tibia=tibia)
+    d["workspace"]["z"].update(min=-57.0, max=-44.5)
+    d["calibration"]["neutral_pose"] = {"r": 20.0, "theta": 0.0, "z": -45.0}
+    return d
+
+
+def test_workspace_unreachable_between_grid_points_is_found():
+    import numpy as np
+    d = _pocket(60.5)
+    r = d["workspace"]
+    axes = [np.linspace(r[k]["min"], r[k]["max"], 9) for k in ("r", "theta", "z")]
+    from ikseries.kinematics import CylinderLeg
+    grid = [g.ravel() for g in np.meshgrid(*axes, indexing="ij")]
+    CylinderLeg(30.0, 60.0, 60.5, 30.0, 50.0).ik(*grid)       # the grid alone finds nothing
+    with pytest.raises(RobotError) as e:
+        parse_robot(d)
+    assert str(e.value) == ("workspace: target (r=22.5, theta=112.5, z=-49.9688) is unreachable: tip distance "
+                            "from the femur axis 0.176172 mm must be within [0.5, 120.5] mm")
+
+
+def test_workspace_that_cannot_be_proven_is_refused():
+    # femur = tibia: the reach hole is the single point on the femur axis, never sampled; the
+    # coxa axis (x = y = 0) is in the box too, where atan2 has no interval enclosure
+    with pytest.raises(RobotError) as e:
+        parse_robot(_pocket(60.0))
+    msg = str(e.value)
+    assert msg.startswith("workspace: could not establish that every target is reachable: after ")
+    assert "cells of interval analysis" in msg and "keep the box clear of the reach and joint limits" in msg
+
+
+def test_presets_are_proven_reachable_in_few_cells():
+    from ikseries.reach import prove_box_reachable
+    from ikseries.robot import load_preset
+    for name in preset_names():
+        r = load_preset(name)
+        cells = prove_box_reachable(r.geometry, [i.min for i in r.inputs], [i.max for i in r.inputs])
+        assert cells <= 1000, name
+
+
+def test_with_hardware_checks_the_refresh_bound():
+    from ikseries.robot import with_hardware
+    r = parse_robot(base())
+    with pytest.raises(RobotError, match=r"^hardware.min_refresh_hz must be at most 8e\+06 Hz \(one target per "
+                                         r"clock cycle at hardware.clock_hz = 48000000 shared by legs = 6\), not 10000000.0$"):
+        with_hardware(r, legs=6, architecture="auto", min_refresh_hz=1e7)

@@ -7,6 +7,10 @@ suite fits anyway by default, and all of them with ``pytest --all-hashes``.
 """
 from __future__ import annotations
 
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
 import argparse
 import hashlib
 import json
