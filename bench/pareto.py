@@ -86,76 +86,55 @@ def _family(device: str) -> str:
 
 
 # -- design specs ----------------------------------------------------------------------------------
+def _spec(arch, plan, name: str, description: str, max_error_pu, extra: dict, devices=None) -> DesignSpec:
+    """The spec of ``arch(dev)`` (an Architecture for a device) on ``plan``: its evaluator's
+    Verilog, latency and interval from the architecture's timing."""
+    from ikseries.hdl.flat import stream_verilog
+    top = f"poly_{name}"
+    kw = {"devices": devices} if devices else {}
+    return DesignSpec(name, "polynomial", description,
+                      lambda dev: (stream_verilog(arch(dev).evaluator(plan), top), top),
+                      lambda dev: arch(dev).timing(plan).latency,
+                      lambda dev: arch(dev).timing(plan).initiation_interval, max_error_pu, extra=dict(extra), **kw)
+
+
 def polynomial_specs(plan, max_error_pu: float | None, names=POLY_DESIGNS,
                      extra: dict | None = None) -> list[DesignSpec]:
     """Specs of the pipelined, modulo-scheduled (II = MODULO_II) and folded (k = 1, 2) evaluators
     of ``plan``, multipliers of the device's DSP size."""
-    from ikseries.hdl.evaluator import PlanEvaluator
-    from ikseries.hdl.flat import stream_verilog
-    from ikseries.hdl.modulo import ModuloEvaluator
-    from ikseries.hdl.schedule import DSP_SIZES
+    from ikseries.hdl.architectures.modulo import Modulo
+    from ikseries.hdl.architectures.pipelined import Pipelined
 
     extra = dict(extra or {})
     specs = []
     if "pipelined" in names:
-        specs.append(DesignSpec(
-            "pipelined", "polynomial", "polynomial, fully pipelined (PlanEvaluator)",
-            lambda dev: (stream_verilog(PlanEvaluator(plan), "poly_pipelined"), "poly_pipelined"),
-            lambda dev: PlanEvaluator(plan).latency, lambda dev: 1, max_error_pu, extra=extra))
+        specs.append(_spec(lambda dev: Pipelined(), plan, "pipelined",
+                           "polynomial, fully pipelined (PlanEvaluator)", max_error_pu, extra))
     for ii in MODULO_II:
-        if f"modulo{ii}" not in names:
-            continue
-
-        def make_modulo(dev, ii=ii):
-            return ModuloEvaluator(plan, ii, dsp=DSP_SIZES[_family(dev)])
-        specs.append(DesignSpec(
-            f"modulo{ii}", "polynomial", f"polynomial, modulo-scheduled, one target per {ii} cycles",
-            lambda dev, make=make_modulo, ii=ii: (stream_verilog(make(dev), f"poly_modulo{ii}"), f"poly_modulo{ii}"),
-            lambda dev, make=make_modulo: make(dev).latency, lambda dev, ii=ii: ii, max_error_pu, extra=extra))
+        if f"modulo{ii}" in names:
+            specs.append(_spec(lambda dev, ii=ii: Modulo(ii, _family(dev)), plan, f"modulo{ii}",
+                               f"polynomial, modulo-scheduled, one target per {ii} cycles", max_error_pu, extra))
     return specs + folded_specs(plan, max_error_pu, names, extra)
 
 
 def dsp_specs(plan, max_error_pu: float | None, names=DSP_DESIGNS, extra: dict | None = None) -> list[DesignSpec]:
     """Specs of the modulo-scheduled evaluators (II = MODULO_DSP_II) of a plan fitted with
     ``fit.products = "dsp"`` for the ECP5, every product on an instantiated MULT18X18D."""
-    from ikseries.hdl.flat import stream_verilog
-    from ikseries.hdl.modulo import ModuloEvaluator
+    from ikseries.hdl.architectures.modulo import Modulo
 
-    specs = []
-    for ii in MODULO_DSP_II:
-        if f"modulo{ii}d" not in names:
-            continue
-
-        def make_dsp(dev, ii=ii):
-            return ModuloEvaluator(plan, ii, dsp=(18, 18), dsp_registers="ecp5")
-        specs.append(DesignSpec(
-            f"modulo{ii}d", "polynomial", f"polynomial, 18x18 products (fit.products = dsp), modulo-scheduled, "
-            f"one target per {ii} cycles, MULT18X18D primitives with their registers",
-            lambda dev, make=make_dsp, ii=ii: (stream_verilog(make(dev), f"poly_modulo{ii}d"), f"poly_modulo{ii}d"),
-            lambda dev, make=make_dsp: make(dev).latency, lambda dev, ii=ii: ii, max_error_pu,
-            devices=(ECP5,), extra=dict(extra or {})))
-    return specs
+    return [_spec(lambda dev, ii=ii: Modulo(ii, "ecp5", primitives=True), plan, f"modulo{ii}d",
+                  f"polynomial, 18x18 products (fit.products = dsp), modulo-scheduled, one target per {ii} "
+                  f"cycles, MULT18X18D primitives with their registers", max_error_pu, extra or {}, (ECP5,))
+            for ii in MODULO_DSP_II if f"modulo{ii}d" in names]
 
 
 def folded_specs(plan, max_error_pu: float | None, names, extra: dict) -> list[DesignSpec]:
     """Specs of the folded evaluators (k = 1, 2 multipliers of the device's DSP size)."""
-    from ikseries.hdl.flat import stream_verilog
-    from ikseries.hdl.folded import FoldedEvaluator
-    from ikseries.hdl.schedule import DSP_SIZES
+    from ikseries.hdl.architectures.folded import Folded
 
-    specs = []
-    for k in (1, 2):
-        if f"folded{k}" not in names:
-            continue
-
-        def make(dev, k=k):
-            return FoldedEvaluator(plan, k, DSP_SIZES[_family(dev)])
-        specs.append(DesignSpec(
-            f"folded{k}", "polynomial", f"polynomial, folded, {k} multiplier{'s' * (k > 1)} (device DSP size)",
-            lambda dev, make=make, k=k: (stream_verilog(make(dev), f"poly_folded{k}"), f"poly_folded{k}"),
-            lambda dev, make=make: make(dev).latency, lambda dev, make=make: make(dev).initiation_interval,
-            max_error_pu, extra=extra))
-    return specs
+    return [_spec(lambda dev, k=k: Folded(k, _family(dev)), plan, f"folded{k}",
+                  f"polynomial, folded, {k} multiplier{'s' * (k > 1)} (device DSP size)", max_error_pu, extra)
+            for k in (1, 2) if f"folded{k}" in names]
 
 
 def cordic_spec(robot, design, max_error_pu: float, extra: dict, iterative: bool = False) -> DesignSpec:
@@ -176,7 +155,7 @@ def cordic_spec(robot, design, max_error_pu: float, extra: dict, iterative: bool
 def hexapod_spec(clock_hz_for_refresh=None) -> DesignSpec:
     """Spec of the hexapod preset's shared core (the configuration ``choose_architecture`` picks)."""
     from ikseries.accuracy import measure
-    from ikseries.architecture import choose_architecture
+    from ikseries.architecture import build_target, choose_architecture
     from ikseries.fit.fitter import fit_robot
     from ikseries.hdl.export import robot_verilog
     from ikseries.robot import load_preset
@@ -190,7 +169,8 @@ def hexapod_spec(clock_hz_for_refresh=None) -> DesignSpec:
     return DesignSpec(
         "hexapod", "robot", f"hexapod shared core: {choice.candidate.describe()}, {core.legs} legs, "
         f"{core.legs * len(core.servos)} PWM",
-        lambda dev: (robot_verilog(choice.candidate.build(robot, plan), "hexapod_core"), "hexapod_core"),
+        lambda dev: (robot_verilog(choice.candidate.build(plan, build_target(robot)), "hexapod_core"),
+                     "hexapod_core"),
         lambda dev: core.latency, lambda dev: core.initiation_interval,
         max(e["total"] for e in m["servos"].values()), devices=(ICE40,),
         extra={"legs": core.legs, "servos": core.legs * len(core.servos), "robot_clock_mhz": robot.clock_hz / 1e6,

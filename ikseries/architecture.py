@@ -3,20 +3,22 @@
 ``hardware.architecture = "auto"`` takes the smallest configuration that refreshes every
 leg at least ``hardware.min_refresh_hz`` times a second at ``hardware.clock_hz``, trying in
 order of size: a folded evaluator with 1 multiplier, with 2, then (one leg only) the
-modulo-scheduled evaluator with initiation intervals 16, 8, 4, 2 (:class:`ModuloEvaluator`:
-the dataflow pipelined, its multiplications shared) and the fully pipelined evaluator. A robot with ``legs > 1`` always gets a :class:`RobotCore` (one folded
-evaluator time-multiplexed over the legs).
+modulo-scheduled evaluator with initiation intervals 16, 8, 4, 2 (the dataflow pipelined, its
+multiplications shared) and the fully pipelined evaluator. A robot with ``legs > 1`` always gets
+the shared architecture (one folded evaluator time-multiplexed over the legs).
 
 ``hardware.architecture = "fastest"`` takes the fastest configuration whose Yosys cell counts fit
 ``hardware.fit_device`` (:data:`ikseries.synth.FIT_DEVICES`; capacities in
-:data:`ikseries.synth.DEVICES`): it builds every configuration of :data:`FASTEST_ORDER` (the
+:data:`ikseries.synth.DEVICES`): it rates every configuration of :data:`FASTEST_ORDER` (the
 pipelined and modulo-scheduled evaluators for one leg; folded, shared by the legs when
-``legs > 1``, with 4, 2 and 1 multipliers), sorts them by refresh rate, fastest first (fewer multipliers first at equal
-rates), and synthesises each in turn for the device until one fits. A configuration slower than
+``legs > 1``, with 4, 2 and 1 multipliers), sorts them by refresh rate, fastest first (fewer
+multipliers first at equal rates), and builds and synthesises each in turn for the device until
+one fits. A configuration slower than
 ``hardware.min_refresh_hz`` is rejected without synthesis. Fitting by cell counts is an estimate
 before place-and-route (routing or packing can still fail on a nearly full device).
 
-Rates come from the built component's ``initiation_interval`` property, never from a formula here.
+Configurations are :class:`ikseries.hdl.architectures.Architecture` objects; rates come from their
+``timing`` (pure schedule data, nothing elaborated), never from a formula here.
 """
 from __future__ import annotations
 
@@ -25,27 +27,27 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from amaranth._unused import MustUse
-
-from .hdl.leg import LegCore
-from .hdl.schedule import DSP_SIZES
-from .hdl.shared import RobotCore
+from .hdl.architectures import Architecture, BuildTarget
+from .hdl.architectures.folded import Folded
+from .hdl.architectures.modulo import Modulo
+from .hdl.architectures.pipelined import Pipelined
+from .hdl.architectures.shared import Shared
 from .synth import DEVICES, FIT_DEVICES, overflows
 
-__all__ = ["ArchitectureError", "Candidate", "Choice", "Tried", "AUTO_ORDER", "FASTEST_ORDER", "candidates",
-           "choose_architecture", "synth_candidate"]
+__all__ = ["ArchitectureError", "Choice", "Tried", "AUTO_ORDER", "FASTEST_ORDER", "candidates",
+           "choose_architecture", "synth_candidate", "build_target"]
 
 #: initiation intervals of the modulo-scheduled evaluator that "auto" and "fastest" try
 MODULO_INTERVALS = (16, 8, 4, 2)
 #: what "auto" tries, smallest first: (architecture, multipliers or initiation interval);
 #: "modulo" and "pipelined" only for one leg
 AUTO_ORDER = (("folded", 1), ("folded", 2), *(("modulo", ii) for ii in MODULO_INTERVALS), ("pipelined", None))
-#: what "fastest" tries (then sorted by the built cores' rates)
+#: what "fastest" tries (then sorted by their rates)
 FASTEST_ORDER = (("pipelined", None), *(("modulo", ii) for ii in reversed(MODULO_INTERVALS)),
                  ("folded", 4), ("folded", 2), ("folded", 1))
 
-#: synthesis for "fastest": (candidate, its core, synthesis target) -> Yosys counts by category
-SynthFunction = Callable[["Candidate", object, str], dict]
+#: synthesis for "fastest": (architecture, its core, synthesis target) -> Yosys counts by category
+SynthFunction = Callable[[Architecture, object, str], dict]
 
 
 class ArchitectureError(ValueError):
@@ -53,43 +55,9 @@ class ArchitectureError(ValueError):
 
 
 @dataclass(frozen=True)
-class Candidate:
-    """One configuration: ``architecture`` is "pipelined", "modulo", "folded" (one leg) or
-    "shared"; ``interval`` the initiation interval of a "modulo" one."""
-    architecture: str
-    multipliers: int | None
-    dsp: str | None
-    legs: int
-    interval: int | None = None
-
-    def describe(self) -> str:
-        if self.architecture == "pipelined":
-            return "pipelined (one target per cycle)"
-        d = "full-width" if self.dsp == "none" else "{} {}x{} DSP".format(self.dsp, *DSP_SIZES[self.dsp])
-        if self.architecture == "modulo":
-            return f"modulo-scheduled pipeline, one target per {self.interval} cycles ({d})"
-        k = f"{self.multipliers} multiplier{'s' if self.multipliers != 1 else ''}"
-        what = f"folded evaluator shared by {self.legs} legs" if self.architecture == "shared" else "folded"
-        return f"{what}, {k} ({d})"
-
-    def build(self, robot, plan):
-        """The core of this configuration for ``robot`` and its fitted ``plan``."""
-        dsp = None if self.dsp in (None, "none") else DSP_SIZES[self.dsp]
-        if self.architecture == "shared":
-            return RobotCore(plan, self.legs, robot.pwm_period_ticks, robot.clock_hz,
-                             multipliers=self.multipliers, dsp=dsp)
-        if self.architecture == "folded":
-            return LegCore(plan, robot.pwm_period_ticks, multipliers=self.multipliers, dsp=dsp)
-        if self.architecture == "modulo":
-            prim = "ecp5" if getattr(robot, "dsp_primitives", False) and self.dsp == "ecp5" else None
-            return LegCore(plan, robot.pwm_period_ticks, interval=self.interval, dsp=dsp, dsp_registers=prim)
-        return LegCore(plan, robot.pwm_period_ticks)
-
-
-@dataclass(frozen=True)
 class Tried:
-    """One candidate tried: its rate and, for "fastest", its Yosys counts and why it was rejected."""
-    candidate: Candidate
+    """One configuration tried: its rate and, for "fastest", its Yosys counts and why it was rejected."""
+    candidate: Architecture
     initiation_interval: int
     refresh_hz: float
     counts: dict | None = None    # Yosys counts by category on the fit device (None: not synthesised)
@@ -97,26 +65,27 @@ class Tried:
 
     def record(self) -> dict:
         t = self.candidate
-        return {"architecture": t.architecture, "multipliers": t.multipliers, "description": t.describe(),
+        return {"architecture": t.name, "multipliers": t.multipliers, "description": t.describe(),
                 "initiation_interval": self.initiation_interval, "refresh_hz": self.refresh_hz,
                 "counts": self.counts, "rejected": self.rejected}
 
 
 @dataclass(frozen=True)
 class Choice:
-    """The chosen configuration, its core, and every candidate tried with its rate."""
-    candidate: Candidate
+    """The chosen configuration, its core, and every configuration tried with its rate."""
+    candidate: Architecture
     core: object               # LegCore or RobotCore
     refresh_hz: float
     reason: str
     tried: tuple               # (Tried, ...) in the order tried, the chosen one last
     fit_device: str | None = None   # "fastest": the device (hardware.fit_device) it fits
+    multipliers: int | None = None  # multiplier units of the chosen configuration
 
     def record(self) -> dict:
         """JSON-ready description for the manifest and the report."""
         c = self.candidate
-        rec = {"architecture": c.architecture, "multipliers": _multipliers(c, self.core), "dsp": c.dsp,
-               "legs": c.legs, "initiation_interval_asked": c.interval,
+        rec = {"architecture": c.name, "multipliers": self.multipliers, "dsp": c.dsp,
+               "legs": c.legs, "initiation_interval_asked": c.interval if c.name == "modulo" else None,
                "description": c.describe(), "reason": self.reason,
                "latency_cycles": self.core.latency, "initiation_interval": self.core.initiation_interval,
                "refresh_hz": self.refresh_hz, "tried": [t.record() for t in self.tried]}
@@ -126,7 +95,22 @@ class Choice:
         return rec
 
 
-def candidates(robot) -> list[Candidate]:
+def build_target(robot) -> BuildTarget:
+    """What the robot's core drives: its PWM period at its clock."""
+    return BuildTarget(robot.pwm_period_ticks, robot.clock_hz)
+
+
+def _configuration(arch: str, k, robot) -> Architecture:
+    if robot.legs > 1:
+        return Shared(robot.legs, k, robot.dsp)
+    if arch == "modulo":
+        return Modulo(k, robot.dsp, primitives=bool(getattr(robot, "dsp_primitives", False)) and robot.dsp == "ecp5")
+    if arch == "folded":
+        return Folded(k, robot.dsp)
+    return Pipelined()
+
+
+def candidates(robot) -> list[Architecture]:
     """The configurations the robot description allows, in the order they are tried."""
     if robot.architecture == "auto":
         order = AUTO_ORDER
@@ -138,55 +122,23 @@ def candidates(robot) -> list[Candidate]:
         order = (("modulo", robot.interval),)
     else:
         order = (("pipelined", None),)
-    out = []
-    for arch, k in order:
-        if robot.legs > 1:
-            if arch in ("pipelined", "modulo"):
-                continue
-            arch = "shared"
-        if arch == "modulo":
-            out.append(Candidate(arch, None, robot.dsp, robot.legs, interval=k))
-        else:
-            out.append(Candidate(arch, k, None if arch == "pipelined" else robot.dsp, robot.legs))
-    return out
+    if robot.legs > 1:       # the legs share one folded evaluator
+        order = [o for o in order if o[0] == "folded"]
+    return [_configuration(arch, k, robot) for arch, k in order]
 
 
-def _size_rank(cand: Candidate) -> tuple:
+def _size_rank(cand: Architecture) -> tuple:
     """Orders configurations by size: folded (fewest multipliers first), modulo-scheduled
     (longest interval first), pipelined."""
-    if cand.architecture == "modulo":
+    if cand.name == "modulo":
         return (1, -cand.interval)
-    return (2, 0) if cand.architecture == "pipelined" else (0, cand.multipliers)
+    return (2, 0) if cand.name == "pipelined" else (0, cand.multipliers)
 
 
-def _multipliers(cand: Candidate, core) -> int | None:
-    """The multipliers of a configuration (a modulo-scheduled core sizes its own)."""
-    if cand.architecture == "modulo":
-        return core.evaluator.multipliers
-    return cand.multipliers
-
-
-def _discard(obj, seen=None) -> None:
-    """Mark a core built only for its rate, and the elaboratables it holds, as used: Amaranth
-    warns (UnusedElaboratable) about every one when it is garbage-collected unelaborated."""
-    seen = set() if seen is None else seen
-    if id(obj) in seen:
-        return
-    seen.add(id(obj))
-    if isinstance(obj, (list, tuple)) or isinstance(obj, dict):
-        for v in (obj.values() if isinstance(obj, dict) else obj):
-            _discard(v, seen)
-    elif isinstance(obj, MustUse):
-        obj._MustUse__used = True
-        for v in vars(obj).values():
-            _discard(v, seen)
-
-
-def _refresh_hz(core, robot) -> float:
-    """Times per second every leg can get new widths (targets offered round-robin)."""
-    if isinstance(core, RobotCore):
-        return core.refresh_hz
-    return robot.clock_hz / core.initiation_interval
+def _chosen(robot, plan, cand: Architecture, hz: float, reason: str, tried, fit_device=None, core=None) -> Choice:
+    core = core if core is not None else cand.build(plan, build_target(robot))
+    return Choice(cand, core, hz, reason, tuple(tried), fit_device, cand.multiplier_units(plan)
+                  if cand.name in ("modulo", "folded", "shared") else None)
 
 
 def choose_architecture(robot, plan, *, synth: SynthFunction | None = None,
@@ -194,8 +146,10 @@ def choose_architecture(robot, plan, *, synth: SynthFunction | None = None,
     """The first configuration of :func:`candidates` that meets ``robot.min_refresh_hz``
     (for "fastest": the fastest of them whose Yosys counts fit ``robot.fit_device``).
 
-    ``synth`` (``"fastest"`` only; default :func:`synth_candidate`) returns the Yosys counts
-    of a candidate's core for a synthesis target; ``progress`` receives one-line messages.
+    Rates come from each architecture's :meth:`~ikseries.hdl.architectures.Architecture.timing`
+    (pure schedule data); only the chosen core (and, for "fastest", each one synthesised) is
+    built. ``synth`` ("fastest" only; default :func:`synth_candidate`) returns the Yosys counts
+    of a configuration's core for a synthesis target; ``progress`` receives one-line messages.
     Raises :class:`ArchitectureError` (one line, naming the best rate reached, or for
     "fastest" the smallest configuration synthesised and what overflowed) if none does.
     """
@@ -203,22 +157,21 @@ def choose_architecture(robot, plan, *, synth: SynthFunction | None = None,
         return _choose_fastest(robot, plan, synth or synth_candidate, progress or (lambda msg: None))
     tried = []
     for cand in candidates(robot):
-        core = cand.build(robot, plan)
-        hz = _refresh_hz(core, robot)
-        tried.append(Tried(cand, core.initiation_interval, hz))
+        t = cand.timing(plan)
+        hz = t.refresh_hz(robot.clock_hz)
+        tried.append(Tried(cand, t.initiation_interval, hz))
         if hz < robot.min_refresh_hz:
-            _discard(core)
             continue
         if robot.architecture == "auto":
             smaller = "; smaller ones: " + ", ".join(f"{t.candidate.describe()} {t.refresh_hz:,.0f} Hz"
                                                      for t in tried[:-1]) if len(tried) > 1 else ""
             reason = (f"auto: the smallest configuration that refreshes every leg at least "
                       f"{robot.min_refresh_hz:g} times a second at {robot.clock_hz / 1e6:g} MHz "
-                      f"({hz:,.0f} Hz, initiation interval {core.initiation_interval} cycles){smaller}")
+                      f"({hz:,.0f} Hz, initiation interval {t.initiation_interval} cycles){smaller}")
         else:
             reason = (f"hardware.architecture = {robot.architecture}: {hz:,.0f} Hz >= "
                       f"min_refresh_hz {robot.min_refresh_hz:g} Hz")
-        return Choice(cand, core, hz, reason, tuple(tried))
+        return _chosen(robot, plan, cand, hz, reason, tried)
     _rate_error(robot, max(tried, key=lambda t: t.refresh_hz))
 
 
@@ -232,9 +185,10 @@ def _rate_error(robot, best: Tried):
         f"not {robot.min_refresh_hz:g}")
 
 
-def synth_candidate(cand: Candidate, core, target: str) -> dict:
+def synth_candidate(cand: Architecture, core, target: str) -> dict:
     """Yosys counts by category (:func:`ikseries.synth.synth_counts`) of ``core`` for ``target``."""
     from .hdl.export import leg_verilog, robot_verilog
+    from .hdl.shared import RobotCore
     from .synth import synth_counts
     name = "ikseries_fit"
     text = robot_verilog(core, name) if isinstance(core, RobotCore) else leg_verilog(core, name)
@@ -251,43 +205,48 @@ def _usage(counts: dict, cap: dict) -> str:
 def _choose_fastest(robot, plan, synth: SynthFunction, progress) -> Choice:
     target = FIT_DEVICES[robot.fit_device]
     part, cap = DEVICES[target]
-    built = []
+    rated = []
     for cand in candidates(robot):
-        core = cand.build(robot, plan)
-        built.append((cand, core, _refresh_hz(core, robot)))
+        t = cand.timing(plan)
+        rated.append((cand, t.initiation_interval, t.refresh_hz(robot.clock_hz)))
     # fastest first; at equal rates the one with fewer multipliers (the pipelined one has none)
-    built.sort(key=lambda b: (-b[2], b[0].multipliers or 0))
+    rated.sort(key=lambda r: (-r[2], r[0].multipliers or 0))
     tried = []
-    for cand, core, hz in built:
+    for cand, ii, hz in rated:
         if hz < robot.min_refresh_hz:
-            _discard(core)
-            tried.append(Tried(cand, core.initiation_interval, hz,
-                               rejected=f"{hz:,.0f} Hz < hardware.min_refresh_hz {robot.min_refresh_hz:g} "
-                                        f"(not synthesised)"))
+            tried.append(Tried(cand, ii, hz, rejected=f"{hz:,.0f} Hz < hardware.min_refresh_hz "
+                                                      f"{robot.min_refresh_hz:g} (not synthesised)"))
             continue
         progress(f"fastest on {part}: synthesising {cand.describe()} ({hz:,.0f} Hz)")
+        core = cand.build(plan, build_target(robot))
         counts = synth(cand, core, target)
         over = overflows(target, counts)
         if over:
-            tried.append(Tried(cand, core.initiation_interval, hz, counts,
+            tried.append(Tried(cand, ii, hz, counts,
                                f"does not fit {part} by Yosys cell counts (before place-and-route): "
                                + ", ".join(f"{k} {u:,} > {a:,}" for k, (u, a) in over.items())))
             progress(f"fastest on {part}: {cand.describe()} rejected: {tried[-1].rejected}")
             continue
-        tried.append(Tried(cand, core.initiation_interval, hz, counts))
-        faster = "; faster ones rejected: " + "; ".join(f"{t.candidate.describe()}: {t.rejected}"
-                                                       for t in tried[:-1]) if len(tried) > 1 else ""
-        rest = built[len(tried):]
-        slower = "; slower ones, not tried: " + ", ".join(f"{c.describe()} {h:,.0f} Hz" for c, _, h in rest) \
-            if rest else ""
-        for _, other, _ in rest:
-            _discard(other)
-        reason = (f"fastest: the fastest configuration whose Yosys cell counts fit {part} "
-                  f"(hardware.fit_device = {robot.fit_device}; {_usage(counts, cap)}; an estimate before "
-                  f"place-and-route, which can still fail on a nearly full device), refreshing every leg "
-                  f"{hz:,.0f} times a second at {robot.clock_hz / 1e6:g} MHz (initiation interval "
-                  f"{core.initiation_interval} cycles){faster}{slower}")
-        return Choice(cand, core, hz, reason, tuple(tried), robot.fit_device)
+        tried.append(Tried(cand, ii, hz, counts))
+        return _chosen(robot, plan, cand, hz, _fastest_reason(robot, part, cap, counts, ii, hz, tried,
+                                                              rated[len(tried):]),
+                       tried, robot.fit_device, core)
+    _fastest_error(robot, target, part, tried)
+
+
+def _fastest_reason(robot, part, cap, counts, ii, hz, tried, rest) -> str:
+    faster = "; faster ones rejected: " + "; ".join(f"{t.candidate.describe()}: {t.rejected}"
+                                                   for t in tried[:-1]) if len(tried) > 1 else ""
+    slower = "; slower ones, not tried: " + ", ".join(f"{c.describe()} {h:,.0f} Hz" for c, _, h in rest) \
+        if rest else ""
+    return (f"fastest: the fastest configuration whose Yosys cell counts fit {part} "
+            f"(hardware.fit_device = {robot.fit_device}; {_usage(counts, cap)}; an estimate before "
+            f"place-and-route, which can still fail on a nearly full device), refreshing every leg "
+            f"{hz:,.0f} times a second at {robot.clock_hz / 1e6:g} MHz (initiation interval "
+            f"{ii} cycles){faster}{slower}")
+
+
+def _fastest_error(robot, target, part, tried):
     synthesised = [t for t in tried if t.counts is not None]
     if not synthesised:       # even the fastest is below the rate
         _rate_error(robot, tried[0])

@@ -148,24 +148,24 @@ def test_leg_core_evaluator_errors(small_plan, kw, msg):
 
 def test_auto_takes_the_smallest_configuration_that_meets_the_rate(auto_robot, small_plan):
     c = choose_architecture(auto_robot, small_plan)
-    assert (c.candidate.architecture, c.candidate.multipliers, c.candidate.dsp) == ("folded", 1, "ice40")
+    assert (c.candidate.name, c.candidate.multipliers, c.candidate.dsp) == ("folded", 1, "ice40")
     ii = LegCore(small_plan, auto_robot.pwm_period_ticks, multipliers=1, dsp=(16, 16)).initiation_interval
     assert c.core.initiation_interval == ii and c.refresh_hz == auto_robot.clock_hz / ii
-    assert [t.candidate.architecture for t in c.tried] == ["folded"]
+    assert [t.candidate.name for t in c.tried] == ["folded"]
     # too fast for any folded evaluator: the modulo-scheduled one with the longest interval
     # that meets the rate, after trying k = 1, 2 and the longer intervals
     half = dataclasses.replace(auto_robot, min_refresh_hz=auto_robot.clock_hz / 2)
     c = choose_architecture(half, small_plan)
-    assert (c.candidate.architecture, c.candidate.interval) == ("modulo", 2) and c.core.architecture == "modulo"
+    assert (c.candidate.name, c.candidate.interval) == ("modulo", 2) and c.core.architecture == "modulo"
     assert c.core.initiation_interval == 2 and c.refresh_hz == auto_robot.clock_hz / 2
-    assert [(t.candidate.architecture, t.candidate.multipliers or t.candidate.interval) for t in c.tried] == [
+    assert [(t.candidate.name, t.candidate.multipliers or t.candidate.interval) for t in c.tried] == [
         ("folded", 1), ("folded", 2), ("modulo", 16), ("modulo", 8), ("modulo", 4), ("modulo", 2)]
     assert all(t.refresh_hz < half.min_refresh_hz for t in c.tried[:-1])
     assert c.record()["multipliers"] == c.core.evaluator.multipliers
     # one target per cycle: the pipelined evaluator
     fast = dataclasses.replace(auto_robot, min_refresh_hz=auto_robot.clock_hz)
     c = choose_architecture(fast, small_plan)
-    assert c.candidate.architecture == "pipelined" and isinstance(c.core, LegCore)
+    assert c.candidate.name == "pipelined" and isinstance(c.core, LegCore)
     assert c.core.initiation_interval == 1 and c.refresh_hz == auto_robot.clock_hz
     rec = c.record()
     assert rec["architecture"] == "pipelined" and rec["reason"].startswith("auto: the smallest configuration")
@@ -174,7 +174,7 @@ def test_auto_takes_the_smallest_configuration_that_meets_the_rate(auto_robot, s
 def test_explicit_modulo_configuration(auto_robot, small_plan):
     c = choose_architecture(dataclasses.replace(auto_robot, architecture="modulo", interval=5, dsp="ecp5",
                                                 min_refresh_hz=1.0), small_plan)
-    assert (c.candidate.architecture, c.candidate.interval) == ("modulo", 5)
+    assert (c.candidate.name, c.candidate.interval) == ("modulo", 5)
     assert c.core.architecture == "modulo" and c.core.initiation_interval == 5
     assert c.record()["multipliers"] == c.core.evaluator.multipliers
     assert c.reason.startswith("hardware.architecture = modulo:")
@@ -183,11 +183,11 @@ def test_explicit_modulo_configuration(auto_robot, small_plan):
 def test_explicit_and_shared_configurations(auto_robot, small_plan):
     c = choose_architecture(dataclasses.replace(auto_robot, architecture="folded", multipliers=2, dsp="none"),
                             small_plan)
-    assert (c.candidate.architecture, c.candidate.multipliers, c.candidate.dsp) == ("folded", 2, "none")
+    assert (c.candidate.name, c.candidate.multipliers, c.candidate.dsp) == ("folded", 2, "none")
     assert c.core.evaluator.dsp is None and c.core.evaluator.multipliers == 2
     six = dataclasses.replace(auto_robot, legs=6)
     c = choose_architecture(six, small_plan)
-    assert isinstance(c.core, RobotCore) and c.candidate.architecture == "shared" and c.core.legs == 6
+    assert isinstance(c.core, RobotCore) and c.candidate.name == "shared" and c.core.legs == 6
     assert c.refresh_hz == c.core.refresh_hz == six.clock_hz / (6 * c.core.initiation_interval)
     c = choose_architecture(dataclasses.replace(six, architecture="folded", multipliers=2), small_plan)
     assert c.candidate.multipliers == 2 and c.core.evaluator.multipliers == 2

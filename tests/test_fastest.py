@@ -6,7 +6,7 @@ import tomllib
 
 import pytest
 
-from ikseries.architecture import ArchitectureError, _discard, candidates, choose_architecture
+from ikseries.architecture import ArchitectureError, build_target, candidates, choose_architecture
 from ikseries.cli import _hardware_overrides
 from ikseries.report import _throughput_lines
 from ikseries.robot import parse_robot, preset_text, robot_from_record, robot_record
@@ -25,7 +25,7 @@ class FakeSynth:
         self.calls = []
 
     def __call__(self, cand, core, target):
-        self.calls.append(((cand.architecture, cand.multipliers or cand.interval), target))
+        self.calls.append(((cand.name, cand.multipliers or cand.interval), target))
         return {"LUT": 1000, "FF": 1000, "carry": 100, "DSP": 4, "BRAM": 0, **self.counts(cand)}
 
 
@@ -33,9 +33,8 @@ def _rates(robot, plan):
     """(architecture, multipliers or initiation interval) -> refresh Hz, from the built cores."""
     out = {}
     for c in candidates(robot):
-        core = c.build(robot, plan)
-        out[(c.architecture, c.multipliers or c.interval)] = robot.clock_hz / core.initiation_interval
-        _discard(core)
+        core = c.build(plan, build_target(robot))
+        out[(c.name, c.multipliers or c.interval)] = robot.clock_hz / core.initiation_interval
     return out
 
 
@@ -45,13 +44,13 @@ def test_fastest_fitting_configuration_is_chosen(fastest, small_plan):
     order = sorted(rates, key=lambda c: (-rates[c], c[1] or 0))
     assert order[0] == ("pipelined", None)
     too_big = order[1]
-    synth = FakeSynth(lambda c: {"DSP": 40} if c.architecture == "pipelined" else
-                      {"LUT": 30000} if (c.architecture, c.multipliers or c.interval) == too_big else {})
+    synth = FakeSynth(lambda c: {"DSP": 40} if c.name == "pipelined" else
+                      {"LUT": 30000} if (c.name, c.multipliers or c.interval) == too_big else {})
     msgs = []
     c = choose_architecture(fastest, small_plan, synth=synth, progress=msgs.append)
     assert [call for call, _ in synth.calls] == order[:3] and {t for _, t in synth.calls} == {"ecp5"}
     cand = c.candidate
-    assert (cand.architecture, cand.multipliers or cand.interval, cand.dsp) == (*order[2], "ecp5")
+    assert (cand.name, cand.multipliers or cand.interval, cand.dsp) == (*order[2], "ecp5")
     assert c.refresh_hz == rates[order[2]] == fastest.clock_hz / c.core.initiation_interval
     rej = [t.rejected for t in c.tried]
     assert rej[0] == ("does not fit LFE5U-25F by Yosys cell counts (before place-and-route): DSP 40 > 28")
@@ -77,7 +76,7 @@ def test_fastest_fitting_configuration_is_chosen(fastest, small_plan):
 
 
 def test_no_configuration_fits_names_the_smallest_and_the_overflow(fastest, small_plan):
-    synth = FakeSynth(lambda c: {"DSP": 130 if c.architecture == "pipelined" else 30 + (c.multipliers or 0)})
+    synth = FakeSynth(lambda c: {"DSP": 130 if c.name == "pipelined" else 30 + (c.multipliers or 0)})
     with pytest.raises(ArchitectureError) as e:
         choose_architecture(fastest, small_plan, synth=synth)
     assert len(synth.calls) == len(candidates(fastest)) == 8   # pipelined, 4 modulo, 3 folded
@@ -112,7 +111,7 @@ def test_several_legs_try_shared_configurations_only(fastest, small_plan):
     synth = FakeSynth(lambda c: {})
     c = choose_architecture(six, small_plan, synth=synth)
     assert synth.calls[0][1] == "ice40" and len(synth.calls) == 1
-    assert c.candidate.architecture == "shared" and c.core.legs == 6
+    assert c.candidate.name == "shared" and c.core.legs == 6
     assert c.refresh_hz == c.core.refresh_hz
 
 
@@ -138,8 +137,8 @@ def test_fastest_runs_yosys(small_robot, small_plan):
     robot = dataclasses.replace(small_robot, architecture="fastest", fit_device="ice40-up5k", dsp="ice40")
     c = choose_architecture(robot, small_plan)
     first = c.tried[0]
-    assert first.candidate.architecture == "pipelined" and first.counts["DSP"] > 8
+    assert first.candidate.name == "pipelined" and first.counts["DSP"] > 8
     assert f"DSP {first.counts['DSP']} > 8" in first.rejected
-    assert c.candidate.architecture in ("modulo", "folded") and c.tried[-1].rejected is None
+    assert c.candidate.name in ("modulo", "folded") and c.tried[-1].rejected is None
     assert all("does not fit" in t.rejected for t in c.tried[:-1])
     assert 0 < c.tried[-1].counts["DSP"] <= 8 and 0 < c.tried[-1].counts["LUT"] <= 5280

@@ -17,6 +17,8 @@ import json
 import sys
 from pathlib import Path
 
+from ikseries.fit.baselines.cordic import CordicDesign
+
 RECORD = Path(__file__).with_name("data") / "verilog_hashes.json"
 
 #: configuration -> (preset, hardware options (as ``ikseries build`` flags set them), kind).
@@ -59,6 +61,9 @@ def robot_of(name: str):
 
 
 _PLANS: dict = {}   # fit-relevant robot record (JSON) -> fitted plan
+#: the CORDIC design the tests use (``size_cordic`` of cylinder-leg on its verification points)
+SIZED = CordicDesign(rot_iters=13, xy_iters=13, uv_iters=14, law_iters=13, len_frac=11, area_frac=3,
+                     angle_frac=11, gain_frac=18, scale_frac=0)
 
 
 def plan_of(name: str, plan=None):
@@ -82,12 +87,9 @@ def verilog_of(name: str, plan=None) -> str:
     robot = robot_of(name)
     kind = CONFIGS[name][2]
     if kind != "core":
-        from ikseries.fit.baselines.cordic import CordicDesign
         from ikseries.hdl.cordic import CordicLegSolver
         from ikseries.hdl.flat import stream_verilog
-        sized = CordicDesign(rot_iters=13, xy_iters=13, uv_iters=14, law_iters=13, len_frac=11, area_frac=3,
-                             angle_frac=11, gain_frac=18, scale_frac=0)
-        core = CordicLegSolver(robot, sized, 1 if kind == "cordic" else 17)
+        core = CordicLegSolver(robot, SIZED, 1 if kind == "cordic" else 17)
         return stream_verilog(core, "cordic_solver")
     core = choose_architecture(robot, plan_of(name, plan)).core
     mod = module_name(robot.name)

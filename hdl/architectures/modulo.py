@@ -1,0 +1,63 @@
+"""Modulo-scheduled evaluator: the dataflow pipelined, its multiplications shared."""
+from __future__ import annotations
+
+from ..leg import LegCore
+from ..modulo import ModuloEvaluator, modulo_schedule
+from . import Architecture, BuildTarget, Timing
+from .options import dsp_label, dsp_size, positive_int
+
+__all__ = ["Modulo"]
+
+
+class Modulo(Architecture):
+    """One target every ``interval`` cycles on ceil(multiplications / interval) multipliers
+    per operand class (:class:`~ikseries.hdl.modulo.ModuloEvaluator`).
+
+    Parameters
+    ----------
+    interval : int
+        Initiation interval, >= 1.
+    dsp : str or None
+        DSP family whose block size splits wide products into limbs (None, "none": full width
+        products; the evaluator's default 18 x 18).
+    primitives : bool
+        Products on instantiated ECP5 MULT18X18D blocks with their own registers (needs
+        ``dsp="ecp5"``).
+    """
+
+    name = "modulo"
+
+    def __init__(self, interval: int, dsp: str | None = None, primitives: bool = False):
+        self.interval = positive_int(interval, "interval")
+        dsp_size(dsp)
+        if not isinstance(primitives, bool):
+            raise ValueError(f"primitives must be true or false, not {primitives!r}")
+        if primitives and dsp != "ecp5":
+            raise ValueError(f"dsp must be 'ecp5' with primitives (the only DSP primitive instantiated is "
+                             f"the ECP5 MULT18X18D), not {dsp!r}")
+        self.dsp, self.primitives = dsp, primitives
+
+    @property
+    def _size(self):
+        return dsp_size(self.dsp) or (18, 18)
+
+    def timing(self, plan) -> Timing:
+        s = modulo_schedule(plan, self.interval, self._size)
+        return Timing(s.latency, s.initiation_interval, "modulo")
+
+    def evaluator(self, plan):
+        return ModuloEvaluator(plan, self.interval, dsp=self._size,
+                               dsp_registers="ecp5" if self.primitives else None)
+
+    def build(self, plan, target: BuildTarget):
+        return LegCore(plan, target.period, interval=self.interval, dsp=dsp_size(self.dsp),
+                       dsp_registers="ecp5" if self.primitives else None)
+
+    def multiplier_units(self, plan) -> int:
+        return modulo_schedule(plan, self.interval, self._size).units
+
+    def describe(self) -> str:
+        return f"modulo-scheduled pipeline, one target per {self.interval} cycles ({dsp_label(self.dsp)})"
+
+    def record(self) -> dict:
+        return {**super().record(), "primitives": self.primitives}

@@ -1,0 +1,28 @@
+"""Option checks shared by the polynomial architectures."""
+from __future__ import annotations
+
+from ..schedule import DSP_SIZES
+
+__all__ = ["dsp_size", "positive_int", "dsp_label"]
+
+
+def dsp_size(dsp: str | None) -> tuple[int, int] | None:
+    """Signed operand widths of the DSP blocks of family ``dsp`` (None or "none": full-width
+    products)."""
+    if dsp in (None, "none"):
+        return None
+    if dsp not in DSP_SIZES:
+        raise ValueError(f"dsp must be None, 'none' or one of {', '.join(DSP_SIZES)}, not {dsp!r}")
+    return DSP_SIZES[dsp]
+
+
+def dsp_label(dsp: str | None) -> str:
+    """``ice40 16x16 DSP`` or ``full-width``."""
+    size = dsp_size(dsp)
+    return "full-width" if size is None else "{} {}x{} DSP".format(dsp, *size)
+
+
+def positive_int(value, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"{name} must be an integer >= 1, not {value!r}")
+    return value

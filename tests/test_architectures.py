@@ -1,0 +1,89 @@
+"""The Architecture interface: registry, option checks, timing from pure data equal to the
+built cores' timing."""
+import dataclasses
+
+import pytest
+
+from ikseries.architecture import build_target
+from ikseries.hdl.architectures import (STREAM_RULES, Architecture, BuildTarget, Timing, architecture_class,
+                                        architecture_names)
+from ikseries.hdl.architectures.cordic import CordicIterative, CordicPipelined
+from ikseries.hdl.architectures.folded import Folded
+from ikseries.hdl.architectures.modulo import Modulo
+from ikseries.hdl.architectures.pipelined import Pipelined
+from ikseries.hdl.architectures.shared import Shared
+
+POLYNOMIAL = [Pipelined(), Modulo(3), Modulo(8, "ice40"), Modulo(5, "ecp5", primitives=True), Folded(1, "ice40"),
+              Folded(2, "none"), Shared(3, 1, "ecp5")]
+
+
+def test_every_architecture_is_registered_by_its_name():
+    assert architecture_names() == ["cordic", "cordic-iterative", "folded", "modulo", "pipelined", "shared"]
+    for name in architecture_names():
+        cls = architecture_class(name)
+        assert issubclass(cls, Architecture) and cls.name == name
+
+
+def test_unknown_architecture_name():
+    with pytest.raises(ValueError, match=r"^architecture must be one of cordic, cordic-iterative, folded, modulo, "
+                                         r"pipelined, shared, not 'systolic'$"):
+        architecture_class("systolic")
+
+
+@pytest.mark.parametrize("arch", POLYNOMIAL, ids=lambda a: a.describe())
+def test_timing_from_pure_data_is_the_built_cores(arch, small_plan, robot):
+    """timing() needs no elaboration and agrees with the evaluator and the exported core."""
+    t = arch.timing(small_plan)
+    ev = arch.evaluator(small_plan)
+    core = arch.build(small_plan, build_target(robot))
+    assert (t.latency, t.initiation_interval) == (ev.latency, ev.initiation_interval)
+    assert (t.latency, t.initiation_interval) == (core.latency, core.initiation_interval)
+    assert t.stream_rule in STREAM_RULES and t.legs == arch.legs
+
+
+def test_stream_rules_and_rates(small_plan):
+    assert Pipelined().timing(small_plan).stream_rule == "pipelined"
+    assert Modulo(4).timing(small_plan).stream_rule == "modulo"
+    assert Folded(1).timing(small_plan).stream_rule == "folded"
+    t = Shared(6, 1).timing(small_plan)
+    assert t.refresh_hz(48e6) == pytest.approx(48e6 / (6 * t.initiation_interval))
+    assert t.latency_counts == "clock" and Modulo(4).timing(small_plan).latency_counts == "enable"
+    assert Modulo(4).timing(small_plan).initiation_interval == 4
+
+
+def test_cordic_architectures_time_their_solver(robot):
+    from ikseries.fit.baselines.cordic import CordicPlan
+    from verilog_hashes import SIZED
+    cp = CordicPlan(robot, dataclasses.replace(SIZED, rot_iters=3, xy_iters=3, uv_iters=3, law_iters=3))
+    for arch in (CordicPipelined(), CordicIterative(cp.longest_loop)):
+        t, core = arch.timing(cp), arch.build(cp, BuildTarget(1000, 48e6))
+        assert (t.latency, t.initiation_interval) == (core.latency, core.initiation_interval)
+    with pytest.raises(ValueError, match=rf"^interval must be an integer >= {cp.longest_loop} \(the longest loop "
+                                         rf"of this design\), not 2$"):
+        CordicIterative(2).timing(cp)
+
+
+@pytest.mark.parametrize("make, msg", [
+    (lambda: Modulo(0), r"^interval must be an integer >= 1, not 0$"),
+    (lambda: Modulo(True), r"^interval must be an integer >= 1, not True$"),
+    (lambda: Modulo(4, "ice40", primitives=True), r"^dsp must be 'ecp5' with primitives \(the only DSP primitive "
+                                                  r"instantiated is the ECP5 MULT18X18D\), not 'ice40'$"),
+    (lambda: Modulo(4, "ecp5", primitives="yes"), r"^primitives must be true or false, not 'yes'$"),
+    (lambda: Folded(0), r"^multipliers must be an integer >= 1, not 0$"),
+    (lambda: Folded(1, "virtex"), r"^dsp must be None, 'none' or one of ice40, ecp5, xc7, not 'virtex'$"),
+    (lambda: Shared(0), r"^legs must be an integer >= 1, not 0$"),
+    (lambda: CordicIterative(1.5), r"^interval must be an integer >= 1, not 1.5$"),
+    (lambda: Timing(3, 1, "systolic"), r"^stream_rule must be one of pipelined, modulo, folded, not 'systolic'$"),
+])
+def test_option_errors(make, msg):
+    with pytest.raises(ValueError, match=msg):
+        make()
+
+
+def test_records_and_equality():
+    assert Modulo(4, "ecp5").record() == {"architecture": "modulo", "multipliers": None, "dsp": "ecp5", "legs": 1,
+                                          "interval": 4, "primitives": False,
+                                          "description": "modulo-scheduled pipeline, one target per 4 cycles "
+                                                         "(ecp5 18x18 DSP)"}
+    assert Folded(2, "ice40") == Folded(2, "ice40") and Folded(2, "ice40") != Folded(1, "ice40")
+    assert Shared(6, 1, "ice40").describe() == "folded evaluator shared by 6 legs, 1 multiplier (ice40 16x16 DSP)"
