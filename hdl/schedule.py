@@ -9,8 +9,8 @@ lives here, in the compiler.
 
 Lowering
 --------
-Wiring nodes (``shr``, ``shl``, ``frac`` and ``index``, which is a ``shr``) disappear into
-*views*: every operand of a registered node (or of a ``mask``) is ``(base >> a) << b`` of a
+Wiring nodes whose op is a pure shift (a ``view`` in :data:`ikseries.fit.ops.OPS`: ``shr``,
+``shl``, ``frac`` and ``index``, which is a ``shr``) disappear into *views*: every operand of a registered node (or of a ``mask``) is ``(base >> a) << b`` of a
 registered node, a ``mask``, an input or a constant
 (a chain of shifts always reduces to that form, exactly, with floor semantics). A result
 is transformed into its view on the way into the memory (one shifter on the write port,
@@ -66,7 +66,7 @@ from ..fit.ops import OPS
 from ..fit.plan import DSP_SIZES, Plan, signed_bits
 from .limbmul import _check_dsp, limb_split
 
-__all__ = ["ALU_OPS", "ALU_PROGRAMS", "DSP_SIZES", "MicroOp", "Program", "READ_DELAY", "WRITE_DELAY", "compile_program",
+__all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "READ_DELAY", "WRITE_DELAY", "compile_program",
            "resolve_view"]
 
 ALU_OPS = ("add", "max", "min", "pass", "and")
