@@ -206,7 +206,7 @@ def _mul_bounds(a, frac, param, ideal, inputs):
         raise ValueError("mul result must have frac(a) + frac(b) fractional bits")
     p = [x * y for x in (a[0].lo, a[0].hi) for y in (a[1].lo, a[1].hi)]
     lo, hi = min(p), max(p)
-    if a[0] is a[1]:  # a square is never negative
+    if a[0] is a[1]:  # one node twice (the same object): a square is never negative
         lo = 0 if a[0].lo <= 0 <= a[0].hi else min(a[0].lo ** 2, a[0].hi ** 2)
     return lo, hi
 

@@ -10,17 +10,18 @@ lives here, in the compiler.
 Lowering
 --------
 Wiring nodes whose op is a pure shift (a ``view`` in :data:`ikseries.fit.ops.OPS`: ``shr``,
-``shl``, ``frac`` and ``index``, which is a ``shr``) disappear into *views*: every operand of a registered node (or of a ``mask``) is ``(base >> a) << b`` of a
-registered node, a ``mask``, an input or a constant
-(a chain of shifts always reduces to that form, exactly, with floor semantics). A result
-is transformed into its view on the way into the memory (one shifter on the write port,
-none on the read ports). A base with several views stores ``base >> min(a)`` and derives
-the other views with ALU ``pass`` operations; constants are folded at compile time; each
-input view is written from the input register by a ``load``; ``clamp(x, lo, hi)`` becomes
-``min(max(x, lo), hi)`` (bounds narrowed to the operand's interval, which changes no
-result); ``mask(x, s)`` becomes the ALU ``and`` of ``x`` with the constant ``2**s - 1`` (two's
-complement low bits: the exact non-negative remainder); every ``lut`` node becomes one ``lut``
-operation that reads its index from the memory and looks it up in its own table of the ROM.
+``shl``, ``frac`` and ``index``, which is a ``shr``) disappear into *views*: every operand of a
+registered node (or of a ``mask``) is ``(base >> a) << b`` of a registered node, a ``mask``, an
+input or a constant (a chain of shifts always reduces to that form, exactly, with floor
+semantics). A result is transformed into its view on the way into the memory (one shifter on
+the write port, none on the read ports). A base with several views stores ``base >> min(a)``
+and derives the other views with ALU ``pass`` operations; constants are folded at compile time;
+each input view is written from the input register by a ``load``; ``clamp(x, lo, hi)`` becomes
+``min(max(x, lo), hi)`` (bounds narrowed to the operand's interval, which changes no result);
+``mask(x, s)`` becomes the ALU ``and`` of ``x`` with the constant ``2**s - 1`` (two's
+complement low bits: the exact non-negative remainder), these ALU microprograms are
+``ALU_PROGRAMS``; every ``lut`` node becomes one ``lut`` operation that reads its index from
+the memory and looks it up in its own table of the ROM.
 
 Coefficient-table ROM
 ---------------------
