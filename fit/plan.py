@@ -8,23 +8,11 @@ in-range input can overflow any intermediate.
 
 Operations
 ----------
-``input``  a port field (already clamped to its range by a ``clamp`` node after it)
-``const``  an integer constant; ``ideal`` keeps the real value it was rounded from
-``add``    a + b (operands have equal ``frac``)            registered
-``mul``    a * b (``frac`` = frac(a) + frac(b))            registered
-``clamp``  min(max(a, lo), hi)                             registered
-``shr``    floor(a / 2**s) (arithmetic shift right)        wiring only
-``shl``    a * 2**s                                        wiring only
-``frac``   same integer, new binary point (``reinterpret``)  wiring only
-``index``  floor(a / 2**s), 0 fractional bits: a table index  wiring only
-``mask``   a mod 2**s (the low s bits), same ``frac``          wiring only
-``lut``    table[a]: a constant per index (``param`` the integers,
-           ``ideal`` the real values they were rounded from)  registered
-
-``index`` and ``mask`` cut an exact value (an input port, offset) into a cell number and the
-offset inside the cell: a piecewise plan looks its coefficients up by cell with ``lut``. Their
-ideal (real) value is the same floor / remainder of the ideal argument, so within one cell the
-offset is an exact affine function of the input.
+``input const add mul clamp shr shl frac index mask lut``: their meaning (arity, intervals,
+integer and ideal values, rounding bounds, JSON form, hardware kind) is the table
+:data:`ikseries.fit.ops.OPS`. ``index`` and ``mask`` cut an exact value (an input port, offset)
+into a cell number and the offset inside the cell: a piecewise plan looks its coefficients up
+by cell with ``lut``.
 
 Registered operations take one pipeline stage; wiring-only ones take none.
 """
@@ -33,6 +21,8 @@ from __future__ import annotations
 import contextlib
 import json
 from dataclasses import dataclass, field
+
+from .ops import OPS, operation
 
 __all__ = ["DSP_SIZES", "quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for",
            "signed_bits", "PLAN_FORMAT",
@@ -43,9 +33,8 @@ PLAN_VERSION = 1
 #: DSP multiplier sizes (signed operand bits) of common FPGA families: iCE40 SB_MAC16,
 #: ECP5 MULT18X18D, Xilinx 7-series DSP48E1
 DSP_SIZES = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
-REGISTERED_OPS = frozenset({"add", "mul", "clamp", "lut"})
-_OPS = {"input": 0, "const": 0, "add": 2, "mul": 2, "clamp": 1, "shr": 1, "shl": 1, "frac": 1,
-        "index": 1, "mask": 1, "lut": 1}
+#: the registered operations with operands (from :data:`ikseries.fit.ops.OPS`)
+REGISTERED_OPS = frozenset(name for name, op in OPS.items() if op.registered and op.arity)
 
 
 def quantize(value: float, frac: int) -> int:
@@ -56,14 +45,8 @@ def quantize(value: float, frac: int) -> int:
 def extend_stages(nodes: list["Node"], st: list[int]) -> list[int]:
     """Append to ``st`` (the stages of ``nodes[:len(st)]``) the stage of every later node
     (see :meth:`Plan.stages`); returns ``st``."""
-    for n in nodes[len(st):]:
-        if n.op == "const":
-            st.append(0)
-        elif n.op == "input":
-            st.append(1)
-        else:
-            s = max([st[a] for a in n.args] + [0])
-            st.append(s + 1 if n.op in REGISTERED_OPS else s)
+    for n in nodes[len(st):]:   # an input is registered (stage 1), a constant is not (0)
+        st.append(max([st[a] for a in n.args] + [0]) + OPS[n.op].registered)
     return st
 
 
@@ -175,32 +158,7 @@ class Plan:
         """
         err: list[float] = []
         for n in self.nodes:
-            sc = 2.0 ** -n.frac
-            if n.op == "input":
-                e = 0.0
-            elif n.op == "const":
-                e = abs(n.param * sc - n.ideal) if n.ideal is not None else 0.0
-            elif n.op == "add":
-                e = err[n.args[0]] + err[n.args[1]]
-            elif n.op == "mul":
-                a, b = (self.nodes[i] for i in n.args)
-                ea, eb = err[n.args[0]], err[n.args[1]]
-                ma = max(abs(a.lo), abs(a.hi)) * 2.0 ** -a.frac
-                mb = max(abs(b.lo), abs(b.hi)) * 2.0 ** -b.frac
-                e = ma * eb + mb * ea + ea * eb
-            elif n.op == "shr":
-                e = err[n.args[0]] + (1 - 2.0 ** -n.param) * sc
-            elif n.op == "frac":  # same integer, real value scaled by 2**(frac(a) - frac)
-                e = err[n.args[0]] * 2.0 ** (self.nodes[n.args[0]].frac - n.frac)
-            elif n.op in ("index", "mask"):  # a cell of an exact value only: a rounded one
-                e = 0.0 if err[n.args[0]] == 0.0 else float("inf")  # could pick another cell
-            elif n.op == "lut":
-                a = self.nodes[n.args[0]]
-                e = 0.0 if n.ideal is None else max(
-                    abs(n.param[i] * sc - n.ideal[i]) for i in range(a.lo, a.hi + 1))
-            else:  # shl: exact; clamp: the ideal value is clamped too, and a clamp
-                e = err[n.args[0]]  # never increases a distance (it is 1-Lipschitz)
-            err.append(e)
+            err.append(OPS[n.op].rounding(n, [self.nodes[a] for a in n.args], [err[a] for a in n.args]))
         return err
 
     # -- serialisation -----------------------------------------------------------
@@ -218,10 +176,11 @@ class Plan:
     def _node_json(i: int, n: Node) -> dict:
         d = {"id": i, "op": n.op, "args": list(n.args), "frac": n.frac, "lo": n.lo, "hi": n.hi,
              "width": n.width, "signed": n.signed}
+        op = OPS[n.op]
         if n.param is not None:
-            d["param"] = list(n.param) if isinstance(n.param, tuple) else n.param
+            d["param"] = op.param.encode(n.param)
         if n.ideal is not None:
-            d["ideal"] = list(n.ideal) if isinstance(n.ideal, tuple) else n.ideal
+            d["ideal"] = op.ideal.encode(n.ideal)
         return d
 
     @classmethod
@@ -232,12 +191,9 @@ class Plan:
             raise ValueError(f"plan version must be {PLAN_VERSION}, not {d.get('version')!r}")
         b = PlanBuilder([PlanInput(**i) for i in d["inputs"]], with_inputs=False)
         for nd in d["nodes"]:
-            param = nd.get("param")
-            if isinstance(param, list):
-                param = tuple(param)
-            ideal = nd.get("ideal")
-            if isinstance(ideal, list):
-                ideal = tuple(ideal)
+            op = operation(nd["op"], len(nd["args"]))
+            param = _decode(nd, "param", op.param)
+            ideal = _decode(nd, "ideal", op.ideal)
             b._append(nd["op"], tuple(nd["args"]), nd["frac"], param, ideal, share=False)
             n = b.nodes[-1]
             if (n.lo, n.hi) != (nd["lo"], nd["hi"]):
@@ -250,6 +206,16 @@ class Plan:
 
     def dumps(self) -> str:
         return json.dumps(self.to_json(), indent=1, sort_keys=True) + "\n"
+
+
+def _decode(nd: dict, key: str, codec):
+    """Field ``key`` of a plan node's JSON through its op's ``codec`` (None if absent)."""
+    if nd.get(key) is None:
+        return None
+    try:
+        return codec.decode(nd[key])
+    except ValueError as e:
+        raise ValueError(f"plan node {nd['id']}: the {key} of a {nd['op']} node {e}") from None
 
 
 class PlanBuilder:
@@ -283,57 +249,16 @@ class PlanBuilder:
     def _needs_clamp(i: PlanInput) -> bool:
         return i.port_range != (i.lo, i.hi)
 
+    def op(self, op: str, args: tuple[int, ...], frac: int, param=None, ideal=None) -> int:
+        """Append (or share) a node of any operation of :data:`ikseries.fit.ops.OPS`."""
+        return self._append(op, tuple(args), frac, param, ideal)
+
     def _append(self, op, args, frac, param=None, ideal=None, share=True) -> int:
-        if op not in _OPS or len(args) != _OPS[op]:
-            raise ValueError(f"bad plan operation {op!r} with {len(args)} operands")
+        spec = operation(op, len(args))
         key = (op, args, frac, param, ideal)
         if share and key in self._memo:
             return self._memo[key]
-        a = [self.nodes[i] for i in args]
-        if op == "input":
-            lo, hi = next(i for i in self.inputs if i.name == param).port_range
-        elif op == "const":
-            lo = hi = int(param)
-        elif op == "add":
-            if a[0].frac != a[1].frac or frac != a[0].frac:
-                raise ValueError("add operands must have equal fractional bits")
-            lo, hi = a[0].lo + a[1].lo, a[0].hi + a[1].hi
-        elif op == "mul":
-            if frac != a[0].frac + a[1].frac:
-                raise ValueError("mul result must have frac(a) + frac(b) fractional bits")
-            p = [x * y for x in (a[0].lo, a[0].hi) for y in (a[1].lo, a[1].hi)]
-            lo, hi = min(p), max(p)
-            if args[0] == args[1]:  # a square is never negative
-                lo = 0 if a[0].lo <= 0 <= a[0].hi else min(a[0].lo ** 2, a[0].hi ** 2)
-        elif op == "clamp":
-            clo, chi = param
-            lo, hi = min(max(a[0].lo, clo), chi), max(min(a[0].hi, chi), clo)
-        elif op == "shr":
-            lo, hi = a[0].lo >> param, a[0].hi >> param
-        elif op == "shl":
-            lo, hi = a[0].lo << param, a[0].hi << param
-        elif op == "index":
-            if frac != 0:
-                raise ValueError(f"index must have 0 fractional bits, not {frac}")
-            lo, hi = a[0].lo >> param, a[0].hi >> param
-        elif op == "mask":
-            if frac != a[0].frac:
-                raise ValueError("mask keeps the fractional bits of its operand")
-            m = (1 << param) - 1
-            lo, hi = (a[0].lo & m, a[0].hi & m) if a[0].lo >> param == a[0].hi >> param else (0, m)
-        elif op == "lut":
-            table = param
-            if not (isinstance(table, tuple) and table and all(isinstance(v, int) for v in table)):
-                raise ValueError(f"lut table must be a non-empty tuple of integers, not {table!r}")
-            if ideal is not None and len(ideal) != len(table):
-                raise ValueError(f"lut ideal values must be one per entry ({len(table)}), not {len(ideal)}")
-            if a[0].frac != 0 or a[0].lo < 0 or a[0].hi >= len(table):
-                raise ValueError(f"lut index must be an integer in [0, {len(table) - 1}], "
-                                 f"not [{a[0].lo}, {a[0].hi}] with {a[0].frac} fractional bits")
-            reach = table[a[0].lo:a[0].hi + 1]
-            lo, hi = min(reach), max(reach)
-        else:  # frac
-            lo, hi = a[0].lo, a[0].hi
+        lo, hi = spec.bounds([self.nodes[i] for i in args], frac, param, ideal, self.inputs)
         if max(abs(lo), abs(hi)) >= 1 << 62:
             raise OverflowError(f"plan node {op} needs more than 63 bits (interval [{lo}, {hi}])")
         self.nodes.append(Node(op, tuple(args), frac, lo, hi, param, ideal))

@@ -1,25 +1,22 @@
 """Pipelined fixed-point evaluator generated from an evaluation plan."""
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Module, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from ..fit.plan import REGISTERED_OPS, Plan
+from ..fit.ops import OPS, node_shape
+from ..fit.plan import Plan
 
-__all__ = ["PlanEvaluator", "input_layout", "lut_groups", "lut_rom_init", "output_layout"]
-
-
-def _shape(node):
-    return signed(node.width) if node.signed else unsigned(node.width)
+__all__ = ["PlanEvaluator", "input_layout", "lut_groups", "lut_rom_init", "node_expression", "output_layout"]
 
 
 def lut_groups(plan: Plan) -> dict[int, list[int]]:
     """``lut`` nodes by index node (in plan order): the tables one ROM holds side by side."""
     groups: dict[int, list[int]] = {}
     for idx, n in enumerate(plan.nodes):
-        if n.op == "lut":
+        if OPS[n.op].kind == "table":
             groups.setdefault(n.args[0], []).append(idx)
     return groups
 
@@ -50,28 +47,16 @@ def input_layout(plan: Plan) -> data.StructLayout:
 
 def output_layout(plan: Plan) -> data.StructLayout:
     """One field per output: pulse width in PWM clock ticks."""
-    return data.StructLayout({o.name: _shape(plan.nodes[o.node]) for o in plan.outputs})
+    return data.StructLayout({o.name: node_shape(plan.nodes[o.node]) for o in plan.outputs})
 
 
 def node_expression(n, ops):
-    """The value of plan node ``n`` (any operation but input, const and lut) as an Amaranth
-    expression of its operands' values ``ops``; the caller registers it or not."""
-    if n.op == "add":
-        return ops[0] + ops[1]
-    if n.op == "mul":
-        return ops[0] * ops[1]
-    if n.op == "clamp":
-        lo, hi = n.param
-        return Mux(ops[0] < lo, lo, Mux(ops[0] > hi, hi, ops[0]))
-    if n.op in ("shr", "index"):
-        return ops[0] >> n.param
-    if n.op == "mask":   # two's complement low bits: non-negative, zero-extended
-        return ops[0] & Const((1 << n.param) - 1, unsigned(n.param))
-    if n.op == "shl":
-        return ops[0] << n.param
-    if n.op == "frac":   # same integer
-        return ops[0]
-    raise ValueError(f"plan node operation {n.op!r} has no expression here")
+    """The value of plan node ``n`` as an Amaranth expression of its operands' values ``ops``
+    (its op's ``rtl`` in :data:`ikseries.fit.ops.OPS`); the caller registers it or not."""
+    rtl = OPS[n.op].rtl
+    if rtl is None:
+        raise ValueError(f"plan node operation {n.op!r} has no expression here")
+    return rtl(n, ops)
 
 
 class PlanEvaluator(wiring.Component):
@@ -149,37 +134,37 @@ class PlanEvaluator(wiring.Component):
         def at(idx, stage):
             """Value of node ``idx`` delayed so that it is valid at ``stage``."""
             have = stages[idx]
-            if plan.nodes[idx].op == "const" or have >= stage:
+            if OPS[plan.nodes[idx].op].kind == "constant" or have >= stage:
                 return vals[idx]
             key = (idx, stage)
             if key not in delayed:
                 prev = at(idx, stage - 1)
-                reg = Signal(_shape(plan.nodes[idx]), name=f"n{idx}_d{stage}")
+                reg = Signal(node_shape(plan.nodes[idx]), name=f"n{idx}_d{stage}")
                 with m.If(en):
                     m.d.sync += reg.eq(prev)
                 delayed[key] = reg
             return delayed[key]
 
         for idx, n in enumerate(plan.nodes):
-            shape = _shape(n)
-            if n.op == "const":
-                vals.append(Const(n.param, shape))
+            op = OPS[n.op]
+            if op.kind == "constant":
+                vals.append(node_expression(n, []))
                 continue
-            sig = Signal(shape, name=f"n{idx}_{n.op}")
-            if n.op == "input":
+            sig = Signal(node_shape(n), name=f"n{idx}_{n.op}")
+            if op.kind == "port":
                 with m.If(en):
                     m.d.sync += sig.eq(self.i.payload[n.param])
                 vals.append(sig)
                 continue
             s = stages[idx]
-            ops = [at(a, s - 1 if n.op in REGISTERED_OPS else s) for a in n.args]
-            if n.op == "lut":
+            ops = [at(a, s - 1 if op.registered else s) for a in n.args]
+            if op.kind == "table":
                 if idx not in lut_field:
                     lut_field.update(self._lut_rom(m, en, n.args[0], groups[n.args[0]], ops[0]))
                 expr = lut_field[idx]
             else:
                 expr = node_expression(n, ops)
-            if n.op in REGISTERED_OPS and n.op != "lut":   # lut: the ROM port registers
+            if op.registered and op.kind != "table":   # a table: the ROM port registers
                 with m.If(en):
                     m.d.sync += sig.eq(expr)
             else:

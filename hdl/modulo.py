@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Array, Cat, ClockSignal, Const, Instance, Module, Mux, ResetSignal, Signal, signed
+from amaranth.hdl import Cat, ClockSignal, Const, Instance, Module, Mux, ResetSignal, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan
-from .evaluator import _shape, input_layout, node_expression, output_layout
+from .evaluator import input_layout, node_expression, output_layout
 from .limbmul import _check_dsp
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
@@ -25,13 +26,16 @@ MUL_LATENCY = 2
 WIDE_MUL_LATENCY = 3
 #: cycles of a clamp: its comparisons registered (with the value), then the selection
 CLAMP_LATENCY = 2
-_WIRING = ("shr", "shl", "frac", "index", "mask")
+
+
+def _kind(n) -> str:
+    return OPS[n.op].kind
 
 
 def _input_clamp(plan: Plan, i: int) -> bool:
     """Node ``i`` clamps an input port: the input register takes the clamped value at once."""
     n = plan.nodes[i]
-    return n.op == "clamp" and plan.nodes[n.args[0]].op == "input"
+    return n.op == "clamp" and _kind(plan.nodes[n.args[0]]) == "port"
 
 
 @dataclass(frozen=True)
@@ -59,7 +63,7 @@ class ModuloSchedule:
         """Per node, the first cycle its own register holds it: ``ready``, except for a
         multiplication, whose product is read from the multiplier in cycle ``ready`` and
         captured at its end."""
-        return [r + 1 if n.op == "mul" else r for r, n in zip(self.ready, plan.nodes)]
+        return [r + 1 if _kind(n) == "product" else r for r, n in zip(self.ready, plan.nodes)]
 
     def last_read(self, plan: Plan) -> list[int]:
         """Per node, the last cycle it is read: by a registered consumer (when that reads its
@@ -73,7 +77,7 @@ class ModuloSchedule:
                 readers[a].append(i)
         for i in reversed(range(len(plan.nodes))):     # readers come after their operands
             for r in readers[i]:
-                if plan.nodes[r].op in _WIRING:
+                if _kind(plan.nodes[r]) == "wiring":
                     last[i] = max(last[i], last[r])
                 elif self.start[r] is not None:         # not an input clamp (reads the port)
                     last[i] = max(last[i], self.start[r])
@@ -103,7 +107,7 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     """
     ii = initiation_interval
     nodes = plan.nodes
-    muls = [i for i, n in enumerate(nodes) if n.op == "mul"]
+    muls = [i for i, n in enumerate(nodes) if _kind(n) == "product"]
     wide = {i for i in muls if not _fits(*(nodes[a].signed_width for a in nodes[i].args), dsp)}
     n_wide = -(-len(wide) // ii)
     n_narrow = -(-(len(muls) - len(wide)) // ii)
@@ -116,9 +120,9 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
             users[a].append(i)
     height = [0] * len(nodes)
     for i in reversed(range(len(nodes))):
-        op = nodes[i].op
-        own = (WIDE_MUL_LATENCY if i in wide else MUL_LATENCY) if op == "mul" else \
-            0 if op in _WIRING or _input_clamp(plan, i) else CLAMP_LATENCY if op == "clamp" else 1
+        kind = _kind(nodes[i])
+        own = (WIDE_MUL_LATENCY if i in wide else MUL_LATENCY) if kind == "product" else \
+            0 if kind == "wiring" or _input_clamp(plan, i) else CLAMP_LATENCY if nodes[i].op == "clamp" else 1
         height[i] = own + max((height[u] for u in users[i]), default=0)
     ready: list = [None] * len(nodes)
     start: list = [None] * len(nodes)
@@ -160,15 +164,15 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     def settle():
         """Give every non-multiplication whose operands are scheduled its time."""
         for i, n in enumerate(nodes):
-            if ready[i] is not None or n.op == "mul":
+            if ready[i] is not None or _kind(n) == "product":
                 continue
-            if n.op == "const":
+            if _kind(n) == "constant":
                 ready[i] = 0
-            elif n.op == "input" or _input_clamp(plan, i):
+            elif _kind(n) == "port" or _input_clamp(plan, i):
                 ready[i] = 1
             elif all(ready[a] is not None for a in n.args):
                 t = max(ready[a] for a in n.args)
-                if n.op in _WIRING:
+                if _kind(n) == "wiring":
                     ready[i] = t
                 else:
                     start[i], ready[i] = t, t + (CLAMP_LATENCY if n.op == "clamp" else 1)
@@ -352,20 +356,20 @@ class ModuloEvaluator(wiring.Component):
         def read(i, c):
             """Value of node ``i`` of the target being evaluated, during its cycle ``c``."""
             n = nodes[i]
-            if n.op == "const":
-                return Const(n.param, _shape(n))
-            if n.op in _WIRING:
+            if _kind(n) == "constant":
+                return node_expression(n, [])
+            if _kind(n) == "wiring":
                 if (i, c) in wires:
                     return wires[i, c]
-                v = node_expression(n, [read(n.args[0], c)])
-                w = wires[i, c] = Signal(_shape(n), name=f"n{i}_{n.op}_c{c}")
+                v = node_expression(n, [read(a, c) for a in n.args])
+                w = wires[i, c] = Signal(node_shape(n), name=f"n{i}_{n.op}_c{c}")
                 m.d.comb += w.eq(v)
                 return w
             if c < sch.ready[i] or c > last[i]:
                 raise AssertionError(f"node {i} read at cycle {c} outside [{sch.ready[i]}, {last[i]}]")
             if c < held[i]:         # the product register, in the cycle after the product
                 if (i, c) not in wires:
-                    wires[i, c] = Signal(_shape(n), name=f"n{i}_mul_bypass")
+                    wires[i, c] = Signal(node_shape(n), name=f"n{i}_mul_bypass")
                     bypass.append((wires[i, c], sch.unit[i]))
                 return wires[i, c]
             return chains[i][(c - held[i]) // ii]
@@ -373,28 +377,26 @@ class ModuloEvaluator(wiring.Component):
         # registers of every registered node: reg[0] written at the end of cycle held - 1,
         # reg[j] takes reg[j - 1] at the same phase (none for a product only read by bypass)
         for i, n in enumerate(nodes):
-            if n.op in _WIRING or n.op == "const":
+            if _kind(n) in ("wiring", "constant"):
                 continue
             depth = max(0, (last[i] - held[i]) // ii + 1)
-            chains[i] = [Signal(_shape(n), name=f"n{i}_{n.op}" + (f"_r{j}" if j else ""))
+            chains[i] = [Signal(node_shape(n), name=f"n{i}_{n.op}" + (f"_r{j}" if j else ""))
                          for j in range(depth)]
             with m.If(at_phase(held[i] - 1)):
                 m.d.sync += [chains[i][j].eq(chains[i][j - 1]) for j in range(1, depth)]
 
         for i, n in enumerate(nodes):
-            if n.op in _WIRING or n.op in ("const", "mul"):
+            if _kind(n) in ("wiring", "constant", "product"):
                 continue
             reg = chains[i][0]      # not a product: read at least in its ready cycle
-            if n.op == "input" or _input_clamp(plan, i):    # input registers: the port, or clamped
+            if _kind(n) == "port" or _input_clamp(plan, i):    # input registers: the port, or clamped
                 port = self.i.payload[(nodes[n.args[0]] if n.args else n).param]
                 with m.If(self.i.ready):
                     m.d.sync += reg.eq(node_expression(n, [port]) if n.args else port)
                 continue
             s = sch.start[i]
             ops = [read(a, s) for a in n.args]
-            if n.op == "lut":
-                v = Array(Const(x, _shape(n)) for x in n.param)[ops[0]]
-            elif n.op == "clamp":   # comparisons registered with the value, then the selection
+            if n.op == "clamp":   # comparisons registered with the value, then the selection
                 lo, hi = n.param
                 x = Signal.like(ops[0], name=f"n{i}_clamp_x")
                 below, above = Signal(name=f"n{i}_clamp_lt"), Signal(name=f"n{i}_clamp_gt")
@@ -403,8 +405,7 @@ class ModuloEvaluator(wiring.Component):
                 with m.If(at_phase(s + 1)):
                     m.d.sync += reg.eq(Mux(below, lo, Mux(above, hi, x)))
                 continue
-            else:
-                v = node_expression(n, ops)
+            v = node_expression(n, ops)
             with m.If(at_phase(s)):
                 m.d.sync += reg.eq(v)
 

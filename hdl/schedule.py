@@ -9,18 +9,19 @@ lives here, in the compiler.
 
 Lowering
 --------
-Wiring nodes (``shr``, ``shl``, ``frac`` and ``index``, which is a ``shr``) disappear into
-*views*: every operand of a registered node (or of a ``mask``) is ``(base >> a) << b`` of a
-registered node, a ``mask``, an input or a constant
-(a chain of shifts always reduces to that form, exactly, with floor semantics). A result
-is transformed into its view on the way into the memory (one shifter on the write port,
-none on the read ports). A base with several views stores ``base >> min(a)`` and derives
-the other views with ALU ``pass`` operations; constants are folded at compile time; each
-input view is written from the input register by a ``load``; ``clamp(x, lo, hi)`` becomes
-``min(max(x, lo), hi)`` (bounds narrowed to the operand's interval, which changes no
-result); ``mask(x, s)`` becomes the ALU ``and`` of ``x`` with the constant ``2**s - 1`` (two's
-complement low bits: the exact non-negative remainder); every ``lut`` node becomes one ``lut``
-operation that reads its index from the memory and looks it up in its own table of the ROM.
+Wiring nodes whose op is a pure shift (a ``view`` in :data:`ikseries.fit.ops.OPS`: ``shr``,
+``shl``, ``frac`` and ``index``, which is a ``shr``) disappear into *views*: every operand of a
+registered node (or of a ``mask``) is ``(base >> a) << b`` of a registered node, a ``mask``, an
+input or a constant (a chain of shifts always reduces to that form, exactly, with floor
+semantics). A result is transformed into its view on the way into the memory (one shifter on
+the write port, none on the read ports). A base with several views stores ``base >> min(a)``
+and derives the other views with ALU ``pass`` operations; constants are folded at compile time;
+each input view is written from the input register by a ``load``; ``clamp(x, lo, hi)`` becomes
+``min(max(x, lo), hi)`` (bounds narrowed to the operand's interval, which changes no result);
+``mask(x, s)`` becomes the ALU ``and`` of ``x`` with the constant ``2**s - 1`` (two's
+complement low bits: the exact non-negative remainder), these ALU microprograms are
+``ALU_PROGRAMS``; every ``lut`` node becomes one ``lut`` operation that reads its index from
+the memory and looks it up in its own table of the ROM.
 
 Coefficient-table ROM
 ---------------------
@@ -62,7 +63,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..fit.plan import DSP_SIZES, REGISTERED_OPS, Plan, signed_bits
+from ..fit.ops import OPS
+from ..fit.plan import DSP_SIZES, Plan, signed_bits
 from .limbmul import _check_dsp, limb_split
 
 __all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "READ_DELAY", "WRITE_DELAY", "compile_program",
@@ -74,26 +76,24 @@ ALU_LATENCY = READ_DELAY + 2   # issue -> write: read, read register, ALU compar
 LUT_LATENCY = READ_DELAY + 1   # issue -> write: index read, read register, ROM read
 WRITE_DELAY = 2        # written at w (source selected and registered), shifted into its view and
                        # registered at w + 1 (fields view/we/wa/cap), in the memory at w + 2
-VIEW_OPS = ("shr", "shl", "frac", "index")   # wiring folded into views (index is a shr)
 
 
 def resolve_view(plan: Plan, idx: int) -> tuple[int, int, int]:
-    """``(base, a, b)`` with node ``idx`` == ``(base >> a) << b`` and ``base`` not a wiring
-    node of :data:`VIEW_OPS` (``mask`` is not a view: it is an ALU ``and``)."""
+    """``(base, a, b)`` with node ``idx`` == ``(base >> a) << b`` and ``base`` no node whose op
+    has a ``view`` (a pure shift, :data:`ikseries.fit.ops.OPS`; ``mask`` has none: it is an
+    ALU ``and``)."""
     chain = []
     nodes = plan.nodes
-    while nodes[idx].op in VIEW_OPS:
-        chain.append((nodes[idx].op, nodes[idx].param))
+    while (view := OPS[nodes[idx].op].view) is not None:
+        chain.append(view(nodes[idx]))
         idx = nodes[idx].args[0]
     a = b = 0
-    for op, s in reversed(chain):
-        if op in ("shr", "index"):
-            if s <= b:
-                b -= s
-            else:
-                a, b = a + s - b, 0
-        elif op == "shl":
-            b += s
+    for right, left in reversed(chain):    # ((x >> a) << b) >> right << left, floor exact
+        if right <= b:
+            b -= right
+        else:
+            a, b = a + right - b, 0
+        b += left
     return idx, a, b
 
 
@@ -183,6 +183,75 @@ def _check_params(multipliers, dsp):
     _check_dsp(dsp)
 
 
+class _Lowering:
+    """The values and micro-operations of a plan being lowered (see :func:`_lower`)."""
+
+    def __init__(self):
+        self.values: list[tuple[int, int]] = []
+        self.const_value: dict[int, int] = {}
+        self.const_by_int: dict[int, int] = {}
+        self.ops: list[MicroOp] = []
+        self.tables: list[tuple[int, ...]] = []
+
+    def new_value(self, lo, hi) -> int:
+        self.values.append((lo, hi))
+        return len(self.values) - 1
+
+    def const(self, c) -> int:
+        """The value id of the integer constant ``c`` (one per integer, pre-loaded)."""
+        c = int(c)
+        if c not in self.const_by_int:
+            v = self.new_value(c, c)
+            self.const_by_int[c] = v
+            self.const_value[v] = c
+        return self.const_by_int[c]
+
+
+def _alu_add(lw: _Lowering, n, args, out, prim):
+    lw.ops.append(MicroOp("alu", tuple(args), out, prim, alu="add", raw=(n.lo, n.hi)))
+
+
+def _alu_mask(lw: _Lowering, n, args, out, prim):
+    """Two's complement low bits of x: x & (2**s - 1)."""
+    lw.ops.append(MicroOp("alu", (args[0], lw.const((1 << n.param) - 1)), out, prim, alu="and",
+                          raw=(n.lo, n.hi)))
+
+
+def _alu_clamp(lw: _Lowering, n, args, out, prim):
+    """clamp -> min(max(x, lo'), hi'), the bounds narrowed to the operand's interval."""
+    xlo, xhi = lw.values[args[0]]
+    clo, chi = n.param
+    lo_b = max(clo, xlo)
+    t = lw.new_value(max(xlo, lo_b), max(xhi, lo_b))
+    lw.ops.append(MicroOp("alu", (args[0], lw.const(lo_b)), t, (0, 0), alu="max", raw=lw.values[t]))
+    hi_b = min(chi, lw.values[t][1])
+    lw.ops.append(MicroOp("alu", (t, lw.const(hi_b)), out, prim, alu="min", raw=(n.lo, n.hi)))
+
+
+#: the ALU microprograms of the plan operations the machine computes on its ALU (every op of
+#: :data:`ikseries.fit.ops.OPS` but ports, constants, products, tables and views)
+ALU_PROGRAMS = {"add": _alu_add, "mask": _alu_mask, "clamp": _alu_clamp}
+
+
+def _lower_node(lw: _Lowering, n, args, out, prim):
+    """Micro-operations computing plan node ``n`` (not a port, constant or view) into ``out``."""
+    kind = OPS[n.op].kind
+    if kind == "product":
+        w = [signed_bits(*lw.values[x]) for x in args]
+        if w[1] > w[0]:
+            args.reverse()
+        lw.ops.append(MicroOp("mul", tuple(args), out, prim, raw=(n.lo, n.hi)))
+    elif kind == "table":    # entries the index never takes are 0 (they may not fit)
+        ilo, ihi = lw.values[args[0]]
+        lw.tables.append(tuple(n.param[j] if j >= ilo else 0 for j in range(ihi + 1)))
+        lw.ops.append(MicroOp("lut", tuple(args), out, prim, table=len(lw.tables) - 1, raw=(n.lo, n.hi)))
+    elif n.op in ALU_PROGRAMS:
+        ALU_PROGRAMS[n.op](lw, n, args, out, prim)
+    else:
+        raise ValueError(f"plan operation must be one the folded machine can compute (ports, constants, "
+                         f"products, tables, shift views or {', '.join(ALU_PROGRAMS)}), not {n.op!r}")
+
+
 def _lower(plan: Plan):
     nodes = plan.nodes
     views: dict[int, list] = {}
@@ -196,74 +265,37 @@ def _lower(plan: Plan):
 
     operand = {}
     for i, n in enumerate(nodes):
-        if n.op in REGISTERED_OPS or n.op == "mask":
+        if OPS[n.op].view is None:
             operand[i] = [need(x) for x in n.args]
     out_ref = {o.name: need(o.node) for o in plan.outputs}
 
-    values: list[tuple[int, int]] = []
-    const_value: dict[int, int] = {}
-    const_by_int: dict[int, int] = {}
-    ops: list[MicroOp] = []
-    tables: list[tuple[int, ...]] = []
+    lw = _Lowering()
     value_of: dict = {}
-
-    def new_value(lo, hi):
-        values.append((lo, hi))
-        return len(values) - 1
-
-    def const(c):
-        c = int(c)
-        if c not in const_by_int:
-            v = new_value(c, c)
-            const_by_int[c] = v
-            const_value[v] = c
-        return const_by_int[c]
-
     for base in sorted(views):
         n, vs = nodes[base], views[base]
-        if n.op == "const":
+        kind = OPS[n.op].kind
+        if kind == "constant":
             for v in vs:
-                value_of[(base, v)] = const(_view_interval(n.param, n.param, v)[0])
+                value_of[(base, v)] = lw.const(_view_interval(n.param, n.param, v)[0])
             continue
-        if n.op == "input":
+        if kind == "port":
             for v in vs:
-                out = new_value(*_view_interval(n.lo, n.hi, v))
-                ops.append(MicroOp("load", (), out, v, input=n.param, raw=(n.lo, n.hi)))
+                out = lw.new_value(*_view_interval(n.lo, n.hi, v))
+                lw.ops.append(MicroOp("load", (), out, v, input=n.param, raw=(n.lo, n.hi)))
                 value_of[(base, v)] = out
             continue
         prim = vs[0] if len(vs) == 1 else (min(a for a, _ in vs), 0)
-        args = [value_of[r] for r in operand[base]]
-        out = new_value(*_view_interval(n.lo, n.hi, prim))
-        if n.op == "add":
-            ops.append(MicroOp("alu", tuple(args), out, prim, alu="add", raw=(n.lo, n.hi)))
-        elif n.op == "mul":
-            w = [signed_bits(*values[x]) for x in args]
-            if w[1] > w[0]:
-                args.reverse()
-            ops.append(MicroOp("mul", tuple(args), out, prim, raw=(n.lo, n.hi)))
-        elif n.op == "mask":   # two's complement low bits of x: x & (2**s - 1)
-            ops.append(MicroOp("alu", (args[0], const((1 << n.param) - 1)), out, prim, alu="and",
-                               raw=(n.lo, n.hi)))
-        elif n.op == "lut":    # entries the index never takes are 0 (they may not fit)
-            ilo, ihi = values[args[0]]
-            tables.append(tuple(n.param[j] if j >= ilo else 0 for j in range(ihi + 1)))
-            ops.append(MicroOp("lut", tuple(args), out, prim, table=len(tables) - 1, raw=(n.lo, n.hi)))
-        else:  # clamp -> min(max(x, lo'), hi')
-            xlo, xhi = values[args[0]]
-            clo, chi = n.param
-            lo_b = max(clo, xlo)
-            t = new_value(max(xlo, lo_b), max(xhi, lo_b))
-            ops.append(MicroOp("alu", (args[0], const(lo_b)), t, (0, 0), alu="max", raw=values[t]))
-            hi_b = min(chi, values[t][1])
-            ops.append(MicroOp("alu", (t, const(hi_b)), out, prim, alu="min", raw=(n.lo, n.hi)))
+        out = lw.new_value(*_view_interval(n.lo, n.hi, prim))
+        _lower_node(lw, n, [value_of[r] for r in operand[base]], out, prim)
         value_of[(base, prim)] = out
         for v in vs:
             if v != prim:
-                dv = new_value(*_view_interval(n.lo, n.hi, v))
-                ops.append(MicroOp("alu", (out,), dv, (v[0] - prim[0], v[1]), alu="pass", raw=values[out]))
+                dv = lw.new_value(*_view_interval(n.lo, n.hi, v))
+                lw.ops.append(MicroOp("alu", (out,), dv, (v[0] - prim[0], v[1]), alu="pass",
+                                      raw=lw.values[out]))
                 value_of[(base, v)] = dv
     outputs = {name: value_of[r] for name, r in out_ref.items()}
-    return ops, values, const_value, outputs, tables
+    return lw.ops, lw.values, lw.const_value, outputs, lw.tables
 
 
 def _schedule(ops, n_values, multipliers, mul_latency, n_limbs):

@@ -3,12 +3,14 @@
 This is exactly the arithmetic the generated hardware performs: the same
 operations, in the same order, with the same truncations. ``evaluate_ideal``
 runs the same dataflow in float64 with unrounded constants and exact shifts,
-which separates the approximation error from the quantization error.
+which separates the approximation error from the quantization error. Each
+operation's meaning in both is its entry of :data:`ikseries.fit.ops.OPS`.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..fit.ops import OPS
 from ..fit.plan import Plan
 
 __all__ = ["evaluate", "evaluate_ideal", "quantize_inputs", "outputs", "port_values"]
@@ -62,29 +64,7 @@ def _run(plan: Plan, ints: dict, keep, step) -> dict:
 
 
 def _int_step(n, ports, vals):
-    op = n.op
-    if op == "input":
-        return ports[n.param]
-    if op == "const":
-        return np.int64(n.param)
-    a = vals[n.args[0]]
-    if op == "add":
-        return a + vals[n.args[1]]
-    if op == "mul":
-        return a * vals[n.args[1]]
-    if op == "shr":
-        return a >> n.param
-    if op == "shl":
-        return a << n.param
-    if op == "clamp":
-        return np.clip(a, n.param[0], n.param[1])
-    if op == "index":
-        return a >> n.param
-    if op == "mask":
-        return a & ((1 << n.param) - 1)
-    if op == "lut":
-        return np.asarray(n.param, dtype=np.int64)[a]
-    return a  # frac: same integer
+    return OPS[n.op].integer(n, [vals[a] for a in n.args], ports)
 
 
 def evaluate(plan: Plan, ints: dict, keep=None) -> dict:
@@ -97,27 +77,7 @@ def evaluate_ideal(plan: Plan, ints: dict, keep=None) -> dict:
     nodes = plan.nodes
 
     def step(n, ports, vals):
-        op = n.op
-        if op == "input":
-            return ports[n.param] * 2.0 ** -n.frac
-        if op == "const":
-            return n.ideal if n.ideal is not None else n.param * 2.0 ** -n.frac
-        a = vals[n.args[0]]
-        if op == "add":
-            return a + vals[n.args[1]]
-        if op == "mul":
-            return a * vals[n.args[1]]
-        if op == "clamp":
-            return np.clip(a, n.param[0] * 2.0 ** -n.frac, n.param[1] * 2.0 ** -n.frac)
-        if op == "frac":
-            return a * 2.0 ** (nodes[n.args[0]].frac - n.frac)
-        if op in ("index", "mask"):  # cells of 2**s integers of the argument
-            cell = np.floor(a * 2.0 ** (nodes[n.args[0]].frac - n.param))
-            return cell.astype(np.int64) if op == "index" else a - cell * 2.0 ** (n.param - nodes[n.args[0]].frac)
-        if op == "lut":
-            return np.asarray(n.ideal if n.ideal is not None else n.param, dtype=np.float64)[a] * (
-                1.0 if n.ideal is not None else 2.0 ** -n.frac)
-        return a  # shr, shl: exact in real arithmetic
+        return OPS[n.op].real(n, [nodes[a] for a in n.args], [vals[a] for a in n.args], ports)
     return _run(plan, ints, keep, step)
 
 
