@@ -23,12 +23,14 @@ def num(v, spec: str = ".3f", none: str = "–") -> str:
     return none if v is None else format(v, spec)
 
 
-def demote(markdown: str, levels: int = 2) -> list[str]:
-    """``markdown``'s lines with every heading ``levels`` deeper (to sit inside a section)."""
-    return [("#" * levels + line) if line.startswith("#") else line for line in markdown.splitlines()]
+def demote(markdown: str, levels: int = 1) -> list[str]:
+    """``markdown``'s lines with every heading ``levels`` deeper (to sit inside a section), and a
+    blank line after them."""
+    return [("#" * levels + line) if line.startswith("#") else line for line in markdown.splitlines()] + [""]
 
 
 def fit_benchmark(res: dict) -> list[str]:
+    """Lines of the ``bench/fit_benchmark.py`` section from its JSON ``res``."""
     rows, notes = [], []
     for r in res["results"]:
         if "error" in r:
@@ -49,6 +51,7 @@ def fit_benchmark(res: dict) -> list[str]:
 
 
 def lowering_latency(res: dict) -> list[str]:
+    """Lines of the ``bench/lowering_latency.py`` section from its JSON ``res``."""
     rows = []
     for name, r in res["schemes"].items():
         for k, s in enumerate(r["servos"]):
@@ -63,6 +66,7 @@ def lowering_latency(res: dict) -> list[str]:
 
 
 def certify_bound(res: dict) -> list[str]:
+    """Lines of the ``bench/certify_bound.py`` section from its JSON ``res``."""
     rows = []
     for s in res["servos"]:
         c = s["certified"]
@@ -80,6 +84,7 @@ def certify_bound(res: dict) -> list[str]:
 
 
 def paper_baseline(res: dict) -> list[str]:
+    """Lines of the ``bench/paper_baseline.py`` section from its JSON ``res``."""
     p = res["paper"]
     lines = demote(render_comparison(res))[1:]    # the section title replaces the heading
     for key, what in (("float_max_error_pu", "the paper's series in float64 (7 significant figures)"),
@@ -93,10 +98,12 @@ def paper_baseline(res: dict) -> list[str]:
 
 
 def divided_differences(res: dict) -> list[str]:
+    """Lines of the ``bench/divided_differences.py`` section from its JSON ``res``."""
     return demote(render_divided(res))[1:] + [f"Preset `{res['preset']}`, {res['seconds']:.2f} s.", ""]
 
 
 def folded_area(res: dict) -> list[str]:
+    """Lines of the ``bench/folded_area.py`` section from its JSON ``res``."""
     rows, extra = [], []
     for r in res["rows"]:
         c = r["counts"]
@@ -116,6 +123,7 @@ def folded_area(res: dict) -> list[str]:
 
 
 def cordic_vs_poly(res: dict) -> list[str]:
+    """Lines of the ``bench/cordic_vs_poly.py`` section from its JSON ``res``."""
     designs = res["designs"]
     names = list(designs)
     servos = list(next(iter(designs.values()))["max_error_pu"])
@@ -140,6 +148,7 @@ def cordic_vs_poly(res: dict) -> list[str]:
 
 
 def exhaustive_accuracy(res: dict) -> list[str]:
+    """Lines of the ``bench/exhaustive_accuracy.py`` section from its JSON ``res``."""
     rows = [(s, num(e["approximation"], ".4f"), num(e["quantization"], ".4f"), num(e["rounding"], ".4f"),
              num(e["total"], ".4f"), e["worst_at"]) for s, e in res["servos"].items()]
     head = ("servo", "approximation (pu)", "quantization (pu)", "output rounding (pu)", "total (pu)",
@@ -149,6 +158,7 @@ def exhaustive_accuracy(res: dict) -> list[str]:
 
 
 def verilator_throughput(res: dict) -> list[str]:
+    """Lines of the ``bench/verilator_throughput.py`` section from its JSON ``res``."""
     rows = []
     for name, p in res["passes"].items():
         rows.append((name.replace("_", " "), f"{p['outputs_checked']:,} / {p['targets']:,}", f"{p['cycles']:,}",
@@ -166,6 +176,7 @@ def verilator_throughput(res: dict) -> list[str]:
 
 
 def _pareto_row(r: dict) -> tuple:
+    """One table row of a place-and-route record ``r``."""
     placed = r["status"] == "placed"
     if placed:
         status = num(r["fmax_mhz"], ".1f")
@@ -181,6 +192,7 @@ def _pareto_row(r: dict) -> tuple:
 
 
 def pareto(res: dict) -> list[str]:
+    """Lines of the ``bench/pareto.py`` section from its JSON ``res``."""
     head = ("core", "device", "Fmax (MHz)", "LC (nextpnr)", "LUT", "FF", "DSP", "BRAM", "latency (cycles / ns)",
             "II", "M solutions/s", "max error (pu)")
     lines = [f"Robot `{res['robot']}` (the hexapod row: the hexapod preset's shared core), nextpnr seed "
