@@ -201,7 +201,8 @@ def pareto(res: dict) -> list[str]:
              "the logic cells nextpnr placed; cores with more port bits than the package has pins run inside "
              "a serial timing harness, whose flip-flops the LC and FF counts include.", "",
              *table(head, [_pareto_row(r) for r in res["records"]])]
-    lines += [f"- {r['design']}: {r['description']}" for r in res["records"] if r["device"] == res["devices"][0]]
+    described = {r["design"]: r["description"] for r in res["records"]}    # one line per core, any device
+    lines += [f"- {name}: {what}" for name, what in described.items()]
     lines.append("")
     for device, plot in res["plots"].items():
         front = ", ".join(plot["pareto_front"]) or "–"
