@@ -147,14 +147,21 @@ def cordic_vs_poly(res: dict) -> list[str]:
     return lines + [f"- whole run {res['seconds']:.1f} s", ""]
 
 
+def point(at: dict | None) -> str:
+    """An input point ``{name: value}`` as ``name = value, ...``."""
+    return "–" if at is None else ", ".join(f"{k} = {v:g}" for k, v in at.items())
+
+
 def exhaustive_accuracy(res: dict) -> list[str]:
     """Lines of the ``bench/exhaustive_accuracy.py`` section from its JSON ``res``."""
     rows = [(s, num(e["approximation"], ".4f"), num(e["quantization"], ".4f"), num(e["rounding"], ".4f"),
-             num(e["total"], ".4f"), e["worst_at"]) for s, e in res["servos"].items()]
+             num(e["total"], ".4f"), point(e["worst_at"])) for s, e in res["servos"].items()]
     head = ("servo", "approximation (pu)", "quantization (pu)", "output rounding (pu)", "total (pu)",
             "worst total at")
-    return [f"Robot `{res['robot']}`: {res['points']:,} input points (every {res['stride']}. value of each "
-            f"input), tolerance ±{res['tolerance_pu']:g} pu, {res['seconds']:.1f} s.", "", *table(head, rows)]
+    grid = ("every representable value of each input" if res["stride"] == 1
+            else f"every {res['stride']}th representable value of each input")
+    return [f"Robot `{res['robot']}`: {res['points']:,} input points ({grid}), tolerance ±{res['tolerance_pu']:g} "
+            f"pu, {res['seconds']:.1f} s.", "", *table(head, rows)]
 
 
 def verilator_throughput(res: dict) -> list[str]:
