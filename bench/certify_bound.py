@@ -5,7 +5,8 @@ Fits the robot (or loads a plan), measures the sampled error on >= 10**6 points
 (``ikseries.fit.certify``) and prints and writes both per servo.
 
     python bench/certify_bound.py [--preset cylinder-leg] [--plan plan.json]
-                                  [--max-cells N] [--target PU] [--json out.json]
+                                  [--max-cells N] [--target PU]
+                                  [--json docs/results/certify_bound.json]
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
 import json
+import runpy
 import sys
 import time
 from pathlib import Path
@@ -25,6 +27,8 @@ from ikseries.fit.fitter import fit_robot
 from ikseries.fit.plan import Plan
 from ikseries.robot import load_preset
 
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
+
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -33,8 +37,9 @@ def main(argv=None):
     ap.add_argument("--max-cells", type=int, default=DEFAULT_MAX_CELLS, help="cell budget per servo")
     ap.add_argument("--target", type=float, default=None,
                     help="approximation target in pu (default: what the tolerance leaves)")
-    ap.add_argument("--json", default="certify_bound.json")
+    ap.add_argument("--json", default=FACTS["default_json"]("certify_bound"))
     args = ap.parse_args(argv)
+    run = FACTS["run_facts"]("certify_bound", argv)
     if args.max_cells < 1:
         sys.exit(f"--max-cells must be >= 1, not {args.max_cells}")
     robot = load_preset(args.preset)
@@ -71,7 +76,7 @@ def main(argv=None):
            "seconds_sampled": t_sampled, "seconds_certify": t_cert, "max_cells": args.max_cells,
            "tolerance_pu": robot.tolerance_pu, "verdict": verdict, "servos": rows,
            "certificate": cert.to_json()}
-    Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+    FACTS["write_result"](args.json, out, run)
     print(f"wrote {args.json}")
 
 

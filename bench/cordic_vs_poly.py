@@ -12,10 +12,11 @@ For one robot (default: the cylinder-leg preset):
    kept in ``<out>/<design>/<target>/netlist.json`` for a place-and-route step;
 5. (hook) ``pnr_step``: add Fmax from ``ikseries.pnr`` when it exists (see ``STEPS``).
 
-Prints a table and writes JSON (default ``build/cordic_vs_poly/cordic_vs_poly.json``).
+Prints a table and writes JSON (default ``docs/results/cordic_vs_poly.json``; Verilog and netlists
+under ``--out``).
 
     python bench/cordic_vs_poly.py [--robot FILE] [--margins 0,0.075] [--design JSON] [--no-poly]
-                                   [--targets ice40,ecp5,xc7] [--jobs N] [--out DIR]
+                                   [--targets ice40,ecp5,xc7] [--jobs N] [--out DIR] [--json FILE]
 
 One CORDIC design per sizing margin: margin 0 meets the tolerance exactly on the verification
 points (it may exceed it slightly elsewhere: see the fresh-point figures), 0.075 pu is the
@@ -31,6 +32,7 @@ single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
 import json
+import runpy
 import sys
 import time
 from pathlib import Path
@@ -44,6 +46,8 @@ from ikseries.hdl.evaluator import PlanEvaluator
 from ikseries.hdl.flat import stream_verilog
 from ikseries.robot import load_preset, load_robot
 from ikseries.synth import TARGETS, synth_counts
+
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
 
 def say(msg: str) -> None:
@@ -170,8 +174,9 @@ def main(argv=None):
     ap.add_argument("--targets", default=",".join(TARGETS))
     ap.add_argument("--jobs", type=int, default=1, help="parallel Yosys processes")
     ap.add_argument("--out", default="build/cordic_vs_poly")
-    ap.add_argument("--json", default=None, help="output JSON (default <out>/cordic_vs_poly.json)")
+    ap.add_argument("--json", default=FACTS["default_json"]("cordic_vs_poly"), help="output JSON")
     args = ap.parse_args(argv)
+    run = FACTS["run_facts"]("cordic_vs_poly", argv)
     targets = [t for t in args.targets.split(",") if t]
     for t in targets:
         if t not in TARGETS:
@@ -198,8 +203,7 @@ def main(argv=None):
               "points": len(next(iter(ctx["points"].values()))),
               "designs": {n: d["record"] for n, d in ctx["designs"].items()},
               "notes": ctx["notes"], "seconds": round(time.perf_counter() - t0, 1)}
-    path = Path(args.json) if args.json else out / "cordic_vs_poly.json"
-    path.write_text(json.dumps(result, indent=1))
+    path = FACTS["write_result"](args.json, result, run)
     print(_table(ctx))
     for n in ctx["notes"]:
         print(f"note: {n}")

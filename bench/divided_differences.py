@@ -5,7 +5,7 @@ prints the Newton-cubic formula's error along the path and over the case's 2-D b
 position error along the path and where it occurs, the joint velocity and acceleration
 errors, and the minimax comparisons, and writes the whole record as JSON.
 
-    python bench/divided_differences.py [--preset planar-arm] [--json out.json] [--samples N] [--grid N]
+    python bench/divided_differences.py [--preset planar-arm] [--json docs/results/divided_differences.json] [--samples N] [--grid N]
 
 The arm's link lengths, pu per degree and tolerance come from the preset; each case sets
 its own tool orientation.
@@ -17,7 +17,7 @@ from ikseries.threads import single_threaded_blas
 single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
-import json
+import runpy
 import sys
 import time
 from pathlib import Path
@@ -26,14 +26,17 @@ from ikseries.fit.baselines.divided import render_markdown, run_divided_differen
 from ikseries.planar_arm import PlanarArm
 from ikseries.robot import RobotError, load_preset
 
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
+
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--preset", default="planar-arm")
-    ap.add_argument("--json", default="build/divided_differences.json", help="output JSON")
+    ap.add_argument("--json", default=FACTS["default_json"]("divided_differences"), help="output JSON")
     ap.add_argument("--samples", type=int, default=2001, help="fit samples along each path")
     ap.add_argument("--grid", type=int, default=41, help="2-D fit grid points per side")
     args = ap.parse_args(argv)
+    run = FACTS["run_facts"]("divided_differences", argv)
     try:
         robot = load_preset(args.preset)
     except RobotError as e:
@@ -47,9 +50,7 @@ def main(argv=None):
     result["preset"] = args.preset
     print(render_markdown(result))
     print(f"({result['seconds']:.2f} s)")
-    out = Path(args.json)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=1))
+    out = FACTS["write_result"](args.json, result, run)
     print(f"wrote {out}")
 
 

@@ -4,7 +4,8 @@ The default test suite and `ikseries build` check >= 10**6 points; this script w
 whole input grid (297 million points for cylinder-leg with 3 fractional bits per input,
 about 10 minutes on one core) and prints and writes the measured maxima.
 
-    python bench/exhaustive_accuracy.py [build/cylinder-leg] [--stride N] [--json out.json]
+    python bench/exhaustive_accuracy.py [build/cylinder-leg] [--stride N]
+                                          [--json docs/results/exhaustive_accuracy.json]
 
 ``--stride N`` takes every N-th value of each input (N**3 fewer points) for a quick run.
 """
@@ -16,6 +17,7 @@ single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
 import json
+import runpy
 import sys
 import time
 from pathlib import Path
@@ -26,13 +28,16 @@ from ikseries.accuracy import measure
 from ikseries.fit.plan import Plan
 from ikseries.robot import robot_from_record
 
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
+
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("build_dir", nargs="?", default="build/cylinder-leg")
     ap.add_argument("--stride", type=int, default=1)
-    ap.add_argument("--json", default=None, help="output JSON (default <build_dir>/exhaustive_accuracy.json)")
+    ap.add_argument("--json", default=FACTS["default_json"]("exhaustive_accuracy"), help="output JSON")
     args = ap.parse_args(argv)
+    run = FACTS["run_facts"]("exhaustive_accuracy", argv)
     if args.stride < 1:
         sys.exit(f"--stride must be >= 1, not {args.stride}")
     bdir = Path(args.build_dir)
@@ -71,8 +76,7 @@ def main(argv=None):
     for s, e in out["servos"].items():
         print(f"{s:6} {e['approximation']:8.4f} {e['quantization']:8.4f} {e['rounding']:8.4f} "
               f"{e['total']:8.4f}  {e['worst_at']}")
-    dest = Path(args.json) if args.json else bdir / "exhaustive_accuracy.json"
-    dest.write_text(json.dumps(out, indent=1) + "\n")
+    dest = FACTS["write_result"](args.json, out, run)
     print(f"wrote {dest}")
     return 0 if all(e["total"] <= robot.tolerance_pu for e in total.values()) else 1
 

@@ -4,7 +4,7 @@ Per preset and servo: variables, total degree, terms, multiplications per evalua
 (coordinate stage included), coefficient bits, sampled max total error (pu) on >= 10**6
 representable points, certified bound (pu), and the preset's fit time (wall and CPU, certification included).
 
-    python bench/fit_benchmark.py [PRESET ...] [--json build/bench/fit_benchmark.json]
+    python bench/fit_benchmark.py [PRESET ...] [--json docs/results/fit_benchmark.json]
 
 Targets (issue 3) for cylinder-leg at +-0.5 pu: <= 100 multiply-adds per servo, certified,
 whole leg fitted in <= 30 s on 2 cores.
@@ -16,7 +16,7 @@ from ikseries.threads import single_threaded_blas
 single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
-import json
+import runpy
 import sys
 import time
 from pathlib import Path
@@ -24,6 +24,8 @@ from pathlib import Path
 from ikseries.accuracy import measure
 from ikseries.fit.fitter import FitError, fit_robot, output_multipliers
 from ikseries.robot import load_preset, preset_names
+
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
 
 def bench_preset(name: str) -> dict:
@@ -72,8 +74,9 @@ def table(results: list) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("presets", nargs="*", help=f"default: all ({', '.join(preset_names())})")
-    ap.add_argument("--json", default="build/bench/fit_benchmark.json")
+    ap.add_argument("--json", default=FACTS["default_json"]("fit_benchmark"))
     args = ap.parse_args(argv)
+    run = FACTS["run_facts"]("fit_benchmark", argv)
     names = args.presets or preset_names()
     bad = [n for n in names if n not in preset_names()]
     if bad:
@@ -83,9 +86,7 @@ def main(argv=None):
         print(f"fitting {n} ...", flush=True)
         results.append(bench_preset(n))
     print(table(results))
-    out = Path(args.json)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"results": results}, indent=1) + "\n")
+    out = FACTS["write_result"](args.json, {"results": results}, run)
     print(f"wrote {out}")
 
 

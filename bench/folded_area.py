@@ -5,7 +5,7 @@ SB_MAC16-sized limbs, ECP5 with MULT18X18D-sized limbs), the fully pipelined
 PlanEvaluator for comparison (optional, slow), and the 6-leg RobotCore (18 servos) on
 iCE40UP5K. Prints a table and writes JSON.
 
-    .venv/bin/python bench/folded_area.py [--out bench/folded_area.json] [--ks 1 2 4] [--pipelined]
+    .venv/bin/python bench/folded_area.py [--out docs/results/folded_area.json] [--ks 1 2 4] [--pipelined]
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from ikseries.threads import single_threaded_blas
 single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
-import json
+import runpy
 import time
 from pathlib import Path
 
@@ -30,6 +30,8 @@ from ikseries.hdl.schedule import compile_program
 from ikseries.hdl.shared import RobotCore
 from ikseries.robot import load_preset
 from ikseries.synth import DEVICES, synth_counts
+
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
 DSP = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
 
@@ -59,13 +61,14 @@ def measure(name, core, target, workdir: Path) -> dict:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="bench/folded_area.json")
+    ap.add_argument("--out", default=FACTS["default_json"]("folded_area"))
     ap.add_argument("--work", default="build/folded_area")
     ap.add_argument("--ks", type=int, nargs="+", default=[1, 2, 4])
     ap.add_argument("--clock-mhz", type=float, nargs="+", default=[24.0, 48.0])
     ap.add_argument("--pipelined", action="store_true", help="also synthesise the pipelined PlanEvaluator")
     ap.add_argument("--only", nargs="+", help="synthesise only these designs (names as in the table)")
     args = ap.parse_args(argv)
+    run = FACTS["run_facts"]("folded_area", argv)
     work = Path(args.work).resolve()
     t0 = time.time()
     robot = load_preset("cylinder-leg")
@@ -112,9 +115,7 @@ def main(argv=None):
         print(f"\nhexapod on iCE40UP5K: {h['counts']['LUT']} LUT / {cap['LUT']}, {h['counts']['DSP']} DSP / {cap['DSP']}, "
               f"{h['counts']['BRAM']} BRAM / {cap['BRAM']}; refresh " +
               ", ".join(f"{v:.0f} Hz at {f}" for f, v in h["refresh_hz_at"].items()))
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"plan_nodes": len(plan.nodes), "rows": rows}, indent=1) + "\n")
+    out = FACTS["write_result"](args.out, {"plan_nodes": len(plan.nodes), "rows": rows}, run)
     print(f"wrote {out}")
 
 

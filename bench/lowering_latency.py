@@ -12,7 +12,7 @@ then fewest multipliers: :func:`ikseries.fit.horner.lower_poly`), ``mix+N`` (at 
 multipliers more than Horner per servo polynomial) and ``mix guard G`` (the powers of the
 variables kept with G more fractional bits).
 
-    python bench/lowering_latency.py [PRESET] [--extra N ...] [--guard G ...] [--json build/bench/lowering_latency.json]
+    python bench/lowering_latency.py [PRESET] [--extra N ...] [--guard G ...] [--json docs/results/lowering_latency.json]
 
 Rebuilding a plan from fits uses the fitter internals ``_Nodes`` (the feature nodes) and the
 coordinate stage as ``fit_robot`` configures it.
@@ -24,7 +24,7 @@ from ikseries.threads import single_threaded_blas
 single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
-import json
+import runpy
 import time
 from pathlib import Path
 
@@ -35,6 +35,8 @@ from ikseries.fit.lowering import MIX_EXTRA_MULTIPLIERS, FeatureNodes, output_mu
 from ikseries.fit.horner import choose_split, estrin, poly_degrees
 from ikseries.fit.plan import PlanBuilder, PlanOutput
 from ikseries.robot import load_preset
+
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
 
 def rebuild(robot, plan, fits, extra: int | None, horner: bool = False, guard: int = 0):
@@ -94,8 +96,9 @@ def main(argv=None):
                     help="multiplier allowances per servo polynomial to report besides the unlimited mix")
     ap.add_argument("--guard", type=int, nargs="*", default=[4],
                     help="extra fractional bits of the powers of the variables to report for the mix")
-    ap.add_argument("--json", default="build/bench/lowering_latency.json")
+    ap.add_argument("--json", default=FACTS["default_json"]("lowering_latency"))
     args = ap.parse_args(argv)
+    run = FACTS["run_facts"]("lowering_latency", argv)
     robot = load_preset(args.preset)
     t0 = time.perf_counter()
     plan, fits = fitter.fit_robot(robot)
@@ -108,9 +111,7 @@ def main(argv=None):
         raise SystemExit(f"the {fitted} rebuild does not reproduce the fitted plan")
     print(table(res))
     print(f"lowered and measured in {time.perf_counter() - t0:.1f} s")
-    out = Path(args.json)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"preset": args.preset, "schemes": res}, indent=1) + "\n")
+    out = FACTS["write_result"](args.json, {"preset": args.preset, "schemes": res}, run)
     print(f"wrote {out}")
 
 

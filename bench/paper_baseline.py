@@ -5,7 +5,7 @@ to evaluation plans, measures both on the same >= 10**6 workspace points and pri
 Markdown table; writes the figures as JSON. About a minute on one core for cylinder-leg.
 
     python bench/paper_baseline.py [--preset cylinder-leg] [--theta-fit minimax|chebyshev]
-                                   [--json paper_baseline.json]
+                                   [--json docs/results/paper_baseline.json]
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from ikseries.threads import single_threaded_blas
 single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
-import json
+import runpy
 import sys
 import time
 from pathlib import Path
@@ -26,13 +26,16 @@ from ikseries.fit.baselines.paper import THETA_FITS, fit_paper, paper_errors, pa
 from ikseries.accuracy import verification_points
 from ikseries.robot import load_preset, preset_names
 
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
+
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--preset", default="cylinder-leg", choices=preset_names())
     ap.add_argument("--theta-fit", default="minimax", choices=THETA_FITS)
-    ap.add_argument("--json", default="paper_baseline.json", help="output JSON")
+    ap.add_argument("--json", default=FACTS["default_json"]("paper_baseline"), help="output JSON")
     args = ap.parse_args(argv)
+    run = FACTS["run_facts"]("paper_baseline", argv)
     robot = load_preset(args.preset)
     times = {}
     t0 = time.perf_counter()
@@ -63,7 +66,7 @@ def main(argv=None):
           + ", ".join(f"{s} {e:.4f}" for s, e in result["paper"]["float_uncut_max_error_pu"].items()))
     print("paper step 1 alone (theta series on the worst circle, unrounded), max error (pu): "
           + ", ".join(f"{s} {e:.4f}" for s, e in result["paper"]["circle_error_pu"].items()))
-    Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
+    FACTS["write_result"](args.json, result, run)
     print(f"wrote {args.json}")
     return 0
 

@@ -38,7 +38,7 @@ Accuracy: the polynomial plan's max |error| on the >= 10**6 verification points
 (``ikseries.accuracy.measure``; bit-exact for the pipelined and folded cores alike) and its
 certified bound; the CORDIC design's on the same points (``measure_cordic``).
 
-Writes JSON (default ``build/bench/pareto.json``), a plot per device next to it
+Writes JSON (default ``docs/results/pareto.json``), a plot per device next to it
 (``pareto_<device>.png``: area = LUT + FF from Yosys (ECP5 LUT: LUT4 cells + the two LUT4s of each
 CCU2C) with the timing harness' FFs removed on x,
 latency in ns at Fmax on y, Pareto front of the placed cylinder-leg cores marked), and prints a table and
@@ -47,7 +47,8 @@ verdicts for the issue's targets.
     python bench/pareto.py [--devices ice40-up5k-sg48,ecp5-25f-cabga381]
                            [--designs pipelined,modulo4,modulo8,modulo12,modulo4d,modulo7d,modulo16d,folded1,folded2,cordic,cordic_iter,hexapod]
                            [--jobs 2]
-                           [--clock-mhz 100] [--cordic-design JSON] [--out build/bench/pareto.json]
+                           [--clock-mhz 100] [--cordic-design JSON] [--out docs/results/pareto.json]
+                           [--work build/bench/pareto]
 """
 from __future__ import annotations
 
@@ -57,6 +58,7 @@ single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
 import json
+import runpy
 import sys
 import time
 import warnings
@@ -64,6 +66,8 @@ from pathlib import Path
 
 from ikseries.pareto import DesignSpec, plot_device, run_matrix
 from ikseries.pnr import PNR_DEVICES
+
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
 ICE40, ECP5 = "ice40-up5k-sg48", "ecp5-25f-cabga381"
 MODULO_II = (4, 8, 12)
@@ -432,8 +436,10 @@ def main(argv=None):
     ap.add_argument("--clock-mhz", type=float, default=100.0, help="nextpnr --freq target")
     ap.add_argument("--cordic-design", default=None, help="CORDIC design as JSON (skips the sizing)")
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--out", default="build/bench/pareto.json")
+    ap.add_argument("--out", default=FACTS["default_json"]("pareto"))
+    ap.add_argument("--work", default="build/bench/pareto", help="place-and-route working directory")
     args = ap.parse_args(argv)
+    run = FACTS["run_facts"]("pareto", argv)
     # latency / initiation interval come from components that are built and never elaborated
     warnings.filterwarnings("ignore", message=".*created but never used")
     devices = _csv(args.devices, list(PNR_DEVICES), "devices")
@@ -450,7 +456,7 @@ def main(argv=None):
     order = {"pipelined": 0, "cordic": 1, "hexapod": 2}
     specs.sort(key=lambda s: order.get(s.name, 3))
     clock_hz = int(round(args.clock_mhz * 1e6))
-    records = run_matrix(specs, devices, clock_hz, out.parent / "pareto", jobs=args.jobs, seed=args.seed,
+    records = run_matrix(specs, devices, clock_hz, Path(args.work).resolve(), jobs=args.jobs, seed=args.seed,
                          progress=say)
     for r in records:
         if r["kind"] == "robot" and r["status"] == "placed":
@@ -469,7 +475,7 @@ def main(argv=None):
     result = {**info, "clock_target_mhz": args.clock_mhz, "seed": args.seed, "devices": devices,
               "area_metric": "LUT + FF - harness_ffs (Yosys counts)", "records": records, "plots": plots,
               "verdicts": verdicts, "seconds": round(time.perf_counter() - t0, 1)}
-    out.write_text(json.dumps(result, indent=1) + "\n")
+    FACTS["write_result"](out, result, run)
     print(table(records))
     for d, p in plots.items():
         print(f"Pareto front on {d} (area, latency ns; cylinder-leg cores): {', '.join(p['pareto_front']) or '-'}")

@@ -16,7 +16,8 @@ latency). Prints the figures, writes JSON, and exits with status 1 if anything m
 Pipelined and modulo-scheduled builds (a target every N cycles: the latency is counted in cycles
 of the pipeline enable); folded and shared builds handshake differently and are refused.
 
-    python bench/verilator_throughput.py [BUILD_DIR] [-n 1000000] [--seed 1] [--json out.json]
+    python bench/verilator_throughput.py [BUILD_DIR] [-n 1000000] [--seed 1]
+                                           [--json docs/results/verilator_throughput.json]
     python bench/verilator_throughput.py --fit [--preset cylinder-leg] ...
 """
 from __future__ import annotations
@@ -27,6 +28,7 @@ single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
 import json
+import runpy
 import shutil
 import sys
 import tempfile
@@ -39,6 +41,8 @@ from ikseries.fit.plan import Plan
 from ikseries.sim import golden
 from ikseries.sim.targets import corner_targets, random_targets
 from ikseries.sim.verilator_bench import build_testbench, run_testbench, write_vectors
+
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
 TOP = "leg_core"
 
@@ -85,9 +89,9 @@ def main(argv=None) -> int:
     ap.add_argument("--bubble", type=float, default=0.1, help="i_valid low probability in the 2nd pass")
     ap.add_argument("--cxx-opt", default="-O2", help="C++ optimisation of the Verilated model")
     ap.add_argument("--workdir", help="keep the Verilator build here (default: a temporary directory)")
-    ap.add_argument("--json", help="output JSON (default <build_dir>/verilator_throughput.json, "
-                                   "or ./verilator_throughput.json with --fit)")
+    ap.add_argument("--json", default=FACTS["default_json"]("verilator_throughput"), help="output JSON")
     args = ap.parse_args(argv)
+    run = FACTS["run_facts"]("verilator_throughput", argv)
     if args.n < 1:
         sys.exit(f"-n must be a positive integer, not {args.n}")
     for name in ("stall", "bubble"):
@@ -143,9 +147,7 @@ def main(argv=None) -> int:
                             "verilator_build": tb.build_s,
                             **{f"run_{k}": p["wall_seconds"] for k, p in passes.items()}},
            "passes": passes}
-    jpath = Path(args.json) if args.json else (Path("verilator_throughput.json") if args.fit
-                                               else Path(args.build_dir) / "verilator_throughput.json")
-    jpath.write_text(json.dumps(out, indent=1) + "\n")
+    jpath = FACTS["write_result"](args.json, out, run)
     print(f"rate {out['rate_targets_per_second']:,} targets/s, {out['mismatches']} mismatches, "
           f"{out['latency_errors']} latency errors: {'PASS' if out['passed'] else 'FAIL'}; wrote {jpath}")
     return 0 if out["passed"] else 1

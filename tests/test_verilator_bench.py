@@ -41,7 +41,8 @@ def bench_run(tmp_path_factory):
     (bdir / "tiny_core.v").write_text(leg_verilog(core, "tiny_core"))
     (bdir / "manifest.json").write_text(json.dumps({"module": "tiny_core", "latency_cycles": core.latency}))
     wd = bdir / "work"
-    code = _bench_main()([str(bdir), "-n", str(N), "--seed", "5", "--cxx-opt=-O0", "--workdir", str(wd)])
+    code = _bench_main()([str(bdir), "-n", str(N), "--seed", "5", "--cxx-opt=-O0", "--workdir", str(wd),
+                          "--json", str(bdir / "verilator_throughput.json")])
     return plan, core, bdir, wd, code, json.loads((bdir / "verilator_throughput.json").read_text())
 
 

@@ -1,0 +1,246 @@
+"""Markdown sections of ``docs/results.md``, one renderer per bench script's JSON.
+
+Each renderer takes the JSON a bench wrote (``docs/results/<bench>.json``) and returns the
+section's body lines: figures only as the JSON holds them, formatted the same way every time.
+:data:`SECTIONS` maps a bench name to its title, a one-line description and its renderer;
+``bench/results.py`` assembles the document.
+"""
+from __future__ import annotations
+
+from ikseries.fit.comparison import render_comparison
+from ikseries.fit.divided import render_markdown as render_divided
+
+
+def table(head, rows) -> list[str]:
+    """A Markdown table of ``rows`` (sequences of cells) under ``head``."""
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return lines + [""]
+
+
+def num(v, spec: str = ".3f", none: str = "–") -> str:
+    """``v`` formatted by ``spec``, or ``none`` when it is missing."""
+    return none if v is None else format(v, spec)
+
+
+def demote(markdown: str, levels: int = 1) -> list[str]:
+    """``markdown``'s lines with every heading ``levels`` deeper (to sit inside a section), and a
+    blank line after them."""
+    return [("#" * levels + line) if line.startswith("#") else line for line in markdown.splitlines()] + [""]
+
+
+def fit_benchmark(res: dict) -> list[str]:
+    """Lines of the ``bench/fit_benchmark.py`` section from its JSON ``res``."""
+    rows, notes = [], []
+    for r in res["results"]:
+        if "error" in r:
+            notes.append(f"- {r['preset']}: fit refused: {r['error']}")
+            continue
+        for k, s in enumerate(r["servos"]):
+            certified = num(s["certified_max_pu"]) + ("" if s["certified"] else " (cell budget spent)")
+            rows.append((r["preset"] if k == 0 else "", s["servo"], s["variables"], s["degree"], s["terms"],
+                         s["multiplications"], s["coefficient_bits"], num(s["sampled_max_pu"]), certified,
+                         f"{r['fit_s']:.1f} ({r['fit_cpu_s']:.1f})" if k == 0 else ""))
+        notes.append(f"- {r['preset']}: tolerance ±{r['tolerance_pu']:g} pu, sampled on {r['points']:,} points, "
+                     f"{r['plan_multipliers']} multipliers in the whole plan")
+    head = ("preset", "servo", "variables", "degree", "terms", "mults", "coefficient bits", "sampled (pu)",
+            "certified (pu)", "fit + certify, wall s (CPU s)")
+    return ["*mults*: multiplications per evaluation of the servo, its share of the coordinate stage "
+            "included. *sampled*: max |emitted − exact pulse| on the sampled points; *certified*: the "
+            "proven bound over the continuous workspace box.", "", *table(head, rows), *notes, ""]
+
+
+def lowering_latency(res: dict) -> list[str]:
+    """Lines of the ``bench/lowering_latency.py`` section from its JSON ``res``."""
+    rows = []
+    for name, r in res["schemes"].items():
+        for k, s in enumerate(r["servos"]):
+            rows.append((name if k == 0 else "", r["latency"] if k == 0 else "", r["multipliers"] if k == 0 else "",
+                         s["servo"], s["split"], s["stage"], s["multipliers"], num(s["rounding_bound_pu"], ".4f"),
+                         num(s["bound_vs_horner"])))
+    head = ("scheme", "plan latency (stages)", "plan mults", "servo", "split", "output stage", "servo mults",
+            "rounding bound (pu)", "bound ÷ Horner's")
+    return [f"Preset `{res['preset']}`, the same fits lowered by each scheme. *mix+N*: at most N "
+            "multiplications more than Horner per servo polynomial; *mix guard G*: the powers of the "
+            "variables kept with G more fractional bits.", "", *table(head, rows)]
+
+
+def certify_bound(res: dict) -> list[str]:
+    """Lines of the ``bench/certify_bound.py`` section from its JSON ``res``."""
+    rows = []
+    for s in res["servos"]:
+        c = s["certified"]
+        rows.append((s["servo"], num(s["sampled_approximation_pu"], ".4f"), num(c["approximation_pu"], ".4f"),
+                     num(s["sampled_total_pu"], ".4f"), num(c["total_pu"], ".4f"), num(c["rounding_pu"], ".4f"),
+                     num(c["output_rounding_pu"], ".4f"), f"{c['cells']:,}", "yes" if c["converged"] else "no",
+                     num(c["seconds"], ".1f")))
+    head = ("servo", "sampled approx. (pu)", "certified approx. (pu)", "sampled total (pu)",
+            "certified total (pu)", "certified quantization (pu)", "output rounding (pu)", "cells",
+            "converged", "certify s")
+    return [f"Preset `{res['preset']}` ({res['nodes']} plan nodes), tolerance ±{res['tolerance_pu']:g} pu; "
+            f"sampled on {res['points_sampled']:,} points in {res['seconds_sampled']:.1f} s, certified "
+            f"(at most {res['max_cells']:,} cells per servo) in {res['seconds_certify']:.1f} s.", "",
+            *table(head, rows), f"Verdict: {res['verdict']}.", ""]
+
+
+def paper_baseline(res: dict) -> list[str]:
+    """Lines of the ``bench/paper_baseline.py`` section from its JSON ``res``."""
+    p = res["paper"]
+    lines = demote(render_comparison(res))[1:]    # the section title replaces the heading
+    for key, what in (("float_max_error_pu", "the paper's series in float64 (7 significant figures)"),
+                      ("float_uncut_max_error_pu", "the same series with every digit (no cut to 7 significant figures)"),
+                      ("circle_error_pu", "the paper's first step alone (θ series on the worst circle)")):
+        lines.append(f"- {what}, max error (pu): " + ", ".join(f"{s} {e:.4f}" for s, e in p[key].items()))
+    t = res["times_s"]
+    lines += [f"- θ fit `{p['theta_fit']}`; fit times: ikseries {t['ikseries_fit_s']} s, paper "
+              f"{t['paper_fit_s']} s; measuring both {t['measure_s']} s", ""]
+    return lines
+
+
+def divided_differences(res: dict) -> list[str]:
+    """Lines of the ``bench/divided_differences.py`` section from its JSON ``res``."""
+    return demote(render_divided(res))[1:] + [f"Preset `{res['preset']}`, {res['seconds']:.2f} s.", ""]
+
+
+def folded_area(res: dict) -> list[str]:
+    """Lines of the ``bench/folded_area.py`` section from its JSON ``res``."""
+    rows, extra = [], []
+    for r in res["rows"]:
+        c = r["counts"]
+        rows.append((r["design"], r["target"], c["LUT"], c["FF"], c["carry"], c["DSP"], c["BRAM"],
+                     r.get("latency", "–"), r.get("initiation_interval", "–")))
+        if "program" in r:
+            p = r["program"]
+            extra.append(f"- {r['design']}: {p['steps']} microcode steps of {p['microcode_bits'] // p['steps']} "
+                         f"bits, {p['muls']} multiplications in limbs {p['limbs']}, store {p['store_width']} "
+                         f"bits × {p['depth']}, {p['consts']} constants, accumulator {p['acc_width']} bits")
+        if "refresh_hz_at" in r:
+            extra.append(f"- {r['design']}: every leg refreshed " + ", ".join(
+                f"{v:,.0f} times/s at {f}" for f, v in r["refresh_hz_at"].items()))
+    head = ("design", "target", "LUT", "FF", "carry", "DSP", "BRAM", "latency (cycles)", "II (cycles)")
+    return [f"The cylinder-leg plan ({res['plan_nodes']} nodes) on folded evaluators and the 6-leg shared "
+            "core, with parts of the latter; Yosys cell counts.", "", *table(head, rows), *extra, ""]
+
+
+def cordic_vs_poly(res: dict) -> list[str]:
+    """Lines of the ``bench/cordic_vs_poly.py`` section from its JSON ``res``."""
+    designs = res["designs"]
+    names = list(designs)
+    servos = list(next(iter(designs.values()))["max_error_pu"])
+    rows = [("latency (cycles)", *(designs[n]["latency_cycles"] for n in names))]
+    rows += [(f"max error {s} (pu)", *(num(designs[n]["max_error_pu"][s], ".4f") for n in names)) for s in servos]
+    rows += [(f"max error {s}, fresh points (pu)",
+              *(num(designs[n].get("max_error_pu_fresh_points", {}).get(s), ".4f") for n in names)) for s in servos]
+    rows.append(("register bits", *(designs[n].get("register_bits", "–") for n in names)))
+    targets = list(next(iter(designs.values())).get("synth", {}))
+    for t in targets:
+        for c in ("LUT", "FF", "carry", "DSP"):
+            rows.append((f"{t} {c}", *(designs[n]["synth"][t]["counts"][c] for n in names)))
+    lines = [f"Robot `{res['robot']}`, tolerance ±{res['tolerance_pu']:g} pu, errors on {res['points']:,} "
+             "points (*fresh points*: a second, independent point set). Yosys cell counts per target.", "",
+             *table(("", *names), rows)]
+    for n in names:
+        d = designs[n]
+        if "design" in d:
+            lines.append(f"- {n}: {d['sized']}; design {d['design']}")
+    lines += [f"- note: {note}" for note in res["notes"]]
+    return lines + [f"- whole run {res['seconds']:.1f} s", ""]
+
+
+def point(at: dict | None) -> str:
+    """An input point ``{name: value}`` as ``name = value, ...``."""
+    return "–" if at is None else ", ".join(f"{k} = {v:g}" for k, v in at.items())
+
+
+def exhaustive_accuracy(res: dict) -> list[str]:
+    """Lines of the ``bench/exhaustive_accuracy.py`` section from its JSON ``res``."""
+    rows = [(s, num(e["approximation"], ".4f"), num(e["quantization"], ".4f"), num(e["rounding"], ".4f"),
+             num(e["total"], ".4f"), point(e["worst_at"])) for s, e in res["servos"].items()]
+    head = ("servo", "approximation (pu)", "quantization (pu)", "output rounding (pu)", "total (pu)",
+            "worst total at")
+    grid = ("every representable value of each input" if res["stride"] == 1
+            else f"every {res['stride']}th representable value of each input")
+    return [f"Robot `{res['robot']}`: {res['points']:,} input points ({grid}), tolerance ±{res['tolerance_pu']:g} "
+            f"pu, {res['seconds']:.1f} s.", "", *table(head, rows)]
+
+
+def verilator_throughput(res: dict) -> list[str]:
+    """Lines of the ``bench/verilator_throughput.py`` section from its JSON ``res``."""
+    rows = []
+    for name, p in res["passes"].items():
+        rows.append((name.replace("_", " "), f"{p['outputs_checked']:,} / {p['targets']:,}", f"{p['cycles']:,}",
+                     f"{p['targets_per_second']:,}", f"{p['cycles_per_second']:,}", p["mismatches"],
+                     p["latency_errors"], f"{p['latency_cycles_min']}..{p['latency_cycles_max']}",
+                     "yes" if p["passed"] else "**no**"))
+    head = ("pass", "outputs checked / targets", "cycles", "targets/s", "cycles/s", "mismatches",
+            "latency errors", "latency (cycles)", "passed")
+    w = res["wall_seconds"]
+    return [f"`{res['source']}`: {res['targets']:,} targets ({res['random_targets']:,} random, seed "
+            f"{res['seed']}, and {res['corner_targets']:,} corners), latency {res['latency_cycles']} cycles, "
+            f"a target every {res['initiation_interval']} cycles, model compiled with `{res['cxx_opt']}`. "
+            "The rates are of the simulated hardware on this machine.", "", *table(head, rows),
+            f"Wall time: Verilator build {w['verilator_build']:.1f} s, golden model {w['golden']:.1f} s.", ""]
+
+
+def _pareto_row(r: dict) -> tuple:
+    """One table row of a place-and-route record ``r``."""
+    placed = r["status"] == "placed"
+    if placed:
+        status = num(r["fmax_mhz"], ".1f")
+    elif r["overflow"]:
+        status = "does not fit: " + ", ".join(f"{k} {o['used']} of {o['available']}" for k, o in r["overflow"].items())
+    else:
+        status = f"{r['status']}: {r['error']}"
+    latency = f"{r['latency_cycles']} / {num(r['latency_ns'], '.1f')}" if placed else f"{r['latency_cycles']} / –"
+    rate = num(r["throughput_per_s"] / 1e6, ".3g") if placed and r["throughput_per_s"] else "–"
+    return (r["design"], r["device"], status, num(r["LC"], "d"), num(r["LUT"], "d"), num(r["FF"], "d"),
+            num(r["DSP"], "d"), num(r["BRAM"], "d"), latency, r["initiation_interval"], rate,
+            num(r["max_error_pu"], ".3f"))
+
+
+def pareto(res: dict) -> list[str]:
+    """Lines of the ``bench/pareto.py`` section from its JSON ``res``."""
+    head = ("core", "device", "Fmax (MHz)", "LC (nextpnr)", "LUT", "FF", "DSP", "BRAM", "latency (cycles / ns)",
+            "II", "M solutions/s", "max error (pu)")
+    lines = [f"Robot `{res['robot']}` (the hexapod row: the hexapod preset's shared core), nextpnr seed "
+             f"{res['seed']}, `--freq` {res['clock_target_mhz']:g} MHz, Fmax of the register-to-register paths. "
+             "LUT, FF, DSP and BRAM from Yosys (ECP5 LUT: LUT4 cells plus the two LUT4s of every CCU2C), LC "
+             "the logic cells nextpnr placed; cores with more port bits than the package has pins run inside "
+             "a serial timing harness, whose flip-flops the LC and FF counts include.", "",
+             *table(head, [_pareto_row(r) for r in res["records"]])]
+    described = {r["design"]: r["description"] for r in res["records"]}    # one line per core, any device
+    lines += [f"- {name}: {what}" for name, what in described.items()]
+    lines.append("")
+    for device, plot in res["plots"].items():
+        front = ", ".join(plot["pareto_front"]) or "–"
+        lines += [f"Area (LUT + FF without the harness) against latency on {device}; Pareto front: {front}.", "",
+                  f"![{device}](results/{plot['png'].rsplit('/', 1)[-1]})", ""]
+    lines += ["Verdicts on the design targets, as the bench prints them:", "", "```"]
+    for verdict in res["verdicts"].values():
+        lines += verdict
+    return lines + ["```", ""]
+
+
+SECTIONS = {
+    "fit_benchmark": ("Fits of every preset", "Per preset and servo: what the fit costs and achieves.",
+                      fit_benchmark),
+    "lowering_latency": ("Horner against the Horner/Estrin mix", "Plan latency, multipliers and rounding "
+                         "bounds of the servo polynomials under each lowering.", lowering_latency),
+    "certify_bound": ("Certified against sampled error", "The certified bound over the continuous "
+                      "workspace beside the sampled maximum.", certify_bound),
+    "paper_baseline": ("The paper's procedure against ikseries", "Both fits lowered to plans and measured "
+                       "on the same points.", paper_baseline),
+    "divided_differences": ("Divided differences (planar-arm path mode)", "The Newton-cubic formula on the "
+                            "planar arm's three tool paths.", divided_differences),
+    "folded_area": ("Folded and shared evaluators", "Yosys resource counts of the folded evaluator and "
+                    "of the shared hexapod core.", folded_area),
+    "cordic_vs_poly": ("CORDIC against the polynomial core", "Accuracy and Yosys counts of the CORDIC "
+                       "leg solver and the pipelined polynomial evaluator, measured in one run.",
+                       cordic_vs_poly),
+    "exhaustive_accuracy": ("Error at every representable input", "The built plan's error on the whole "
+                            "input grid.", exhaustive_accuracy),
+    "verilator_throughput": ("Verilator throughput", "Targets through the exported Verilog in Verilator, "
+                             "every output compared bit for bit with the golden model.", verilator_throughput),
+    "pareto": ("Every core placed and routed", "Place and route of the polynomial cores, the CORDIC "
+               "baseline and the hexapod core on iCE40UP5K and ECP5-25F.", pareto),
+}
