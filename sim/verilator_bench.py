@@ -42,7 +42,7 @@ import numpy as np
 
 from ..fit.baselines.cordic import CordicPlan
 from ..fit.plan import Plan, bits_for
-from .runner import _verilator_make_fixes, _verilator_path, primitive_models, simulator_available
+from .runner import primitive_models, simulator_available, verilator_make_fixes, verilator_path
 
 __all__ = ["VerilatorTestbench", "write_vectors", "testbench_cpp", "build_testbench", "run_testbench"]
 
@@ -239,10 +239,10 @@ def build_testbench(plan: Plan | CordicPlan, verilog: str, top: str, workdir, *,
     workdir.mkdir(parents=True, exist_ok=True)
     (workdir / f"{top}.v").write_text(verilog)
     (workdir / "tb.cpp").write_text(testbench_cpp(plan, top, advance))
-    path = _verilator_path()
+    path = verilator_path()
     env = dict(os.environ, PATH=path)
     # run-once code at -O0 (see runner.run)
-    fixes = [_verilator_make_fixes(path), f"OPT_FAST={cxx_opt}", "OPT_SLOW=-O0", f"OPT_GLOBAL={cxx_opt}"]
+    fixes = [verilator_make_fixes(path), f"OPT_FAST={cxx_opt}", "OPT_SLOW=-O0", f"OPT_GLOBAL={cxx_opt}"]
     env["MAKEFLAGS"] = " ".join(x for x in (os.environ.get("MAKEFLAGS", ""), *fixes) if x)
     argv = [shutil.which("verilator", path=path), "--cc", "--exe", "--build", "-j", str(jobs), "--no-timing",
             "-Wno-fatal", "-Wno-lint", "-Wno-style", "--top-module", top, "--Mdir", "obj",
