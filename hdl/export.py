@@ -13,7 +13,7 @@ from .leg import LegCore
 from .shared import RobotCore
 
 __all__ = ["FlatLegTop", "FlatRobotTop", "module_name", "leg_verilog", "robot_verilog", "pwm_port",
-           "manifest", "MANIFEST_FORMAT"]
+           "manifest", "MANIFEST_FORMAT", "STREAM_RULES", "stream_rule"]
 
 
 class FlatLegTop(FlatStreamTop):
@@ -100,6 +100,20 @@ class FlatRobotTop(wiring.Component):
 
 MANIFEST_FORMAT = "ikseries.manifest"
 
+#: the stream timing a core follows (the manifest's ``"stream_rule"``): ``"pipelined"``: global
+#: stall, i_ready = o_ready | ~o_valid, one target per cycle; ``"modulo"``: global stall, a target
+#: enters when the phase counter is 0 (every ``initiation_interval`` cycles); ``"folded"``: one
+#: evaluation in flight, i_ready low from an input transfer until its output transfers
+STREAM_RULES = ("pipelined", "modulo", "folded")
+
+
+def stream_rule(core: LegCore | RobotCore) -> str:
+    """The stream rule of ``core`` (one of :data:`STREAM_RULES`): a leg core's architecture; a
+    robot core shares one folded evaluator between its legs."""
+    if isinstance(core, RobotCore):
+        return "folded"
+    return core.architecture
+
 
 def module_name(robot_name: str) -> str:
     """Verilog module name of a robot's leg core (``cylinder-leg`` -> ``cylinder_leg_core``)."""
@@ -157,6 +171,7 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
         "latency_cycles": core.latency,
         "latency_ns": core.latency / clk * 1e9,
         "initiation_interval": ii,
+        "stream_rule": stream_rule(core),
         "clock_hz": clk,
         "legs": core.legs if shared else 1,
         "refresh_hz": core.refresh_hz if shared else clk / ii,

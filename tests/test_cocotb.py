@@ -1,7 +1,8 @@
 """cocotb tests of the exported leg-core Verilog on Icarus and Verilator.
 
 Each simulator gets one build of ``leg_verilog(LegCore(small_plan, PWM_PERIOD))`` and runs the
-three cocotb tests of :mod:`ikseries.sim.cocotb_leg` (see there for what each checks):
+three cocotb tests of :mod:`ikseries.sim.cocotb_leg.tests` (see there for what each checks; the
+bench reads the design from the manifest the runner writes):
 
 * test_back_to_back  - corner + 3000 random targets, one per cycle: bit-exact vs the golden
   model, in order, latency == core.latency for every target, one transfer per cycle;
@@ -104,7 +105,8 @@ def test_folded_leg_core_cocotb(simulator, small_plan, small_plan_file, tmp_path
     print(res.summary())
     assert set(res.tests) == COCOTB_TESTS, res.summary()
     assert res.ok, res.summary()
-    assert (res.latency, res.initiation_interval, res.top) == (core.latency, core.initiation_interval, "leg")
+    assert (res.latency, res.initiation_interval, res.top, res.stream_rule) == \
+        (core.latency, core.initiation_interval, "leg", "folded")
     assert res.n_random >= 16
 
 
@@ -119,7 +121,8 @@ def test_robot_core_cocotb(small_plan, small_plan_file, tmp_path_factory):
     print(res.summary())
     assert set(res.tests) == COCOTB_TESTS, res.summary()
     assert res.ok, res.summary()
-    assert (res.top, res.legs, res.initiation_interval) == ("robot", 3, core.initiation_interval)
+    assert (res.top, res.legs, res.initiation_interval, res.stream_rule) == \
+        ("robot", 3, core.initiation_interval, "folded")
 
 
 @pytest.mark.parametrize("wrong", ["latency", "ii"])
@@ -166,7 +169,7 @@ def test_modulo_leg_core_cocotb(simulator, small_plan, small_plan_file, tmp_path
     print(res.summary())
     assert set(res.tests) == COCOTB_TESTS, res.summary()
     assert res.ok, res.summary()
-    assert (res.latency, res.initiation_interval, res.architecture, res.top) == \
+    assert (res.latency, res.initiation_interval, res.stream_rule, res.top) == \
         (core.latency, core.initiation_interval, "modulo", "leg")
 
 

@@ -28,7 +28,7 @@ def test_hexapod_build_report_and_ports(hexapod):
     man = json.loads((hexapod / "manifest.json").read_text())
     robot = load_preset("hexapod")
     assert sorted(p.name for p in hexapod.iterdir()) == [
-        "cocotb_icarus.log", "error_map.png", "hexapod_core.sdc", "hexapod_core.v", "manifest.json", "plan.json",
+        ".ikseries-build.json", "cocotb_icarus.log", "error_map.png", "hexapod_core.sdc", "hexapod_core.v", "manifest.json", "plan.json",
         "report.json", "report.md"]
     a = rep["architecture"]
     assert (a["architecture"], a["multipliers"], a["dsp"], a["legs"]) == ("shared", 1, "ice40", 6)
