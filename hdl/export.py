@@ -13,7 +13,7 @@ from .leg import LegCore
 from .shared import RobotCore
 
 __all__ = ["FlatLegTop", "FlatRobotTop", "module_name", "leg_verilog", "robot_verilog", "pwm_port",
-           "manifest", "MANIFEST_FORMAT", "STREAM_RULES", "stream_rule"]
+           "manifest", "MANIFEST_FORMAT", "stream_rule"]
 
 
 class FlatLegTop(FlatStreamTop):
@@ -104,11 +104,11 @@ MANIFEST_FORMAT = "ikseries.manifest"
 #: stall, i_ready = o_ready | ~o_valid, one target per cycle; ``"modulo"``: global stall, a target
 #: enters when the phase counter is 0 (every ``initiation_interval`` cycles); ``"folded"``: one
 #: evaluation in flight, i_ready low from an input transfer until its output transfers
-STREAM_RULES = ("pipelined", "modulo", "folded")
 
 
 def stream_rule(core: LegCore | RobotCore) -> str:
-    """The stream rule of ``core`` (one of :data:`STREAM_RULES`): a leg core's architecture; a
+    """The stream rule of ``core`` (one of :data:`ikseries.hdl.architectures.STREAM_RULES`, the
+    rule its architecture's timing names): a leg core's architecture; a
     robot core shares one folded evaluator between its legs."""
     if isinstance(core, RobotCore):
         return "folded"

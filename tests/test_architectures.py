@@ -41,6 +41,13 @@ def test_timing_from_pure_data_is_the_built_cores(arch, small_plan, robot):
     assert t.stream_rule in STREAM_RULES and t.legs == arch.legs
 
 
+@pytest.mark.parametrize("arch", POLYNOMIAL, ids=lambda a: a.describe())
+def test_the_manifest_stream_rule_is_the_architectures(arch, small_plan, robot):
+    """The benches read the core's handshake from the manifest: it must be the architecture's."""
+    from ikseries.hdl.export import stream_rule
+    assert stream_rule(arch.build(small_plan, build_target(robot))) == arch.timing(small_plan).stream_rule
+
+
 def test_stream_rules_and_rates(small_plan):
     assert Pipelined().timing(small_plan).stream_rule == "pipelined"
     assert Modulo(4).timing(small_plan).stream_rule == "modulo"

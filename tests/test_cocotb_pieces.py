@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from helpers import tiny_piecewise_plan
-from ikseries.hdl.export import STREAM_RULES, stream_rule
+from ikseries.hdl.architectures import STREAM_RULES
+from ikseries.hdl.export import stream_rule
 from ikseries.hdl.leg import LegCore
 from ikseries.hdl.shared import RobotCore
 from ikseries.sim.cocotb_leg.config import Design, RunConfig

@@ -25,7 +25,7 @@ Rules
 
 Adding a timing rule for a new architecture
 -------------------------------------------
-1. Give the core's stream rule a name in :data:`ikseries.hdl.export.STREAM_RULES` and return it
+1. Give the core's stream rule a name in :data:`ikseries.hdl.architectures.STREAM_RULES` and return it
    from :func:`ikseries.hdl.export.stream_rule` for that core, so its manifest says it.
 2. Subclass :class:`TimingRule` here: ``name`` (that string), :meth:`~TimingRule.check` (the
    i_ready rule of one cycle; keep any state it needs, reset in :meth:`~TimingRule.start`),
