@@ -62,12 +62,12 @@ def polynomial_step(ctx: dict) -> None:
     m = measure(robot, plan, ctx["points"])
     ctx["designs"]["polynomial"] = {
         "core": PlanEvaluator(plan), "top": "poly_evaluator",
-        "record": {"latency_cycles": plan.latency,
+        "record": {"latency_cycles": plan.depth,
                    "max_error_pu": {s: e["total"] for s, e in m["servos"].items()},
                    "error_points": m["points"],
                    "seconds_fit_and_measure": round(time.perf_counter() - t0, 1),
                    "plan": {"nodes": len(plan.nodes), "multiplies": plan.count("mul")}}}
-    say(f"polynomial: latency {plan.latency}, max error "
+    say(f"polynomial: latency {plan.depth}, max error "
         + ", ".join(f"{s} {e['total']:.4f}" for s, e in m["servos"].items()) + " pu")
 
 

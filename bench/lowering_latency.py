@@ -102,12 +102,12 @@ def main(argv=None):
     robot = load_preset(args.preset)
     t0 = time.perf_counter()
     plan, fits = fitter.fit_robot(robot)
-    print(f"fitted {args.preset} in {time.perf_counter() - t0:.1f} s: latency {plan.latency}, "
+    print(f"fitted {args.preset} in {time.perf_counter() - t0:.1f} s: latency {plan.depth}, "
           f"{plan.count('mul')} multipliers")
     t0 = time.perf_counter()
     res = measure(robot, plan, fits, [None, *args.extra], args.guard)
     fitted = "horner" if robot.lowering == "horner" else f"mix+{MIX_EXTRA_MULTIPLIERS}"
-    if fitted in res and (res[fitted]["latency"], res[fitted]["multipliers"]) != (plan.latency, plan.count("mul")):
+    if fitted in res and (res[fitted]["latency"], res[fitted]["multipliers"]) != (plan.depth, plan.count("mul")):
         raise SystemExit(f"the {fitted} rebuild does not reproduce the fitted plan")
     print(table(res))
     print(f"lowered and measured in {time.perf_counter() - t0:.1f} s")

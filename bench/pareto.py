@@ -389,7 +389,7 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
         points = verification_points(robot) if points is None else points
         m = measure(r, plan, points)
         err = {s: e["total"] for s, e in m["servos"].items()}
-        say(f"{what}: latency {plan.latency}, {plan.count('mul')} mul, max error "
+        say(f"{what}: latency {plan.depth}, {plan.count('mul')} mul, max error "
             + ", ".join(f"{s} {e:.4f}" for s, e in err.items()) + f" pu ({time.perf_counter() - t0:.0f} s)")
         return plan, max(err.values()), {"max_error_pu_per_servo": err, "error_points": m["points"], **extra,
                                          "certified_pu": _certified(plan.meta.get("certificate", {}))}

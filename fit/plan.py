@@ -26,10 +26,13 @@ from .ops import OPS, operation
 
 __all__ = ["DSP_SIZES", "quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for",
            "signed_bits", "PLAN_FORMAT",
-           "PLAN_VERSION", "REGISTERED_OPS"]
+           "PLAN_VERSION", "READABLE_VERSIONS", "REGISTERED_OPS"]
 
 PLAN_FORMAT = "ikseries.plan"
-PLAN_VERSION = 1
+PLAN_VERSION = 2
+#: plan versions :meth:`Plan.from_json` reads: 1 stored the pipeline depth as "latency", a
+#: name that misled for any architecture but the fully pipelined one
+READABLE_VERSIONS = (1, 2)
 #: DSP multiplier sizes (signed operand bits) of common FPGA families: iCE40 SB_MAC16,
 #: ECP5 MULT18X18D, Xilinx 7-series DSP48E1
 DSP_SIZES = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
@@ -129,8 +132,10 @@ class Plan:
         return extend_stages(self.nodes, [])
 
     @property
-    def latency(self) -> int:
-        """Clock cycles from an input transfer to the transfer of its outputs (all aligned)."""
+    def depth(self) -> int:
+        """Pipeline depth of the dataflow: the stage of the latest output (all aligned). It is the
+        latency of the fully pipelined evaluator only; every architecture states its own
+        latency (:meth:`ikseries.hdl.architectures.Architecture.timing`)."""
         st = self.stages()
         return max([1] + [st[o.node] for o in self.outputs])  # inputs are registered: >= 1
 
@@ -167,7 +172,7 @@ class Plan:
             "format": PLAN_FORMAT, "version": PLAN_VERSION,
             "inputs": [vars(i) for i in self.inputs],
             "outputs": [vars(o) for o in self.outputs],
-            "latency": self.latency,
+            "depth": self.depth,
             "nodes": [self._node_json(i, n) for i, n in enumerate(self.nodes)],
             "meta": self.meta,
         }
@@ -187,8 +192,9 @@ class Plan:
     def from_json(cls, d: dict) -> "Plan":
         if d.get("format") != PLAN_FORMAT:
             raise ValueError(f"plan format must be {PLAN_FORMAT!r}, not {d.get('format')!r}")
-        if d.get("version") != PLAN_VERSION:
-            raise ValueError(f"plan version must be {PLAN_VERSION}, not {d.get('version')!r}")
+        if d.get("version") not in READABLE_VERSIONS:
+            raise ValueError(f"plan version must be one of {', '.join(map(str, READABLE_VERSIONS))}, "
+                             f"not {d.get('version')!r}")
         b = PlanBuilder([PlanInput(**i) for i in d["inputs"]], with_inputs=False)
         for nd in d["nodes"]:
             op = operation(nd["op"], len(nd["args"]))
@@ -200,8 +206,9 @@ class Plan:
                 raise ValueError(f"plan node {nd['id']}: stored interval [{nd['lo']}, {nd['hi']}] "
                                  f"does not match the recomputed [{n.lo}, {n.hi}]")
         plan = cls(b.inputs, b.nodes, [PlanOutput(**o) for o in d["outputs"]], d.get("meta", {}))
-        if plan.latency != d.get("latency"):
-            raise ValueError(f"plan latency {d.get('latency')!r} does not match the recomputed {plan.latency}")
+        key = "latency" if d["version"] == 1 else "depth"
+        if plan.depth != d.get(key):
+            raise ValueError(f"plan {key} {d.get(key)!r} does not match the recomputed {plan.depth}")
         return plan
 
     def dumps(self) -> str:

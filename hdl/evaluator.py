@@ -84,7 +84,7 @@ class PlanEvaluator(wiring.Component):
 
     Latency
     -------
-    ``latency`` cycles (``plan.latency``) from an input transfer to its output
+    ``latency`` cycles (``plan.depth``) from an input transfer to its output
     transfer when ``o.ready`` is high.
 
     Throughput
@@ -111,7 +111,7 @@ class PlanEvaluator(wiring.Component):
 
     @property
     def latency(self) -> int:
-        return self._plan.latency
+        return self._plan.depth
 
     @property
     def initiation_interval(self) -> int:
@@ -122,7 +122,7 @@ class PlanEvaluator(wiring.Component):
         m = Module()
         plan = self._plan
         stages = plan.stages()
-        lat = plan.latency
+        lat = plan.depth
         en = Signal()
         m.d.comb += [en.eq(~self.o.valid | self.o.ready), self.i.ready.eq(en)]
 

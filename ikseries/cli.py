@@ -117,62 +117,13 @@ def cmd_build(args):
           f"every leg refreshed {rep['refresh_hz']:,.0f} times/s, output in {out}/")
 
 
-def _read_plan(robot, path: Path, given: bool):
-    """The plan in ``path`` if it was fitted for ``robot``'s fit fields. A ``given`` path
-    (``--plan``) that is missing, unreadable, not a plan or for another robot is an error;
-    otherwise such a file is passed over (None)."""
-    import json
-
-    from .fit.plan import Plan
-    from .robot import fit_record, robot_record
-
-    def refuse(msg):
-        if given:
-            raise CliError(msg)
-        return None
-    if not path.exists():
-        return refuse(f"--plan must be an existing plan file, not {str(path)!r} (it does not exist)")
-    if not path.is_file():
-        return refuse(f"--plan must be a plan file, not {str(path)!r} (a directory or other non-file)")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-        if not isinstance(data, dict):
-            raise ValueError(f"a plan is a JSON object, not a {type(data).__name__}")
-        plan = Plan.from_json(data)
-        described = plan.meta.get("robot_description") or {}
-        same = fit_record(robot_record(robot)) == fit_record(described)
-    except OSError as e:
-        return refuse(f"cannot read plan file {str(path)!r}: {e.strerror}")
-    except (ValueError, KeyError, TypeError, AttributeError, IndexError) as e:   # JSON of another shape
-        return refuse(f"{path}: not a valid ikseries plan: {e}")
-    if not same:
-        return refuse(f"{path} was fitted for a different robot description than {robot.name!r}")
-    return plan
-
-
 def _eval_plan(robot, args, say):
-    """(plan, line saying which plan it is): ``--plan``, else the robot's build under
-    build/, else the per-user cache (:mod:`ikseries.plancache`), else a fit that is cached."""
-    from .build import default_output_dir
-    from .fit.fitter import FitError, fit_robot
-    from .plancache import cached_plan_path, store_plan
-    from .robot import robot_record
-    if args.plan is not None:
-        return _read_plan(robot, Path(args.plan), True), f"plan: {args.plan}"
-    for path, what in ((default_output_dir(robot) / "plan.json", "the build"), (cached_plan_path(robot), "cached")):
-        plan = _read_plan(robot, path, False)
-        if plan is not None:
-            return plan, f"plan: {path} ({what})"
-    say(f"no plan for {robot.name} under build/ or in the cache: fitting")
+    """(plan, line saying which plan it is) for ``ikseries eval`` (:func:`ikseries.plancache.find_plan`)."""
+    from .plancache import PlanLookupError, find_plan
     try:
-        plan = fit_robot(robot, say)[0]
-    except FitError as e:
+        return find_plan(robot, None if args.plan is None else Path(args.plan), say)
+    except PlanLookupError as e:
         raise CliError(str(e)) from None
-    plan.meta["robot_description"] = robot_record(robot)
-    try:
-        return plan, f"plan: fitted and cached in {store_plan(robot, plan.dumps())}"
-    except OSError as e:
-        return plan, f"plan: fitted, not cached ({e.strerror}: {e.filename})"
 
 
 def cmd_fit(args):

@@ -17,7 +17,11 @@ from pathlib import Path
 from . import __version__
 from .robot import fit_record, robot_record
 
-__all__ = ["cache_dir", "plan_key", "cached_plan_path", "store_plan"]
+__all__ = ["PlanLookupError", "cache_dir", "plan_key", "cached_plan_path", "store_plan", "read_plan", "find_plan"]
+
+
+class PlanLookupError(ValueError):
+    """A given plan file that cannot be used, or a fit that fails; the message is one line."""
 
 
 def cache_dir() -> Path:
@@ -64,3 +68,56 @@ def store_plan(robot, text: str) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return dest
+
+
+def read_plan(robot, path: Path, given: bool):
+    """The plan in ``path`` if it was fitted for ``robot``'s fit fields. A ``given`` path
+    (``--plan``) that is missing, unreadable, not a plan or for another robot is an error
+    (:class:`PlanLookupError`); otherwise such a file is passed over (None)."""
+    from .fit.plan import Plan
+
+    def refuse(msg):
+        if given:
+            raise PlanLookupError(msg)
+        return None
+    if not path.exists():
+        return refuse(f"--plan must be an existing plan file, not {str(path)!r} (it does not exist)")
+    if not path.is_file():
+        return refuse(f"--plan must be a plan file, not {str(path)!r} (a directory or other non-file)")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(data, dict):
+            raise ValueError(f"a plan is a JSON object, not a {type(data).__name__}")
+        plan = Plan.from_json(data)
+        described = plan.meta.get("robot_description") or {}
+        same = fit_record(robot_record(robot)) == fit_record(described)
+    except OSError as e:
+        return refuse(f"cannot read plan file {str(path)!r}: {e.strerror}")
+    except (ValueError, KeyError, TypeError, AttributeError, IndexError) as e:   # JSON of another shape
+        return refuse(f"{path}: not a valid ikseries plan: {e}")
+    if not same:
+        return refuse(f"{path} was fitted for a different robot description than {robot.name!r}")
+    return plan
+
+
+def find_plan(robot, given: Path | None, progress):
+    """(plan, line saying which plan it is): the ``given`` file, else the robot's build under
+    build/, else this cache, else a fit that is then cached."""
+    from .build import default_output_dir
+    from .fit.fitter import FitError, fit_robot
+    if given is not None:
+        return read_plan(robot, given, True), f"plan: {given}"
+    for path, what in ((default_output_dir(robot) / "plan.json", "the build"), (cached_plan_path(robot), "cached")):
+        plan = read_plan(robot, path, False)
+        if plan is not None:
+            return plan, f"plan: {path} ({what})"
+    progress(f"no plan for {robot.name} under build/ or in the cache: fitting")
+    try:
+        plan = fit_robot(robot, progress)[0]
+    except FitError as e:
+        raise PlanLookupError(str(e)) from None
+    plan.meta["robot_description"] = robot_record(robot)
+    try:
+        return plan, f"plan: fitted and cached in {store_plan(robot, plan.dumps())}"
+    except OSError as e:
+        return plan, f"plan: fitted, not cached ({e.strerror}: {e.filename})"

@@ -87,7 +87,7 @@ def test_full_plan_on_icarus(plan, tmp_path_factory):
               testcase="test_back_to_back,test_backpressure")
     assert set(res.tests) == {"test_back_to_back", "test_backpressure"}, res.summary()
     assert res.ok, res.summary()
-    assert res.latency == plan.latency
+    assert res.latency == plan.depth
 
 
 # ---- cores with an initiation interval > 1 -------------------------------------------------

@@ -105,15 +105,33 @@ def test_every_op_of_the_table_is_used_by_the_plans_the_cores_are_checked_on():
     assert {n for n, o in ops.OPS.items() if o.wiring} == {"shr", "shl", "frac", "index", "mask"}
 
 
+def _as_version_2(text: str) -> str:
+    """A version 1 plan text as version 2 writes it (the depth no longer called latency)."""
+    d = json.loads(text)
+    d["version"], d["depth"] = 2, d.pop("latency")
+    return json.dumps(d, indent=1, sort_keys=True) + "\n"
+
+
 def test_plans_written_before_load_and_round_trip_to_the_same_text():
-    """Plan JSON written by the plan module before it read the op table (tests/data/plans_v1.json)."""
+    """Plan JSON (version 1) written by the plan module before it read the op table
+    (tests/data/plans_v1.json) loads, and is written again with nothing changed but the version
+    and the name of the depth."""
     made = {"tiny_plan_2": tiny_plan(2), "tiny_piecewise_plan_1": tiny_piecewise_plan(1),
             "signed_cell_plan": signed_cell_plan(), "tiny_plan_0_dsp": tiny_plan(0, operand_bits=(4, 4))}
     stored = json.loads((DATA / "plans_v1.json").read_text())
     assert set(stored) == set(made)
     for name, text in stored.items():
-        assert Plan.from_json(json.loads(text)).dumps() == text, name
-        assert made[name].dumps() == text, name
+        assert json.loads(text)["version"] == 1
+        assert Plan.from_json(json.loads(text)).dumps() == _as_version_2(text), name
+        assert made[name].dumps() == _as_version_2(text), name
+
+
+def test_a_plan_of_an_unknown_version_or_a_wrong_depth_is_refused(plan):
+    d = plan.to_json()
+    with pytest.raises(ValueError, match=r"^plan version must be one of 1, 2, not 3$"):
+        Plan.from_json({**d, "version": 3})
+    with pytest.raises(ValueError, match=rf"^plan depth {plan.depth + 1} does not match the recomputed {plan.depth}$"):
+        Plan.from_json({**d, "depth": plan.depth + 1})
 
 
 def test_the_suite_plan_round_trips(plan):

@@ -55,7 +55,7 @@ def test_json_round_trip_and_tamper_detection():
         Plan.from_json(d)
     d = json.loads(text)
     d["version"] = 99
-    with pytest.raises(ValueError, match="plan version must be 1, not 99"):
+    with pytest.raises(ValueError, match="plan version must be one of 1, 2, not 99"):
         Plan.from_json(d)
 
 

@@ -64,7 +64,7 @@ def plan_figures(robot, plan: Plan, points: dict | None = None) -> dict:
         }
     return {"points": acc["points"], "servos": out,
             "plan": {"nodes": len(plan.nodes), "multiplications": plan.count("mul"),
-                     "adders": plan.count("add"), "latency_cycles": plan.latency,
+                     "adders": plan.count("add"), "latency_cycles": plan.depth,
                      "max_width": max(n.width for n in plan.nodes)}}
 
 

@@ -15,7 +15,7 @@ class Pipelined(Architecture):
     name = "pipelined"
 
     def timing(self, plan) -> Timing:
-        return Timing(plan.latency, 1, "pipelined")
+        return Timing(plan.depth, 1, "pipelined")
 
     def evaluator(self, plan):
         return PlanEvaluator(plan)
