@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import Geometry
 from .kinematics import NUMPY_MATH, RAD2DEG
 from .reach import joint_range_checks, raise_first_unreachable
 
@@ -18,7 +19,7 @@ __all__ = ["HexapodLeg"]
 
 
 @dataclass(frozen=True)
-class HexapodLeg:
+class HexapodLeg(Geometry):
     """3-DOF hexapod leg: coxa yaw, femur and tibia pitch; tip target (x, y, z) in mm.
 
     Frame and inputs (origin at the coxa joint, on the body underside):

@@ -12,6 +12,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .geometry import CylindricalGeometry
+
 __all__ = ["UnreachableError", "CylinderLeg", "Calibration", "NUMPY_MATH", "RAD2DEG", "format_point"]
 
 RAD2DEG = 180.0 / np.pi
@@ -32,7 +34,7 @@ def format_point(names, values):
 
 
 @dataclass(frozen=True)
-class CylinderLeg:
+class CylinderLeg(CylindricalGeometry):
     """3-DOF coxa-femur-tibia leg with a cylindrical tip target (R, theta, Z).
 
     The coxa (S1) axis is vertical through the origin. The tip's plan position

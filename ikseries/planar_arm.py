@@ -21,13 +21,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import Geometry
 from .kinematics import NUMPY_MATH, RAD2DEG, UnreachableError, format_point
 
 __all__ = ["PlanarArm"]
 
 
 @dataclass(frozen=True)
-class PlanarArm:
+class PlanarArm(Geometry):
     """Planar 3R arm, tool tip target (x, y) at a fixed tool orientation ``phi``.
 
     With the wrist ``w = (xw, yw) = (x - l3 cos phi, y - l3 sin phi)``, ``d2 = |w|**2``,

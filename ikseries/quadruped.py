@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import Geometry
 from .kinematics import NUMPY_MATH, RAD2DEG
 from .reach import joint_range_checks, raise_first_unreachable
 
@@ -55,7 +56,7 @@ def _sagittal_tip(pivot_height, segments):
 
 
 @dataclass(frozen=True)
-class QuadrupedHind:
+class QuadrupedHind(Geometry):
     """Hind leg: thigh, shin and foot; the hip-toe line bisects the shin (notes' rule).
 
     Inputs (mm), in the leg's vertical plane, origin on the ground below the hip axis:
@@ -187,7 +188,7 @@ class QuadrupedHind:
 
 
 @dataclass(frozen=True)
-class QuadrupedFore:
+class QuadrupedFore(Geometry):
     """Fore leg: upper arm, forearm and hand, the wrist kept straight (notes' rule).
 
     Inputs (mm) as for :class:`QuadrupedHind`, relative to the shoulder axis standing

@@ -11,11 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .hexapod_leg import HexapodLeg
-from .kinematics import Calibration, CylinderLeg, UnreachableError
-from .planar_arm import PlanarArm
+from .geometry import geometry_class, geometry_type
+from .kinematics import Calibration, UnreachableError
 from .reach import ReachUnprovenError, prove_box_reachable
-from .quadruped import QuadrupedFore, QuadrupedHind
 from .synth import FIT_DEVICES
 
 __all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot",
@@ -42,14 +40,6 @@ class RobotError(ValueError):
     """An invalid robot description; the message names the field and the bad value."""
 
 
-#: geometry.type -> geometry class. A geometry is a frozen dataclass whose float fields are the
-#: [geometry] fields (each > 0 unless named in the class's ``signed_fields``); its constructor may raise ValueError("<field> must be ..., not ...")
-#: for inconsistent values, and an optional ``workspace_error(name, lo, hi)`` method returns a
-#: message for a workspace range it cannot take (else None).
-GEOMETRIES = {"cylinder-leg": CylinderLeg, "hexapod-leg": HexapodLeg, "planar-arm": PlanarArm,
-              "quadruped-hind": QuadrupedHind, "quadruped-fore": QuadrupedFore}
-
-
 @dataclass(frozen=True)
 class InputSpec:
     name: str
@@ -71,7 +61,7 @@ class InputSpec:
 class Robot:
     name: str
     description: str
-    geometry: object  # an instance of a GEOMETRIES class
+    geometry: object  # an ikseries.geometry.Geometry of a registered class
     inputs: tuple[InputSpec, ...]
     neutral_pose: dict
     pulse_unit_us: float
@@ -173,9 +163,10 @@ def parse_robot(data: dict, source: str = "robot") -> Robot:
 
     geo = _table(data, "geometry", "")
     gtype = geo.get("type")
-    if gtype not in GEOMETRIES:
-        raise RobotError(f"geometry.type must be one of {sorted(GEOMETRIES)}, not {gtype!r}")
-    cls = GEOMETRIES[gtype]
+    try:
+        cls = geometry_class(gtype)
+    except ValueError as e:
+        raise RobotError(str(e)) from None
     fields = [f for f in cls.__dataclass_fields__]
     _no_extra(geo, ["type", *fields], "geometry.")
     signed = getattr(cls, "signed_fields", ())  # fields that may be <= 0 (e.g. an angle)
@@ -404,8 +395,7 @@ def _check_refresh(robot: Robot, labels: dict | None = None) -> None:
 def robot_record(robot: Robot) -> dict:
     """JSON-ready record of every parameter of ``robot`` (stored in the fit artifact)."""
     d = dataclasses.asdict(robot)
-    gtype = next(k for k, v in GEOMETRIES.items() if isinstance(robot.geometry, v))
-    d["geometry"] = {"type": gtype, **dataclasses.asdict(robot.geometry)}
+    d["geometry"] = {"type": geometry_type(robot.geometry), **dataclasses.asdict(robot.geometry)}
     d["inputs"] = [dataclasses.asdict(i) for i in robot.inputs]
     return json.loads(json.dumps(d))
 
@@ -430,7 +420,7 @@ def robot_from_record(d: dict) -> Robot:
     """Inverse of :func:`robot_record` (the record is re-validated)."""
     try:
         geo = dict(d["geometry"])
-        cls = GEOMETRIES[geo.pop("type")]
+        cls = geometry_class(geo.pop("type"))
         fields = {k: v for k, v in d.items() if k not in ("geometry", "inputs")}
         fields["directions"] = tuple(fields["directions"])
         robot = Robot(geometry=cls(**geo), inputs=tuple(InputSpec(**i) for i in d["inputs"]), **fields)

@@ -8,7 +8,8 @@ import pytest
 from ikseries.hexapod_leg import HexapodLeg
 from ikseries.kinematics import NUMPY_MATH, UnreachableError
 from ikseries.quadruped import QuadrupedFore, QuadrupedHind
-from ikseries.robot import (GEOMETRIES, RobotError, load_preset, parse_robot, preset_names, preset_text,
+from ikseries.geometry import Geometry, geometry_class, geometry_names
+from ikseries.robot import (RobotError, load_preset, parse_robot, preset_names, preset_text,
                             robot_from_record, robot_record)
 
 PRESETS = ["hexapod-leg", "quadruped-hind", "quadruped-fore"]
@@ -35,11 +36,19 @@ def _grid(robot, n):
 
 
 # -- loading -------------------------------------------------------------------------
+def test_every_geometry_is_registered_and_implements_the_interface():
+    assert geometry_names() == ["cylinder-leg", "hexapod-leg", "planar-arm", "quadruped-fore", "quadruped-hind"]
+    for name in geometry_names():
+        cls = geometry_class(name)
+        assert issubclass(cls, Geometry) and not getattr(cls, "__abstractmethods__", None), name
+        assert len(cls.inputs) == len(cls.input_units) and len(cls.servos) == len(cls.servo_names), name
+
+
 def test_presets_are_listed_and_registered():
     assert set(PRESETS) <= set(preset_names())
     for name, cls in [("hexapod-leg", HexapodLeg), ("quadruped-hind", QuadrupedHind),
                       ("quadruped-fore", QuadrupedFore)]:
-        assert GEOMETRIES[name] is cls
+        assert geometry_class(name) is cls and issubclass(cls, Geometry)
         assert isinstance(load_preset(name).geometry, cls)
 
 
