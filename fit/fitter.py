@@ -18,11 +18,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..constraints.devices import FAMILIES
 from ..kinematics import UnreachableError
 from .certify import CertificationError, certify
 from .features import Cut, Normaliser, coordinate_stage
 from .horner import estrin, lower_poly
-from .plan import DSP_SIZES, Plan, PlanBuilder, PlanInput, PlanOutput, bits_for, quantize
+from .plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for, quantize
 from .polyfit import fit_least_squares, lawson, total_degree_terms, vander
 
 __all__ = ["FitError", "ServoFit", "FeatureSet", "fit_robot", "plan_inputs", "workspace_samples",
@@ -52,9 +53,9 @@ class FormatError(FitError):
 def operand_bits(robot) -> tuple[int, int] | None:
     """The signed operand widths every plan multiplication must fit: those of the DSP block
     of ``hardware.dsp`` when ``fit.products = "dsp"``; else None (exact products)."""
-    if getattr(robot, "products", "exact") != "dsp" or robot.dsp not in DSP_SIZES:
+    if getattr(robot, "products", "exact") != "dsp" or robot.dsp not in FAMILIES:
         return None
-    return DSP_SIZES[robot.dsp]
+    return FAMILIES[robot.dsp].dsp
 
 
 @dataclass

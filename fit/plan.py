@@ -34,15 +34,12 @@ import contextlib
 import json
 from dataclasses import dataclass, field
 
-__all__ = ["DSP_SIZES", "quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for",
+__all__ = ["quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for",
            "signed_bits", "PLAN_FORMAT",
            "PLAN_VERSION", "REGISTERED_OPS"]
 
 PLAN_FORMAT = "ikseries.plan"
 PLAN_VERSION = 1
-#: DSP multiplier sizes (signed operand bits) of common FPGA families: iCE40 SB_MAC16,
-#: ECP5 MULT18X18D, Xilinx 7-series DSP48E1
-DSP_SIZES = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
 REGISTERED_OPS = frozenset({"add", "mul", "clamp", "lut"})
 _OPS = {"input": 0, "const": 0, "add": 2, "mul": 2, "clamp": 1, "shr": 1, "shl": 1, "frac": 1,
         "index": 1, "mask": 1, "lut": 1}

@@ -8,8 +8,8 @@ the dataflow pipelined, its multiplications shared) and the fully pipelined eval
 evaluator time-multiplexed over the legs).
 
 ``hardware.architecture = "fastest"`` takes the fastest configuration whose Yosys cell counts fit
-``hardware.fit_device`` (:data:`ikseries.synth.FIT_DEVICES`; capacities in
-:data:`ikseries.synth.DEVICES`): it builds every configuration of :data:`FASTEST_ORDER` (the
+``hardware.fit_device`` (a part of :data:`ikseries.constraints.devices.PARTS`, with its
+capacities): it builds every configuration of :data:`FASTEST_ORDER` (the
 pipelined and modulo-scheduled evaluators for one leg; folded, shared by the legs when
 ``legs > 1``, with 4, 2 and 1 multipliers), sorts them by refresh rate, fastest first (fewer multipliers first at equal
 rates), and synthesises each in turn for the device until one fits. A configuration slower than
@@ -27,10 +27,9 @@ from typing import Callable
 
 from amaranth._unused import MustUse
 
+from .constraints.devices import dsp_size, part as device_part
 from .hdl.leg import LegCore
-from .hdl.schedule import DSP_SIZES
 from .hdl.shared import RobotCore
-from .synth import DEVICES, FIT_DEVICES, overflows
 
 __all__ = ["ArchitectureError", "Candidate", "Choice", "Tried", "AUTO_ORDER", "FASTEST_ORDER", "candidates",
            "choose_architecture", "synth_candidate"]
@@ -65,7 +64,7 @@ class Candidate:
     def describe(self) -> str:
         if self.architecture == "pipelined":
             return "pipelined (one target per cycle)"
-        d = "full-width" if self.dsp == "none" else "{} {}x{} DSP".format(self.dsp, *DSP_SIZES[self.dsp])
+        d = "full-width" if self.dsp == "none" else "{} {}x{} DSP".format(self.dsp, *dsp_size(self.dsp))
         if self.architecture == "modulo":
             return f"modulo-scheduled pipeline, one target per {self.interval} cycles ({d})"
         k = f"{self.multipliers} multiplier{'s' if self.multipliers != 1 else ''}"
@@ -74,7 +73,7 @@ class Candidate:
 
     def build(self, robot, plan):
         """The core of this configuration for ``robot`` and its fitted ``plan``."""
-        dsp = None if self.dsp in (None, "none") else DSP_SIZES[self.dsp]
+        dsp = None if self.dsp in (None, "none") else dsp_size(self.dsp)
         if self.architecture == "shared":
             return RobotCore(plan, self.legs, robot.pwm_period_ticks, robot.clock_hz,
                              multipliers=self.multipliers, dsp=dsp)
@@ -121,8 +120,8 @@ class Choice:
                "latency_cycles": self.core.latency, "initiation_interval": self.core.initiation_interval,
                "refresh_hz": self.refresh_hz, "tried": [t.record() for t in self.tried]}
         if self.fit_device is not None:
-            part, cap = DEVICES[FIT_DEVICES[self.fit_device]]
-            rec["fit_device"] = {"name": self.fit_device, "part": part, "capacity": cap}
+            dev = device_part(self.fit_device)
+            rec["fit_device"] = {"name": self.fit_device, "part": dev.part, "capacity": dev.capacities}
         return rec
 
 
@@ -249,8 +248,8 @@ def _usage(counts: dict, cap: dict) -> str:
 
 
 def _choose_fastest(robot, plan, synth: SynthFunction, progress) -> Choice:
-    target = FIT_DEVICES[robot.fit_device]
-    part, cap = DEVICES[target]
+    dev = device_part(robot.fit_device)
+    target, part, cap = dev.family, dev.part, dev.capacities
     built = []
     for cand in candidates(robot):
         core = cand.build(robot, plan)
@@ -267,7 +266,7 @@ def _choose_fastest(robot, plan, synth: SynthFunction, progress) -> Choice:
             continue
         progress(f"fastest on {part}: synthesising {cand.describe()} ({hz:,.0f} Hz)")
         counts = synth(cand, core, target)
-        over = overflows(target, counts)
+        over = dev.overflows(counts)
         if over:
             tried.append(Tried(cand, core.initiation_interval, hz, counts,
                                f"does not fit {part} by Yosys cell counts (before place-and-route): "
@@ -292,7 +291,7 @@ def _choose_fastest(robot, plan, synth: SynthFunction, progress) -> Choice:
     if not synthesised:       # even the fastest is below the rate
         _rate_error(robot, tried[0])
     smallest = min(synthesised, key=lambda t: _size_rank(t.candidate))
-    over = overflows(target, smallest.counts)
+    over = dev.overflows(smallest.counts)
     slower = [t for t in tried if t.counts is None]
     raise ArchitectureError(
         f"hardware.fit_device = {robot.fit_device}: no configuration fits {part} by Yosys cell counts "

@@ -25,6 +25,8 @@ import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from ..constraints.devices import PRIMITIVES
+
 __all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_PLAN", "ENV_PERIOD", "ENV_LATENCY", "ENV_SEED",
            "ENV_N_RANDOM", "ENV_II", "ENV_ARCH", "ENV_TOP", "ENV_LEGS", "VERILATOR_OPT", "default_n_random", "Result",
            "simulator_available", "verilator_bin_dir", "export", "run"]
@@ -142,13 +144,10 @@ def _env(**values):
                 os.environ[k] = v
 
 
-#: simulation models of the vendor primitives the exported Verilog may instantiate
-MODELS = {"MULT18X18D": Path(__file__).parent / "models" / "MULT18X18D.v"}
-
-
 def primitive_models(verilog: str) -> list[Path]:
-    """The model files of the vendor primitives instantiated in ``verilog``."""
-    return [path for cell, path in MODELS.items() if re.search(rf"^\s*{cell}\b", verilog, re.M)]
+    """The model files of the vendor primitives (:data:`ikseries.constraints.devices.PRIMITIVES`)
+    instantiated in ``verilog``."""
+    return [p.model_path for p in PRIMITIVES.values() if re.search(rf"^\s*{p.name}\b", verilog, re.M)]
 
 
 def _write_if_changed(path: Path, text: str) -> None:
