@@ -74,7 +74,9 @@ CORDIC_DESIGNS = ("cordic", "cordic_iter")
 DSP_DESIGNS = tuple(f"modulo{ii}d" for ii in MODULO_DSP_II)
 POLY_DESIGNS = tuple(d for d in DESIGNS if d not in (*CORDIC_DESIGNS, "hexapod", *DSP_DESIGNS))
 TARGET_FMAX_MHZ, TARGET_LATENCY_NS, TARGET_THROUGHPUT = 150.0, 200.0, 20e6
-HEXAPOD_DSP, HEXAPOD_LC, HEXAPOD_REFRESH_HZ = 8, 5280, 1000.0
+#: the hexapod target: within the iCE40 part's DSP blocks and logic cells, refreshing >= 1000/s
+HEXAPOD_DSP, HEXAPOD_LC = (PARTS[PNR_DEVICES[ICE40].part].capacities[k] for k in ("DSP", "LUT"))
+HEXAPOD_REFRESH_HZ = 1000.0
 
 
 def say(msg: str) -> None:

@@ -228,7 +228,7 @@ def plot_device(records: Sequence[dict], device: str, path: Path) -> list[str]:
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.margins(x=0.35, y=0.15)   # room for the labels right of the points
-    ax.set_xlabel("area: LUT + FF (Yosys; ECP5 LUT with carry LUT4s; harness FFs excluded)")
+    ax.set_xlabel("area: LUT + FF (Yosys; LUT with the carry chains' LUTs; harness FFs excluded)")
     ax.set_ylabel("latency at Fmax (ns)")
     title = f"{device}: area vs latency"
     if missing:

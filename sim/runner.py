@@ -303,7 +303,7 @@ def run(plan_path, period: int, simulator: str, build_dir, *, waves: bool = Fals
         fix = [_verilator_make_fixes(path)]
         if verilator_opt:
             # the slow (run-once) code at -O0: GCC spent over 10 minutes at -O1 on the symbol
-            # table constructor of a core with ~50 MULT18X18D model instances (2 s at -O0)
+            # table constructor of a core with ~50 DSP primitive model instances (2 s at -O0)
             fix += [f"OPT_FAST={verilator_opt}", "OPT_SLOW=-O0", f"OPT_GLOBAL={verilator_opt}"]
         makeflags = " ".join(x for x in (os.environ.get("MAKEFLAGS", ""), *fix) if x) or None
     # Icarus: the runner puts "-none" (no dump) after the plusargs when waves=False; vvp takes

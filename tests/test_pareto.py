@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from helpers import tiny_plan
-from ikseries import pnr
+from ikseries.constraints.devices import PNR_DEVICES
 from ikseries.pareto import pareto_front, plot_device, run_design, run_matrix
 
 ICE40 = "ice40-up5k-sg48"
@@ -82,10 +82,10 @@ def test_plot_marks_the_front(records, tmp_path):
 
 def test_does_not_fit_is_recorded(records, tmp_path, monkeypatch):
     _, bench = records
-    dev = pnr.PNR_DEVICES[ICE40]
+    dev = PNR_DEVICES[ICE40]
     small = dataclasses.replace(dev, cell_limits=tuple((n, rx, 1 if n == "DSP" else cap)
                                                        for n, rx, cap in dev.cell_limits))
-    monkeypatch.setitem(pnr.PNR_DEVICES, ICE40, small)
+    monkeypatch.setitem(PNR_DEVICES, ICE40, small)
     spec = bench.polynomial_specs(tiny_plan(3, clamp=(0, 100), degree=2), None, ("pipelined",))[0]
     r = run_design(spec, ICE40, 48_000_000, tmp_path / "w")
     assert r["status"] == "does-not-fit"
