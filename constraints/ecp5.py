@@ -46,21 +46,24 @@ PNR_DEVICES = (
 )
 
 
-def mult18x18d(a, b, product, enable):
+def mult18x18d(m, a, b, product, enable):
     """A MULT18X18D computing ``product = a * b`` two enabled clock edges later: its input
     (A, B) and output registers clocked by the sync domain, clock enable ``enable``, cleared
-    synchronously by the domain's reset; ``a``, ``b`` 18-bit signed, ``product`` 36 bits."""
-    from amaranth.hdl import ClockSignal, Const, Instance, ResetSignal
+    synchronously by the domain's reset. ``a`` and ``b`` (at most 18 bits signed) and
+    ``product`` are connected to its ports in ``m``'s comb domain; returns the ``Instance``."""
+    from amaranth.hdl import ClockSignal, Const, Instance, ResetSignal, Signal, signed
+    sa, sb, out = Signal(signed(18)), Signal(signed(18)), Signal(36)
+    m.d.comb += [sa.eq(a), sb.eq(b), product.eq(out.as_signed())]
     regs = {f"p_REG_{r}_{f}": v for r in ("INPUTA", "INPUTB", "OUTPUT")
             for f, v in (("CLK", "CLK0"), ("CE", "CE0"), ("RST", "RST0"))}
     return Instance(
         "MULT18X18D", **regs, p_REG_INPUTC_CLK="NONE", p_REG_PIPELINE_CLK="NONE", p_GSR="DISABLED",
         p_CLK0_DIV="ENABLED", p_SOURCEB_MODE="B_SHIFT", p_RESETMODE="SYNC",
-        **{f"i_A{k}": a[k] for k in range(18)}, **{f"i_B{k}": b[k] for k in range(18)},
+        **{f"i_A{k}": sa[k] for k in range(18)}, **{f"i_B{k}": sb[k] for k in range(18)},
         **{f"i_C{k}": Const(0, 1) for k in range(18)},
         i_SIGNEDA=Const(1, 1), i_SIGNEDB=Const(1, 1), i_SOURCEA=Const(0, 1), i_SOURCEB=Const(0, 1),
         i_CLK0=ClockSignal(), i_CE0=enable, i_RST0=ResetSignal(),
-        **{f"o_P{k}": product[k] for k in range(36)})
+        **{f"o_P{k}": out[k] for k in range(36)})
 
 
 PRIMITIVES = (Primitive("MULT18X18D", "ecp5", 18, 36, "MULT18X18D.v", mult18x18d),)

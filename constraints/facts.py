@@ -216,9 +216,10 @@ class Primitive:
     model : str
         File name of the behavioural model in ``ikseries/sim/models/`` (package data).
     instance : callable
-        ``instance(a, b, product, enable)`` -> the Amaranth ``Instance`` of one registered
-        multiplication in the sync domain (operand and product registers inside the primitive,
-        clock enable ``enable``, synchronous reset = the domain's reset).
+        ``instance(m, a, b, product, enable)`` -> the Amaranth ``Instance`` of one registered
+        multiplication ``product = a * b`` in the sync domain (operand and product registers
+        inside the primitive, clock enable ``enable``, synchronous reset = the domain's reset),
+        its ports connected to the operands and ``product`` in ``m``'s comb domain.
     """
     name: str
     family: str

@@ -323,10 +323,7 @@ class ModuloEvaluator(wiring.Component):
             with m.If(en):
                 m.d.sync += [ar.eq(a), br.eq(b), p.eq(ar * br)]
             return p
-        prim = family_primitives(self._dsp_registers)[0]
-        sa, sb, out = Signal(signed(prim.operand_bits)), Signal(signed(prim.operand_bits)), Signal(prim.product_bits)
-        m.d.comb += [sa.eq(a), sb.eq(b), p.eq(out.as_signed())]
-        m.submodules[f"{name}_dsp"] = prim.instance(sa, sb, out, en)
+        m.submodules[f"{name}_dsp"] = family_primitives(self._dsp_registers)[0].instance(m, a, b, p, en)
         return p
 
     def elaborate(self, platform):

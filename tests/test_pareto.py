@@ -129,9 +129,9 @@ def test_verdicts_on_hand_made_records(records):
     assert pv[4].startswith("against the iterative CORDIC (a target every 17 cycles: 800 LUT, 2 DSP, 900.0 ns")
     assert "-> loses on LUT; also loses on FF 800 vs 500 (1.6x); BRAM 5 vs 0; throughput 3.3 vs 9 M/s (0.37x)" in pv[5]
     assert pv[6] == "  verdict: not met (LUT and DSP each, latency no worse)"
-    # when the placed LUT4 slots disagree with Yosys' LUT count, the line says so
+    # when the placed LUT slots disagree with Yosys' LUT count, the line says so
     pv = bench.verdict_poly_vs_cordic([{**poly, "DSP": 2, "latency_ns": 200.0, "LC": 5200}, {**cordic, "LC": 5100}])
-    assert pv[1].endswith("; nextpnr's placed LUT4 slots say the opposite on LUT: LC 5200 vs 5100")
+    assert pv[1].endswith("; nextpnr's placed LUT slots say the opposite on LUT: LC 5200 vs 5100")
 
 
 def test_jobs_must_be_one_or_two(tmp_path):
