@@ -59,12 +59,12 @@ import time
 import warnings
 from pathlib import Path
 
+from ikseries.constraints.devices import PARTS, PNR_DEVICES, dsp_size, family_primitives
 from ikseries.pareto import DesignSpec, plot_device, run_matrix
-from ikseries.constraints.devices import PNR_DEVICES, PARTS, dsp_size, family_primitives
 
 #: the place-and-route target of each family the verdicts are about
 ICE40, ECP5 = (next(n for n, d in PNR_DEVICES.items() if d.family == f) for f in ("ice40", "ecp5"))
-ICE40_PART, ECP5_PART = PARTS[PNR_DEVICES[ICE40].part].part, PARTS[PNR_DEVICES[ECP5].part].part
+ECP5_PART = PARTS[PNR_DEVICES[ECP5].part].part
 ECP5_PRIMITIVES = ", ".join(p.name for p in family_primitives("ecp5"))
 MODULO_II = (4, 8, 12)
 MODULO_DSP_II = (4, 7, 16)   # ECP5 only: DSP-sized plan, DSP primitives with their own registers
