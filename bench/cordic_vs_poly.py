@@ -8,7 +8,7 @@ For one robot (default: the cylinder-leg preset):
    second, independent point set (another seed) to show how the sizing generalises;
 3. export both as flat-port Verilog tops with identical stream interfaces
    (``ikseries.hdl.flat.FlatStreamTop``: evaluator / solver only, no PWM);
-4. Yosys resource counts for iCE40UP5K / ECP5 / Xilinx 7-series (``ikseries.synth``), netlists
+4. Yosys resource counts for every family of the device registry (``ikseries.synth``), netlists
    kept in ``<out>/<design>/<target>/netlist.json`` for a place-and-route step;
 5. (hook) ``pnr_step``: add Fmax from ``ikseries.pnr`` when it exists (see ``STEPS``).
 
@@ -45,7 +45,8 @@ from ikseries.hdl.cordic import CordicLegSolver
 from ikseries.hdl.evaluator import PlanEvaluator
 from ikseries.hdl.flat import stream_verilog
 from ikseries.robot import load_preset, load_robot
-from ikseries.synth import TARGETS, synth_counts
+from ikseries.constraints.devices import FAMILIES as TARGETS
+from ikseries.synth import synth_counts
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 

@@ -1,9 +1,9 @@
 """Yosys resource counts of the folded evaluator and of the shared hexapod core.
 
-For the cylinder-leg plan: the FoldedEvaluator for a few multiplier counts (iCE40 with
-SB_MAC16-sized limbs, ECP5 with MULT18X18D-sized limbs), the fully pipelined
-PlanEvaluator for comparison (optional, slow), and the 6-leg RobotCore (18 servos) on
-iCE40UP5K. Prints a table and writes JSON.
+For the cylinder-leg plan: the FoldedEvaluator for a few multiplier counts (iCE40 and ECP5,
+limbs of each family's DSP size), the fully pipelined PlanEvaluator for comparison (optional,
+slow), and the 6-leg RobotCore (18 servos) on the iCE40's reference part. Prints a table and
+writes JSON.
 
     .venv/bin/python bench/folded_area.py [--out docs/results/folded_area.json] [--ks 1 2 4] [--pipelined]
 """
@@ -29,11 +29,10 @@ from ikseries.hdl.pwmbank import ServoPWMBank
 from ikseries.hdl.schedule import compile_program
 from ikseries.hdl.shared import RobotCore
 from ikseries.robot import load_preset
-from ikseries.synth import DEVICES, synth_counts
+from ikseries.constraints.devices import dsp_size, reference_part
+from ikseries.synth import synth_counts
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
-
-DSP = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
 
 
 def measure(name, core, target, workdir: Path) -> dict:
@@ -79,15 +78,15 @@ def main(argv=None):
     designs = {}
     for target in ("ice40", "ecp5"):
         for k in args.ks:
-            designs[f"folded_k{k}_{target}"] = (target, lambda k=k, t=target: FoldedEvaluator(plan, k, DSP[t]))
+            designs[f"folded_k{k}_{target}"] = (target, lambda k=k, t=target: FoldedEvaluator(plan, k, dsp_size(t)))
     designs["hexapod_k2_ice40"] = ("ice40", lambda: RobotCore(plan, legs=6, period=period,
                                                               clock_hz=args.clock_mhz[0] * 1e6,
-                                                              multipliers=2, dsp=DSP["ice40"]))
+                                                              multipliers=2, dsp=dsp_size("ice40")))
     # parts of the hexapod core, to see where the area goes
-    ref = compile_program(plan, 2, DSP["ice40"])
+    ref = compile_program(plan, 2, dsp_size("ice40"))
     width_bits = max(plan.nodes[o.node].width for o in plan.outputs)
     designs["part_limb_multiplier_ice40"] = ("ice40", lambda: LimbMultiplier(
-        *ref.mul_widths, DSP["ice40"], ref.acc_width))
+        *ref.mul_widths, dsp_size("ice40"), ref.acc_width))
     designs["part_pwm_bank_6x3_ice40"] = ("ice40", lambda: ServoPWMBank(period, width_bits, 6, 3))
     designs["part_servo_pwm_x1_ice40"] = ("ice40", lambda: ServoPWM(period, width_bits))
     if args.pipelined:
@@ -104,7 +103,8 @@ def main(argv=None):
                                          for f in args.clock_mhz}
         print(rows[-1], flush=True)
 
-    cap = DEVICES["ice40"][1]
+    ice40 = reference_part("ice40")
+    cap = ice40.capacities
     print()
     print(f"{'design':22} {'target':6} {'LUT':>6} {'FF':>6} {'carry':>6} {'DSP':>4} {'BRAM':>5} {'lat':>5} {'II':>5}")
     for r in rows:
@@ -112,7 +112,7 @@ def main(argv=None):
         print(f"{r['design']:22} {r['target']:6} {c['LUT']:6} {c['FF']:6} {c['carry']:6} {c['DSP']:4} {c['BRAM']:5} "
               f"{r.get('latency', ''):>5} {r.get('initiation_interval', ''):>5}")
     for h in (r for r in rows if r["design"] == "hexapod_k2_ice40"):
-        print(f"\nhexapod on iCE40UP5K: {h['counts']['LUT']} LUT / {cap['LUT']}, {h['counts']['DSP']} DSP / {cap['DSP']}, "
+        print(f"\nhexapod on {ice40.part}: {h['counts']['LUT']} LUT / {cap['LUT']}, {h['counts']['DSP']} DSP / {cap['DSP']}, "
               f"{h['counts']['BRAM']} BRAM / {cap['BRAM']}; refresh " +
               ", ".join(f"{v:.0f} Hz at {f}" for f, v in h["refresh_hz_at"].items()))
     out = FACTS["write_result"](args.out, {"plan_nodes": len(plan.nodes), "rows": rows}, run)

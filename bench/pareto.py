@@ -5,16 +5,17 @@ For the cylinder-leg robot, the IK cores alone (no PWM), as flat-port stream top
 
 ``pipelined``  the fully pipelined polynomial evaluator (``PlanEvaluator``, 1 target/clock);
 ``folded1``    ``FoldedEvaluator`` with 1 multiplier of the device's DSP size
-               (iCE40 SB_MAC16 16x16, ECP5 MULT18X18D 18x18: ``hdl.schedule.DSP_SIZES``);
+               (the family's ``Family.dsp`` in ``ikseries.constraints.devices``);
 ``folded2``    the same with 2 multipliers;
 ``moduloN``    ``ModuloEvaluator``: the dataflow pipelined, its multiplications shared by a modulo
                schedule, one target every N cycles (N = 4, 8, 12; products gathered by the device's
                DSP size);
 ``moduloNd``   on the ECP5 only (N = 4, 7, 16): the plan fitted with ``fit.products = "dsp"`` (every
-               product's operands narrowed to 18x18, so each is one MULT18X18D), modulo-scheduled,
-               every product an instantiated MULT18X18D using its own input and output registers
-               (``dsp_registers="ecp5"``; Yosys would leave them in the fabric); simulated in
-               cocotb with the primitive's model (``sim/models/MULT18X18D.v``, tests); its
+               product's operands narrowed to the ECP5's DSP size, so each is one DSP block),
+               modulo-scheduled, every product an instantiated ECP5 DSP primitive using its own
+               input and output registers (``dsp_registers="ecp5"``; Yosys would leave them in the
+               fabric); simulated in cocotb with the primitive's model (``Primitive.model_path``,
+               tests); its
                accuracy column is that plan's own;
 ``cordic``     ``CordicLegSolver``, sized with ``size_cordic(margin_pu=0.075)`` (about 1.5 min)
                unless ``--cordic-design JSON`` gives the design; fully pipelined;
@@ -24,14 +25,14 @@ For the cylinder-leg robot, the IK cores alone (no PWM), as flat-port stream top
 
 and ``hexapod``: the hexapod preset's shared robot core (``RobotCore``: one folded evaluator
 for 6 legs, the configuration ``choose_architecture`` picks, iCE40 DSP size, plus the 18-channel
-PWM bank) on the iCE40UP5K only (``robot_verilog``).
+PWM bank) on the iCE40 only (``robot_verilog``).
 
 Each is placed and routed (``ikseries.pnr.place_and_route``, seed 1) on each device
-(iCE40UP5K sg48, ECP5-25F CABGA381) with nextpnr ``--freq`` = ``--clock-mhz`` (default 100 MHz).
+(each of ``ikseries.constraints.devices.PNR_DEVICES``) with nextpnr ``--freq`` = ``--clock-mhz`` (default 100 MHz).
 nextpnr reports the Fmax it achieved whether or not it meets the target; the target only
 steers its timing-driven placement and routing, so the default is above every core's expected
 Fmax (not the robots' 48 MHz) in case a lower one would let it stop early. Measured with the
-installed nextpnr-ecp5 (seed 1): folded2 and CORDIC reach the same Fmax (64.671, 104.471 MHz)
+installed ECP5 nextpnr (seed 1): folded2 and CORDIC reach the same Fmax (64.671, 104.471 MHz)
 with ``--clock-mhz`` 48, 100 and 200. A design that does not fit is recorded with Yosys' counts
 and the overflow.
 Accuracy: the polynomial plan's max |error| on the >= 10**6 verification points
@@ -39,12 +40,12 @@ Accuracy: the polynomial plan's max |error| on the >= 10**6 verification points
 certified bound; the CORDIC design's on the same points (``measure_cordic``).
 
 Writes JSON (default ``docs/results/pareto.json``), a plot per device next to it
-(``pareto_<device>.png``: area = LUT + FF from Yosys (ECP5 LUT: LUT4 cells + the two LUT4s of each
-CCU2C) with the timing harness' FFs removed on x,
+(``pareto_<device>.png``: area = LUT + FF from Yosys (LUT including the LUTs that carry cells
+occupy, ``Family.ripple_luts``) with the timing harness' FFs removed on x,
 latency in ns at Fmax on y, Pareto front of the placed cylinder-leg cores marked), and prints a table and
 verdicts for the issue's targets.
 
-    python bench/pareto.py [--devices ice40-up5k-sg48,ecp5-25f-cabga381]
+    python bench/pareto.py [--devices ice40,ecp5]
                            [--designs pipelined,modulo4,modulo8,modulo12,modulo4d,modulo7d,modulo16d,folded1,folded2,cordic,cordic_iter,hexapod]
                            [--jobs 2]
                            [--clock-mhz 100] [--cordic-design JSON] [--out docs/results/pareto.json]
@@ -64,21 +65,26 @@ import time
 import warnings
 from pathlib import Path
 
+from ikseries.constraints.devices import PARTS, PNR_DEVICES, dsp_size, family_primitives
 from ikseries.pareto import DesignSpec, plot_device, run_matrix
-from ikseries.pnr import PNR_DEVICES
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
-ICE40, ECP5 = "ice40-up5k-sg48", "ecp5-25f-cabga381"
+#: the place-and-route target of each family the verdicts are about
+ICE40, ECP5 = (next(n for n, d in PNR_DEVICES.items() if d.family == f) for f in ("ice40", "ecp5"))
+ECP5_PART = PARTS[PNR_DEVICES[ECP5].part].part
+ECP5_PRIMITIVES = ", ".join(p.name for p in family_primitives("ecp5"))
 MODULO_II = (4, 8, 12)
-MODULO_DSP_II = (4, 7, 16)   # ECP5 only: DSP-sized plan, MULT18X18D with its own registers
+MODULO_DSP_II = (4, 7, 16)   # ECP5 only: DSP-sized plan, DSP primitives with their own registers
 DESIGNS = ("pipelined", *(f"modulo{ii}" for ii in MODULO_II), *(f"modulo{ii}d" for ii in MODULO_DSP_II),
            "folded1", "folded2", "cordic", "cordic_iter", "hexapod")
 CORDIC_DESIGNS = ("cordic", "cordic_iter")
 DSP_DESIGNS = tuple(f"modulo{ii}d" for ii in MODULO_DSP_II)
 POLY_DESIGNS = tuple(d for d in DESIGNS if d not in (*CORDIC_DESIGNS, "hexapod", *DSP_DESIGNS))
 TARGET_FMAX_MHZ, TARGET_LATENCY_NS, TARGET_THROUGHPUT = 150.0, 200.0, 20e6
-HEXAPOD_DSP, HEXAPOD_LC, HEXAPOD_REFRESH_HZ = 8, 5280, 1000.0
+#: the hexapod target: within the iCE40 part's DSP blocks and logic cells, refreshing >= 1000/s
+HEXAPOD_DSP, HEXAPOD_LC = (PARTS[PNR_DEVICES[ICE40].part].capacities[k] for k in ("DSP", "LUT"))
+HEXAPOD_REFRESH_HZ = 1000.0
 
 
 def say(msg: str) -> None:
@@ -123,12 +129,13 @@ def polynomial_specs(plan, max_error_pu: float | None, names=POLY_DESIGNS,
 
 def dsp_specs(plan, max_error_pu: float | None, names=DSP_DESIGNS, extra: dict | None = None) -> list[DesignSpec]:
     """Specs of the modulo-scheduled evaluators (II = MODULO_DSP_II) of a plan fitted with
-    ``fit.products = "dsp"`` for the ECP5, every product on an instantiated MULT18X18D."""
+    ``fit.products = "dsp"`` for the ECP5, every product on an instantiated DSP primitive."""
     from ikseries.hdl.architectures.modulo import Modulo
 
     return [_spec(lambda dev, ii=ii: Modulo(ii, "ecp5", primitives=True), plan, f"modulo{ii}d",
-                  f"polynomial, 18x18 products (fit.products = dsp), modulo-scheduled, one target per {ii} "
-                  f"cycles, MULT18X18D primitives with their registers", max_error_pu, extra or {}, (ECP5,))
+                  "polynomial, {}x{} products (fit.products = dsp), modulo-scheduled, ".format(*dsp_size("ecp5"))
+                  + f"one target per {ii} cycles, {ECP5_PRIMITIVES} primitives with their registers",
+                  max_error_pu, extra or {}, (ECP5,))
             for ii in MODULO_DSP_II if f"modulo{ii}d" in names]
 
 
@@ -198,11 +205,11 @@ def _by(records, device, kind=None):
 
 
 def verdict_ecp5_speed(records) -> list[str]:
-    """Target 1: the fastest cylinder-leg configuration that fits an ECP5-25F."""
+    """Target 1: the fastest cylinder-leg configuration that fits the ECP5 part."""
     placed = [r for r in _by(records, ECP5) if r["kind"] != "robot" and r["status"] == "placed"]
     poly = [r for r in placed if r["kind"] == "polynomial"]
     if not poly:
-        return ["ECP5 speed target: no polynomial cylinder-leg core placed on the ECP5-25F - NOT MET"]
+        return [f"ECP5 speed target: no polynomial cylinder-leg core placed on the {ECP5_PART} - NOT MET"]
     # the target is ikseries' own core: the CORDIC baseline is compared in the third verdict
     best = max(poly, key=lambda r: (r["throughput_per_s"], -r["latency_ns"]))
     checks = [("Fmax", best["fmax_mhz"], ">=", TARGET_FMAX_MHZ, "MHz"),
@@ -237,7 +244,7 @@ def verdict_ecp5_speed(records) -> list[str]:
 
 
 def verdict_hexapod(records) -> list[str]:
-    """Target 2: the hexapod on one iCE40UP5K refreshing the whole robot >= 1000/s."""
+    """Target 2: the hexapod on one iCE40 part refreshing the whole robot >= 1000/s."""
     hx = [r for r in records if r["design"] == "hexapod" and r["device"] == ICE40]
     if not hx:
         return ["hexapod target: not run"]
@@ -286,7 +293,7 @@ def _against(poly, c) -> tuple[list[str], list[str]]:
                      + ("wins" if lut and dsp and lat else "loses on " + ", ".join(
                          n for n, ok in (("LUT", lut), ("DSP", dsp), ("latency", lat)) if not ok))
                      + (f"; also loses on {'; '.join(elsewhere)}" if elsewhere else "")
-                     + (f"; nextpnr's placed LUT4 slots say the opposite on LUT: LC {p['LC']} vs {c['LC']}"
+                     + (f"; nextpnr's placed LUT slots say the opposite on LUT: LC {p['LC']} vs {c['LC']}"
                         if p.get("LC") and c.get("LC") and (p["LC"] < c["LC"]) != lut else ""))
         if lut and dsp and lat:
             winners.append(p["design"])
@@ -309,7 +316,7 @@ def verdict_poly_vs_cordic(records) -> list[str]:
     if not cor or not poly:
         return ["polynomial vs CORDIC on ECP5: needs a placed CORDIC and a placed polynomial core - not decided"]
     c = cor[0]
-    lines = [f"polynomial vs CORDIC on ECP5 (pipelined CORDIC: {_cordic_head(c)}; LUT counts the LUT4s of the "
+    lines = [f"polynomial vs CORDIC on ECP5 (pipelined CORDIC: {_cordic_head(c)}; LUT counts the LUTs of the "
              "carry chains):"]
     body, winners = _against(poly, c)
     lines += body
@@ -401,7 +408,7 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
     dsp_names = [d for d in designs if d in DSP_DESIGNS]
     if dsp_names:
         plan, worst, extra = fitted(with_hardware(robot, products="dsp", dsp="ecp5"), "DSP-sized plan",
-                                    products="dsp (18x18)")
+                                    products="dsp ({}x{})".format(*dsp_size("ecp5")))
         specs += dsp_specs(plan, worst, dsp_names, extra)
     cordic_names = [d for d in designs if d in CORDIC_DESIGNS]
     if cordic_names:

@@ -9,7 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .features import coordinate_stage
-from .plan import DSP_SIZES, PlanInput
+from ..constraints.devices import FAMILIES
+from .plan import PlanInput
 from .ports import plan_inputs
 
 __all__ = ["FitError", "FormatError", "Budget", "FitContext", "operand_bits"]
@@ -46,9 +47,9 @@ class Budget:
 def operand_bits(robot) -> tuple[int, int] | None:
     """The signed operand widths every plan multiplication must fit: those of the DSP block
     of ``hardware.dsp`` when ``fit.products = "dsp"``; else None (exact products)."""
-    if getattr(robot, "products", "exact") != "dsp" or robot.dsp not in DSP_SIZES:
+    if getattr(robot, "products", "exact") != "dsp" or robot.dsp not in FAMILIES:
         return None
-    return DSP_SIZES[robot.dsp]
+    return FAMILIES[robot.dsp].dsp
 
 
 @dataclass(frozen=True)

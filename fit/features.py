@@ -111,7 +111,7 @@ class TrigTable:
 def fit_trig_table(port, tol: float, max_degree: int = 5, max_cells: int = 32) -> TrigTable | None:
     """The lowest degree (<= ``max_degree``), then the coarsest cells (<= ``max_cells``: on
     cylinder-leg 32 gives cubics on 23 cells, whose tables take a folded core to 23 of the
-    iCE40UP5K's 30 block RAMs; 64 cells of quadratics took 32), of the
+    iCE40 reference part's block RAMs; 64 cells of quadratics took 32), of the
     theta port ``port`` (a PlanInput in degrees) whose per-cell near-minimax cos/sin
     polynomials stay within ``tol``; None if none does. The last cell is fitted on a full cell
     width, as :meth:`Cut.rows` defines."""

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 from .ops import OPS, operation
 
-__all__ = ["DSP_SIZES", "quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for",
+__all__ = ["quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for",
            "signed_bits", "PLAN_FORMAT",
            "PLAN_VERSION", "READABLE_VERSIONS", "REGISTERED_OPS"]
 
@@ -33,9 +33,6 @@ PLAN_VERSION = 2
 #: plan versions :meth:`Plan.from_json` reads: 1 stored the pipeline depth as "latency", a
 #: name that misled for any architecture but the fully pipelined one
 READABLE_VERSIONS = (1, 2)
-#: DSP multiplier sizes (signed operand bits) of common FPGA families: iCE40 SB_MAC16,
-#: ECP5 MULT18X18D, Xilinx 7-series DSP48E1
-DSP_SIZES = {"ice40": (16, 16), "ecp5": (18, 18), "xc7": (25, 18)}
 #: the registered operations with operands (from :data:`ikseries.fit.ops.OPS`)
 REGISTERED_OPS = frozenset(name for name, op in OPS.items() if op.registered and op.arity)
 

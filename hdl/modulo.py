@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Cat, ClockSignal, Const, Instance, Module, Mux, ResetSignal, Signal, signed
+from amaranth.hdl import Cat, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from ..constraints.devices import PRIMITIVES, dsp_size, family_primitives
 from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan
 from .evaluator import input_layout, node_expression, output_layout
@@ -89,7 +90,7 @@ def _fits(wa: int, wb: int, dsp) -> bool:
     return dsp is None or (wa <= dsp[0] and wb <= dsp[1]) or (wa <= dsp[1] and wb <= dsp[0])
 
 
-def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = (18, 18)
+def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = dsp_size("ecp5")
                     ) -> ModuloSchedule:
     """List-schedule ``plan`` with its multiplications on shared multipliers, each free once
     per phase (cycle mod ``initiation_interval``).
@@ -237,17 +238,21 @@ class ModuloEvaluator(wiring.Component):
     initiation_interval : int
         Cycles between accepted targets (>= 1).
     dsp : (int, int) or None
-        Signed operand widths of the device's DSP multiplier (default ECP5 MULT18X18D 18x18;
-        iCE40 SB_MAC16 16x16, Xilinx DSP48E1 25x18); None: every product in one piece.
-    dsp_registers : None or "ecp5"
+        Signed operand widths of the device's DSP multiplier (a family's
+        :attr:`~ikseries.constraints.facts.Family.dsp`, default the ECP5's); None: every product
+        in one piece.
+    dsp_registers : None or str
         None (default): the operand and product registers are fabric flip-flops (Yosys maps
         the product to a DSP block without absorbing them, so every product path runs fabric
-        -> DSP -> fabric). "ecp5": each block product is an instantiated MULT18X18D whose own
+        -> DSP -> fabric). A family with a DSP primitive
+        (:data:`ikseries.constraints.devices.PRIMITIVES`, ``"ecp5"``; ``dsp`` must be that
+        family's size): each block product is an instantiated primitive whose own
         input and output registers are the operand and product registers (clock enable = the
         pipeline enable, synchronous reset = the domain's reset), same timing and values. The
         Amaranth simulator cannot run an ``Instance``: simulate the same core with None; the
         exported Verilog runs in Icarus and Verilator with the primitive's model
-        ``ikseries/sim/models/MULT18X18D.v`` (:func:`ikseries.sim.runner.run` adds it).
+        (:attr:`~ikseries.constraints.facts.Primitive.model_path`; :func:`ikseries.sim.runner.run`
+        adds it).
 
     Attributes
     ----------
@@ -268,7 +273,7 @@ class ModuloEvaluator(wiring.Component):
     ``o.ready`` low, everything, the phase counter included, stalls.
     """
 
-    def __init__(self, plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = (18, 18),
+    def __init__(self, plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = dsp_size("ecp5"),
                  dsp_registers: str | None = None):
         if not isinstance(plan, Plan):
             raise TypeError(f"plan must be a Plan, not {plan!r}")
@@ -276,8 +281,12 @@ class ModuloEvaluator(wiring.Component):
                 or initiation_interval < 1:
             raise ValueError(f"initiation_interval must be an integer >= 1, not {initiation_interval!r}")
         _check_dsp(dsp)
-        if dsp_registers not in (None, "ecp5") or (dsp_registers and dsp != (18, 18)):
-            raise ValueError(f"dsp_registers must be None, or 'ecp5' with dsp=(18, 18), not {dsp_registers!r}")
+        prim_families = dict.fromkeys(p.family for p in PRIMITIVES.values())
+        if dsp_registers is not None and (not isinstance(dsp_registers, str) or dsp_registers not in prim_families
+                                          or dsp != dsp_size(dsp_registers)):
+            raise ValueError("dsp_registers must be None, or "
+                             + " or ".join(f"{f!r} with dsp={dsp_size(f)}" for f in prim_families)
+                             + f", not {dsp_registers!r}")
         self._plan = plan
         self._dsp = dsp
         self._dsp_registers = dsp_registers
@@ -309,8 +318,8 @@ class ModuloEvaluator(wiring.Component):
 
     def _product(self, m, a, b, en, name):
         """``a * b`` two enabled clock edges later: operand registers, then a product register
-        (in the fabric; with ``dsp_registers="ecp5"`` the MULT18X18D's own input and output
-        registers, cleared by the domain's reset like the fabric ones)."""
+        (in the fabric; with ``dsp_registers`` the primitive's own input and output registers,
+        cleared by the domain's reset like the fabric ones)."""
         wa, wb = len(a), len(b)
         p = Signal(signed(wa + wb + 1), name=f"{name}_p")   # + 1: unsigned limb x unsigned limb
         if self._dsp_registers is None:
@@ -318,18 +327,7 @@ class ModuloEvaluator(wiring.Component):
             with m.If(en):
                 m.d.sync += [ar.eq(a), br.eq(b), p.eq(ar * br)]
             return p
-        sa, sb, out = Signal(signed(18)), Signal(signed(18)), Signal(36)
-        m.d.comb += [sa.eq(a), sb.eq(b), p.eq(out.as_signed())]
-        regs = {f"p_REG_{r}_{f}": v for r in ("INPUTA", "INPUTB", "OUTPUT")
-                for f, v in (("CLK", "CLK0"), ("CE", "CE0"), ("RST", "RST0"))}
-        m.submodules[f"{name}_dsp"] = Instance(
-            "MULT18X18D", **regs, p_REG_INPUTC_CLK="NONE", p_REG_PIPELINE_CLK="NONE", p_GSR="DISABLED",
-            p_CLK0_DIV="ENABLED", p_SOURCEB_MODE="B_SHIFT", p_RESETMODE="SYNC",
-            **{f"i_A{k}": sa[k] for k in range(18)}, **{f"i_B{k}": sb[k] for k in range(18)},
-            **{f"i_C{k}": Const(0, 1) for k in range(18)},
-            i_SIGNEDA=Const(1, 1), i_SIGNEDB=Const(1, 1), i_SOURCEA=Const(0, 1), i_SOURCEB=Const(0, 1),
-            i_CLK0=ClockSignal(), i_CE0=en, i_RST0=ResetSignal(),
-            **{f"o_P{k}": out[k] for k in range(36)})
+        m.submodules[f"{name}_dsp"] = family_primitives(self._dsp_registers)[0].instance(m, a, b, p, en)
         return p
 
     def elaborate(self, platform):

@@ -64,10 +64,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ..fit.ops import OPS
-from ..fit.plan import DSP_SIZES, Plan, signed_bits
+from ..fit.plan import Plan, signed_bits
 from .limbmul import _check_dsp, limb_split
 
-__all__ = ["ALU_OPS", "DSP_SIZES", "MicroOp", "Program", "READ_DELAY", "WRITE_DELAY", "compile_program",
+__all__ = ["ALU_OPS", "MicroOp", "Program", "READ_DELAY", "WRITE_DELAY", "compile_program",
            "resolve_view"]
 
 ALU_OPS = ("add", "max", "min", "pass", "and")

@@ -8,8 +8,8 @@ multiplications shared) and the fully pipelined evaluator. A robot with ``legs >
 the shared architecture (one folded evaluator time-multiplexed over the legs).
 
 ``hardware.architecture = "fastest"`` takes the fastest configuration whose Yosys cell counts fit
-``hardware.fit_device`` (:data:`ikseries.synth.FIT_DEVICES`; capacities in
-:data:`ikseries.synth.DEVICES`): it rates every configuration of :data:`FASTEST_ORDER` (the
+``hardware.fit_device`` (a part of :data:`ikseries.constraints.devices.PARTS`, with its
+capacities): it rates every configuration of :data:`FASTEST_ORDER` (the
 pipelined and modulo-scheduled evaluators for one leg; folded, shared by the legs when
 ``legs > 1``, with 4, 2 and 1 multipliers), sorts them by refresh rate, fastest first (fewer
 multipliers first at equal rates), and builds and synthesises each in turn for the device until
@@ -27,12 +27,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from .constraints.devices import part as device_part
 from .hdl.architectures import Architecture, BuildTarget
 from .hdl.architectures.folded import Folded
 from .hdl.architectures.modulo import Modulo
+from .hdl.architectures.options import primitive_families
 from .hdl.architectures.pipelined import Pipelined
 from .hdl.architectures.shared import Shared
-from .synth import DEVICES, FIT_DEVICES, overflows
 
 __all__ = ["ArchitectureError", "Choice", "Tried", "AUTO_ORDER", "FASTEST_ORDER", "candidates",
            "choose_architecture", "synth_candidate", "build_target"]
@@ -90,8 +91,8 @@ class Choice:
                "latency_cycles": self.core.latency, "initiation_interval": self.core.initiation_interval,
                "refresh_hz": self.refresh_hz, "tried": [t.record() for t in self.tried]}
         if self.fit_device is not None:
-            part, cap = DEVICES[FIT_DEVICES[self.fit_device]]
-            rec["fit_device"] = {"name": self.fit_device, "part": part, "capacity": cap}
+            dev = device_part(self.fit_device)
+            rec["fit_device"] = {"name": self.fit_device, "part": dev.part, "capacity": dev.capacities}
         return rec
 
 
@@ -104,7 +105,8 @@ def _configuration(arch: str, k, robot) -> Architecture:
     if robot.legs > 1:
         return Shared(robot.legs, k, robot.dsp)
     if arch == "modulo":
-        return Modulo(k, robot.dsp, primitives=bool(getattr(robot, "dsp_primitives", False)) and robot.dsp == "ecp5")
+        prim = bool(getattr(robot, "dsp_primitives", False)) and robot.dsp in primitive_families()
+        return Modulo(k, robot.dsp, primitives=prim)
     if arch == "folded":
         return Folded(k, robot.dsp)
     return Pipelined()
@@ -203,8 +205,8 @@ def _usage(counts: dict, cap: dict) -> str:
 
 
 def _choose_fastest(robot, plan, synth: SynthFunction, progress) -> Choice:
-    target = FIT_DEVICES[robot.fit_device]
-    part, cap = DEVICES[target]
+    dev = device_part(robot.fit_device)
+    target, part, cap = dev.family, dev.part, dev.capacities
     rated = []
     for cand in candidates(robot):
         t = cand.timing(plan)
@@ -220,7 +222,7 @@ def _choose_fastest(robot, plan, synth: SynthFunction, progress) -> Choice:
         progress(f"fastest on {part}: synthesising {cand.describe()} ({hz:,.0f} Hz)")
         core = cand.build(plan, build_target(robot))
         counts = synth(cand, core, target)
-        over = overflows(target, counts)
+        over = dev.overflows(counts)
         if over:
             tried.append(Tried(cand, ii, hz, counts,
                                f"does not fit {part} by Yosys cell counts (before place-and-route): "
@@ -231,7 +233,7 @@ def _choose_fastest(robot, plan, synth: SynthFunction, progress) -> Choice:
         return _chosen(robot, plan, cand, hz, _fastest_reason(robot, part, cap, counts, ii, hz, tried,
                                                               rated[len(tried):]),
                        tried, robot.fit_device, core)
-    _fastest_error(robot, target, part, tried)
+    _fastest_error(robot, dev, tried)
 
 
 def _fastest_reason(robot, part, cap, counts, ii, hz, tried, rest) -> str:
@@ -246,15 +248,15 @@ def _fastest_reason(robot, part, cap, counts, ii, hz, tried, rest) -> str:
             f"{ii} cycles){faster}{slower}")
 
 
-def _fastest_error(robot, target, part, tried):
+def _fastest_error(robot, dev, tried):
     synthesised = [t for t in tried if t.counts is not None]
     if not synthesised:       # even the fastest is below the rate
         _rate_error(robot, tried[0])
     smallest = min(synthesised, key=lambda t: _size_rank(t.candidate))
-    over = overflows(target, smallest.counts)
+    over = dev.overflows(smallest.counts)
     slower = [t for t in tried if t.counts is None]
     raise ArchitectureError(
-        f"hardware.fit_device = {robot.fit_device}: no configuration fits {part} by Yosys cell counts "
+        f"hardware.fit_device = {robot.fit_device}: no configuration fits {dev.part} by Yosys cell counts "
         f"(before place-and-route); the smallest synthesised, {smallest.candidate.describe()} "
         f"({smallest.refresh_hz:,.0f} Hz), needs "
         + ", ".join(f"{k} {u:,} > {a:,}" for k, (u, a) in over.items())

@@ -299,9 +299,10 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         (tmp / f"{name}.sdc").write_text(clock_sdc(name, robot.clock_hz))
         resources = None
         if synth:
-            from .synth import TARGETS, synth_counts
+            from .constraints.devices import FAMILIES
+            from .synth import synth_counts
             t0 = time.perf_counter()
-            resources = synth_counts(tmp / vfile, name, (family,) if family else TARGETS,
+            resources = synth_counts(tmp / vfile, name, (family,) if family else tuple(FAMILIES),
                                      workdir=tmp / "synth", progress=progress, jobs=2)
             times["synth_s"] = round(time.perf_counter() - t0, 1)
             shutil.rmtree(tmp / "synth", ignore_errors=True)

@@ -57,7 +57,8 @@ def _hardware_overrides(robot, args):
     --products applied
     (validated). --fit-device also sets the DSP size to the device's family unless --dsp is given;
     --architecture other than fastest drops the description's hardware.fit_device."""
-    from .robot import ARCHITECTURES, DSP_CHOICES, FIT_DEVICES, PRODUCTS, check_architecture_options, with_hardware
+    from .constraints.devices import FIT_DEVICES
+    from .robot import ARCHITECTURES, DSP_CHOICES, PRODUCTS, check_architecture_options, with_hardware
     opts = {}
     if args.architecture is not None:
         if args.architecture not in ARCHITECTURES:
@@ -202,7 +203,7 @@ def cmd_report(args):
 
 def _parser() -> argparse.ArgumentParser:
     from . import __version__
-    from .synth import FIT_DEVICES
+    from .constraints.devices import FAMILIES, FIT_DEVICES, PNR_DEVICES, PRIMITIVES, PARTS
     p = argparse.ArgumentParser(prog="ikseries", description=__doc__)
     p.add_argument("--version", action="version", version=f"ikseries {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -225,13 +226,15 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--interval", metavar="N", help="override hardware.interval: initiation interval of the "
                    "modulo-scheduled evaluator (needs architecture modulo; default 8)")
     b.add_argument("--dsp", metavar="FAMILY",
-                   help="override hardware.dsp: ice40, ecp5, xc7 (DSP multiplier size) or none (full width)")
+                   help=f"override hardware.dsp: {', '.join(FAMILIES)} (DSP multiplier size) or none (full width)")
     b.add_argument("--fit-device", metavar="DEVICE",
                    help="override hardware.fit_device (with --architecture fastest): "
                         f"{', '.join(FIT_DEVICES)}; also sets --dsp to the device's family unless --dsp is given")
     b.add_argument("--dsp-primitives", action="store_true",
-                   help="override hardware.dsp_primitives: put a modulo core's products on instantiated ECP5 "
-                        "MULT18X18D blocks with their own registers (needs --dsp ecp5)")
+                   help="override hardware.dsp_primitives: put a modulo core's products on instantiated "
+                        + ", ".join(f"{FAMILIES[p.family].label} {p.name}" for p in PRIMITIVES.values())
+                        + " blocks with their own registers (needs --dsp "
+                        + " or ".join(dict.fromkeys(p.family for p in PRIMITIVES.values())) + ")")
     b.add_argument("--products", metavar="MODE",
                    help="override fit.products: exact (default: every product as wide as it needs, split "
                         "into DSP-sized limbs in hardware) or dsp (operands narrowed to one --dsp block each)")
@@ -255,7 +258,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("build_dir", nargs="?", metavar="BUILD_DIR",
                    help="directory of an `ikseries build` (default build/<preset>)")
     r.add_argument("--pnr", action="store_true",
-                   help="Yosys + nextpnr on iCE40UP5K and ECP5-25F: Fmax and utilisation into "
+                   help="Yosys + nextpnr on "
+                        + " and ".join(dict.fromkeys(PARTS[d.part].part for d in PNR_DEVICES.values()))
+                        + ": Fmax and utilisation into "
                         "pnr.json and report.md")
     r.add_argument("--preset", help="with no BUILD_DIR: this preset's default build directory")
     r.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")

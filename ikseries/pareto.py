@@ -21,7 +21,7 @@ Record fields (``None`` when not measured):
 ``LUT``, ``FF``, ``carry``, ``DSP``, ``BRAM``
     Yosys cell counts of what was synthesised (the timing harness included when used).
 ``LC``, ``LC_available``
-    nextpnr's placed logic cells (iCE40 ICESTORM_LC, ECP5 TRELLIS_COMB) and the device's.
+    nextpnr's placed logic cells (the device's ``LC`` BEL type) and the device's.
 ``harness``, ``harness_ffs``
     Whether the core is wrapped in the timing harness (its port bits exceed the package's
     pins, as :func:`~ikseries.pnr.place_and_route` decides) and the FFs that harness adds;
@@ -43,12 +43,10 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable, Sequence
 
-from .pnr import PNR_DEVICES, DoesNotFitError, PnrError, place_and_route, verilog_ports
-from .synth import categorise
+from .constraints.devices import PNR_DEVICES, family as device_family
+from .pnr import DoesNotFitError, PnrError, place_and_route, verilog_ports
 
 __all__ = ["DesignSpec", "pareto_front", "run_design", "run_matrix", "plot_device"]
-
-FAMILY_CELLS = {"ice40": "ice40", "ecp5": "ecp5"}
 
 
 @dataclasses.dataclass
@@ -114,7 +112,7 @@ def _counts_from_workdir(workdir: Path, family: str) -> dict | None:
         cells = json.loads(stat.read_text())["design"]["num_cells_by_type"]
     except (OSError, ValueError, KeyError):
         return None
-    return categorise(family, cells)[0]
+    return device_family(family).categorise(cells)[0]
 
 
 def run_design(spec: DesignSpec, device: str, clock_hz: int, workdir: Path, *, seed: int = 1,
@@ -158,7 +156,7 @@ def run_design(spec: DesignSpec, device: str, clock_hz: int, workdir: Path, *, s
         if counts:
             rec.update({k: counts[k] for k in ("LUT", "FF", "carry", "DSP", "BRAM")})
     else:
-        counts = categorise(family, res.synth_cells)[0]
+        counts = device_family(family).categorise(res.synth_cells)[0]
         rec.update({k: counts[k] for k in ("LUT", "FF", "carry", "DSP", "BRAM")})
         fmax = res.fmax_mhz
         rec.update(status="placed", fmax_mhz=fmax, meets_clock=res.meets_clock,
@@ -230,7 +228,7 @@ def plot_device(records: Sequence[dict], device: str, path: Path) -> list[str]:
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.margins(x=0.35, y=0.15)   # room for the labels right of the points
-    ax.set_xlabel("area: LUT + FF (Yosys; ECP5 LUT with carry LUT4s; harness FFs excluded)")
+    ax.set_xlabel("area: LUT + FF (Yosys; LUT with the carry chains' LUTs; harness FFs excluded)")
     ax.set_ylabel("latency at Fmax (ns)")
     title = f"{device}: area vs latency"
     if missing:

@@ -1,17 +1,10 @@
 """Place-and-route reports: achieved Fmax and placed utilisation from Yosys + nextpnr.
 
 :func:`place_and_route` synthesises a Verilog design with YoWASP Yosys (via
-:func:`ikseries.synth.synth_counts`, ``synth_ice40 -dsp`` / ``synth_ecp5``) and places and routes
-it with YoWASP nextpnr for one of :data:`PNR_DEVICES`:
-
-=====================  ===================================  =============  ==========
-device                 nextpnr                              user I/O pins  clock pin
-=====================  ===================================  =============  ==========
-``ice40-up5k-sg48``    ``nextpnr-ice40 --up5k --package     39             35 (iCEBreaker
-                       sg48``                                              12 MHz, GBIN)
-``ecp5-25f-cabga381``  ``nextpnr-ecp5 --25k --package       197            G2 (ULX3S
-                       CABGA381``                                          25 MHz)
-=====================  ===================================  =============  ==========
+:func:`ikseries.synth.synth_counts`, the family's :attr:`~ikseries.constraints.facts.Family.yosys`
+command) and places and routes it with YoWASP nextpnr for one of
+:data:`ikseries.constraints.devices.PNR_DEVICES` (each names its nextpnr arguments, the
+package's user I/O pins and a clock pin of a common board).
 
 nextpnr runs with ``--freq`` = the requested clock, a fixed ``--seed`` (the result is
 deterministic for a given design, seed and tool version) and ``--timing-allow-fail`` (a design
@@ -20,9 +13,10 @@ whether it met it). Fmax is nextpnr's achieved frequency of the clock net driven
 port: register-to-register paths only (paths from input pins and to output pins are not part
 of a clock domain in nextpnr's analysis).
 
-Pin placement: only the clock is constrained (a PCF ``set_io`` on iCE40, an LPF ``LOCATE`` on
-ECP5), to a global-buffer-capable pin of a common board; every other pin is placed by nextpnr
-(``--pcf-allow-unconstrained`` on iCE40, ``--lpf-allow-unconstrained`` on ECP5).
+Pin placement: only the clock is constrained (the family's pin file,
+:meth:`~ikseries.constraints.facts.Nextpnr.clock_constraint`), to a global-buffer-capable pin of
+a common board; every other pin is placed by nextpnr (the file's ``...-allow-unconstrained``
+argument).
 
 Timing harness
 --------------
@@ -40,8 +34,8 @@ in the reported utilisation (:attr:`PnrResult.harness_ffs`).
 
 Does-not-fit
 ------------
-Yosys' cell counts are compared with the device's capacities before nextpnr runs (DSP, block
-RAM, SPRAM exactly; LUTs and FFs each against the logic cells, a necessary condition); nextpnr's
+Yosys' cell counts are compared with the device's ``cell_limits`` before nextpnr runs (hard
+blocks exactly; LUTs and FFs each against the logic cells, a necessary condition); nextpnr's
 own "Device utilisation" is parsed if it still fails to place. Either way
 :class:`DoesNotFitError` names each exceeded resource with used, available and the excess.
 """
@@ -57,48 +51,14 @@ import sys
 import time
 from pathlib import Path
 
+from .constraints.devices import PNR_DEVICES, PnrDevice, family as device_family, pnr_families
 from .synth import SynthError, synth_counts
 from .wasm_cache import warm_nextpnr
 
-__all__ = ["PNR_DEVICES", "HARNESS_TOP", "Device", "PnrError", "DoesNotFitError", "PnrResult", "Port",
+__all__ = ["HARNESS_TOP", "PnrError", "DoesNotFitError", "PnrResult", "Port",
            "verilog_ports", "harness_verilog", "nextpnr_command", "place_and_route"]
 
 HARNESS_TOP = "ikseries_pnr_harness"
-
-
-@dataclasses.dataclass(frozen=True)
-class Device:
-    """A place-and-route target: nextpnr options, package pins and capacities."""
-    name: str
-    family: str                       # "ice40" | "ecp5" (nextpnr flavour, Yosys target)
-    description: str
-    nextpnr_args: tuple[str, ...]
-    user_io: int                      # user I/O pins of the package
-    clock_pin: str
-    #: resource -> (regex over Yosys cell types, capacity): checked before nextpnr; regex None:
-    #: the category of :func:`ikseries.synth.categorise` (``LUT``: on ECP5 with the LUT4s of the
-    #: carry chains, which nextpnr places in the same slots)
-    cell_limits: tuple[tuple[str, str | None, int], ...]
-    #: report column -> nextpnr utilisation key (BEL type)
-    bels: tuple[tuple[str, str], ...]
-
-
-PNR_DEVICES: dict[str, Device] = {
-    "ice40-up5k-sg48": Device(
-        "ice40-up5k-sg48", "ice40", "Lattice iCE40UP5K, SG48 package",
-        ("--up5k", "--package", "sg48"), 39, "35",
-        (("LUT", None, 5280), ("FF", r"SB_DFF\w*", 5280), ("DSP", r"SB_MAC16", 8),
-         ("BRAM", r"SB_RAM40_4K\w*", 30), ("SPRAM", r"SB_SPRAM256KA", 4)),
-        (("LC", "ICESTORM_LC"), ("DSP", "ICESTORM_DSP"), ("BRAM", "ICESTORM_RAM"),
-         ("SPRAM", "ICESTORM_SPRAM"), ("IO", "SB_IO"))),
-    "ecp5-25f-cabga381": Device(
-        "ecp5-25f-cabga381", "ecp5", "Lattice ECP5 LFE5U-25F, CABGA381 package",
-        ("--25k", "--package", "CABGA381"), 197, "G2",
-        (("LUT", None, 24288), ("FF", r"TRELLIS_FF|FD1[PS]3\w+", 24288), ("DSP", r"MULT18X18D", 28),
-         ("ALU54B", r"ALU54B", 14), ("BRAM", r"DP16KD|PDPW16KD", 56)),
-        (("LC", "TRELLIS_COMB"), ("FF", "TRELLIS_FF"), ("DSP", "MULT18X18D"), ("BRAM", "DP16KD"),
-         ("IO", "TRELLIS_IO"))),
-}
 
 
 class PnrError(RuntimeError):
@@ -131,11 +91,11 @@ class Port:
 class PnrResult:
     """Outcome of one place-and-route run (only designs that fit produce one).
 
-    ``utilisation`` maps a resource to ``{"used": n, "available": m}``: ``LC`` (iCE40 logic
-    cells; ECP5 LUT4 slots, carry halves included), ``FF``, ``DSP``, ``BRAM``, ``IO`` and, on
-    iCE40, ``SPRAM`` are from nextpnr's placed design (iCE40 ``FF`` from Yosys); ``LUT`` and
-    ``carry`` are Yosys counts (:func:`ikseries.synth.categorise`: ECP5 ``LUT`` includes the two
-    LUT4s of each CCU2C; carry: SB_CARRY = 1 bit, CCU2C = 2 bits).
+    ``utilisation`` maps a resource to ``{"used": n, "available": m}``: the device's ``bels``
+    columns (``LC``: :attr:`~ikseries.constraints.facts.Family.lc_note`) are from nextpnr's
+    placed design, ``FF`` from Yosys where nextpnr reports none; ``LUT`` and ``carry`` are Yosys
+    counts (:func:`ikseries.synth.categorise`: ``LUT`` includes the LUTs carry cells occupy;
+    carry: cells of :attr:`~ikseries.constraints.facts.Family.carry_bits` bits each).
     """
     device: str
     top: str
@@ -249,15 +209,18 @@ def harness_verilog(ports: list[Port], top: str, clock: str = "clk", reset: str 
 # -- tools -----------------------------------------------------------------------------------------
 
 def nextpnr_command(family: str) -> list[str]:
-    """argv prefix that starts nextpnr for ``family``; ``$IKSERIES_NEXTPNR_ICE40`` /
-    ``$IKSERIES_NEXTPNR_ECP5`` (split on whitespace) override the YoWASP build."""
-    if family not in ("ice40", "ecp5"):
-        raise ValueError(f"family must be one of ['ice40', 'ecp5'], not {family!r}")
-    env = os.environ.get(f"IKSERIES_NEXTPNR_{family.upper()}")
+    """argv prefix that starts nextpnr for ``family``; the family's
+    :attr:`~ikseries.constraints.facts.Nextpnr.env` variable (split on whitespace, e.g.
+    ``$IKSERIES_NEXTPNR_ECP5``) overrides the YoWASP build."""
+    names = [f.name for f in pnr_families()]
+    if family not in names:
+        raise ValueError(f"family must be one of {names}, not {family!r}")
+    tool = device_family(family).nextpnr
+    env = os.environ.get(tool.env)
     if env:
         return env.split()
     return [sys.executable, "-c",
-            f"import sys, yowasp_nextpnr_{family} as m; sys.exit(m.run_nextpnr_{family}(sys.argv[1:]))"]
+            f"import sys, {tool.module} as m; sys.exit(m.{tool.runner}(sys.argv[1:]))"]
 
 
 def _tail(path: Path, lines: int = 20) -> str:
@@ -267,11 +230,11 @@ def _tail(path: Path, lines: int = 20) -> str:
         return ""
 
 
-# "Info: \t         ICESTORM_DSP:      10/      8   125%"
+# "Info: \t         <BEL type>:      10/      8   125%"
 _UTIL_RE = re.compile(r"^Info:\s+(\w+):\s+(\d+)/\s*(\d+)\s+\d+%", re.M)
 
 
-def _log_overflow(log: str, dev: Device) -> dict[str, tuple[int, int]]:
+def _log_overflow(log: str, dev: PnrDevice) -> dict[str, tuple[int, int]]:
     idx = log.rfind("Device utilisation:")
     if idx < 0:
         return {}
@@ -340,9 +303,9 @@ def place_and_route(verilog: str, top: str, device: str, clock_hz: int, workdir:
     """
     _check_args(verilog, top, device, clock_hz, workdir, harness, seed)
     dev = PNR_DEVICES[device]
-    if not os.environ.get(f"IKSERIES_NEXTPNR_{dev.family.upper()}") \
-            and importlib.util.find_spec(f"yowasp_nextpnr_{dev.family}") is None:
-        raise PnrError(f"nextpnr for {device} is not installed (pip install yowasp-nextpnr-{dev.family})")
+    tool = device_family(dev.family).nextpnr
+    if not os.environ.get(tool.env) and importlib.util.find_spec(tool.module) is None:
+        raise PnrError(f"nextpnr for {device} is not installed (pip install {tool.package})")
     ports = verilog_ports(verilog, top)
     if not any(p.name == clock for p in ports):
         raise ValueError(f"clock must be a port of module {top!r} {[p.name for p in ports]}, not {clock!r}")
@@ -385,13 +348,8 @@ def place_and_route(verilog: str, top: str, device: str, clock_hz: int, workdir:
     tdir = workdir / dev.family
     for stale in ("report.json", "nextpnr.log"):
         (tdir / stale).unlink(missing_ok=True)
-    if dev.family == "ice40":
-        (tdir / "pins.pcf").write_text(f"set_io {clock_pin_name} {dev.clock_pin}\n")
-        pins = ["--pcf", "pins.pcf", "--pcf-allow-unconstrained"]
-    else:
-        (tdir / "pins.lpf").write_text(f'LOCATE COMP "{clock_pin_name}" SITE "{dev.clock_pin}";\n'
-                                       f'IOBUF PORT "{clock_pin_name}" IO_TYPE=LVCMOS33;\n')
-        pins = ["--lpf", "pins.lpf", "--lpf-allow-unconstrained"]
+    (tdir / tool.pin_file).write_text(tool.clock_constraint(clock_pin_name, dev.clock_pin))
+    pins = list(tool.pin_args)
     cmd = nextpnr_command(dev.family)
     warm_nextpnr(dev.family, cmd)   # parallel first runs would race on YoWASP's cache
     argv = [*cmd, *dev.nextpnr_args, "--json", "netlist.json", "--report", "report.json",

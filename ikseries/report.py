@@ -54,6 +54,17 @@ def _values(v, fmt: str) -> str:
     return ", ".join(fmt.format(x) for x in v) if isinstance(v, (list, tuple)) else fmt.format(v)
 
 
+def _carry_note(families: dict) -> str:
+    """What carry and LUT count on each family (the registry's carry cells and their LUTs)."""
+    bits = [f"{f.carry_bits} bit{'s' if f.carry_bits != 1 else ''} ({f.label})" for f in families.values()]
+    text = f"carry cells are {', '.join(bits[:-1])} or {bits[-1]} each."
+    for f in families.values():
+        if f.ripple_luts:
+            text += (f" {f.label} LUT includes the {f.ripple_luts} LUTs of every {f.carry_cell} carry cell "
+                     "(a slice in ripple mode), as the vendor counts LUTs against the device.")
+    return text
+
+
 def render_markdown(r: dict) -> str:
     out = [f"# ikseries report: {r['robot']}", "",
            f"ikseries {r['ikseries_version']}; Verilog module `{r['module']}` in `{r['verilog']}`; "
@@ -114,23 +125,22 @@ def render_markdown(r: dict) -> str:
     res = r.get("resources")
     out += ["## FPGA resources (Yosys, before place-and-route)", ""]
     if res:
-        from .synth import DEVICES, overflows
+        from .constraints.devices import FAMILIES, reference_part
         cats = ["LUT", "FF", "carry", "DSP", "BRAM"]
         out += [_row(["target", *cats, "fits reference device?", "synthesis time (s)"]),
                 _row(["---"] * (len(cats) + 3))]
         for tgt, d in res.items():
             c = d["counts"]
-            over = overflows(tgt, c)
-            fits = (f"{DEVICES[tgt][0]}: " + ("yes (by cell count)" if not over else
+            ref = reference_part(tgt)
+            over = ref.overflows(c)
+            fits = (f"{ref.part}: " + ("yes (by cell count)" if not over else
                     "no: " + ", ".join(f"{k} {u}/{a}" for k, (u, a) in over.items())))
             out.append(_row([tgt, *(c.get(k, 0) for k in cats), fits, d.get("seconds", "")]))
         if r.get("primitives"):
-            fam = r["primitives"]["family"].upper()
+            fam = FAMILIES[r["primitives"]["family"]].label
             out += ["", f"{fam} only: the Verilog instantiates {fam} "
                     + ", ".join(r["primitives"]["cells"]) + " primitives."]
-        out += ["", "Cell counts after synthesis, before place-and-route; carry cells are 1 bit (iCE40), "
-                "2 bits (ECP5) or 4 bits (xc7) each. ECP5 LUT includes the two LUT4s of every CCU2C "
-                "carry cell (a slice in ripple mode), as Lattice counts LUT4s against the device. "
+        out += ["", "Cell counts after synthesis, before place-and-route; " + _carry_note(FAMILIES) + " "
                 + ("This fully pipelined, one-target-per-cycle design is sized for throughput, not area."
                    if r.get("initiation_interval", 1) == 1 else
                    "This design trades throughput for area: its multipliers are shared over "

@@ -11,14 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .constraints.devices import FAMILIES, FIT_DEVICES, PRIMITIVES
 from .geometry import geometry_class, geometry_type
 from .kinematics import Calibration, UnreachableError
 from .reach import ReachUnprovenError, prove_box_reachable
-from .synth import FIT_DEVICES
 
 __all__ = ["RobotError", "InputSpec", "Robot", "load_robot", "load_preset", "preset_names", "parse_robot",
-           "robot_record", "robot_from_record", "fit_record", "with_hardware", "ARCHITECTURES", "DSP_CHOICES", "PRODUCTS",
-           "FIT_DEVICES"]
+           "robot_record", "robot_from_record", "fit_record", "with_hardware", "ARCHITECTURES", "DSP_CHOICES", "PRODUCTS"]
 
 #: fit.lowering values: "mixed" = per servo the Horner/Estrin mix of least pipeline depth (a few
 #: more multiplications), "horner" = nested Horner (fewest multiplications, deepest)
@@ -32,8 +31,8 @@ PRODUCTS = ("exact", "dsp")
 #: Default: "pipelined" (one target per clock, verified by cocotb too) for one leg, "auto" for more.
 ARCHITECTURES = ("auto", "pipelined", "folded", "modulo", "fastest")
 #: hardware.dsp values: the FPGA family whose DSP multiplier size the folded evaluator uses
-#: (see ikseries.hdl.schedule.DSP_SIZES), or "none" for full-width products
-DSP_CHOICES = ("ice40", "ecp5", "xc7", "none")
+#: (see ikseries.constraints.devices.FAMILIES), or "none" for full-width products
+DSP_CHOICES = (*FAMILIES, "none")
 
 
 class RobotError(ValueError):
@@ -83,7 +82,7 @@ class Robot:
     lowering: str = "mixed"         # one of LOWERINGS: how servo polynomials become plan operations
     interval: int = 8               # initiation interval of a modulo-scheduled evaluator
     products: str = "exact"         # one of PRODUCTS: product widths exact or fitted to hardware.dsp
-    dsp_primitives: bool = False    # modulo cores: products on instantiated ECP5 MULT18X18D with their registers
+    dsp_primitives: bool = False    # modulo cores: products on instantiated DSP primitives with their registers
 
     @property
     def servos(self) -> tuple[str, ...]:
@@ -301,9 +300,12 @@ def _check_hardware(robot: Robot, labels: dict | None = None) -> None:
     prim = robot.dsp_primitives
     if not isinstance(prim, bool):
         raise RobotError(f"{lab['dsp_primitives']} must be true or false, not {prim!r}")
-    if prim and robot.dsp != "ecp5":
-        raise RobotError(f"{lab['dsp']} must be ecp5 when {lab['dsp_primitives']} is true (the only "
-                         f"DSP primitive instantiated is the ECP5 MULT18X18D), not {robot.dsp!r}")
+    prim_families = {p.family: p for p in PRIMITIVES.values()}
+    if prim and robot.dsp not in prim_families:
+        raise RobotError(f"{lab['dsp']} must be {', '.join(prim_families)} when {lab['dsp_primitives']} is true "
+                         f"(the only DSP primitive instantiated is the "
+                         + ", ".join(f"{FAMILIES[f].label} {p.name}" for f, p in prim_families.items())
+                         + f"), not {robot.dsp!r}")
     dev = robot.fit_device
     if dev is not None and dev not in FIT_DEVICES:
         raise RobotError(f"{lab['fit_device']} must be one of {', '.join(FIT_DEVICES)}, not {dev!r}")

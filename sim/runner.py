@@ -29,6 +29,7 @@ import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from ..constraints.devices import PRIMITIVES
 from .cocotb_leg.config import CLOCK_NS, ENV_CONFIG, RunConfig
 
 __all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_CONFIG", "VERILATOR_OPT", "BenchRobot", "default_n_random",
@@ -138,13 +139,10 @@ def _env(**values):
                 os.environ[k] = v
 
 
-#: simulation models of the vendor primitives the exported Verilog may instantiate
-MODELS = {"MULT18X18D": Path(__file__).parent / "models" / "MULT18X18D.v"}
-
-
 def primitive_models(verilog: str) -> list[Path]:
-    """The model files of the vendor primitives instantiated in ``verilog``."""
-    return [path for cell, path in MODELS.items() if re.search(rf"^\s*{cell}\b", verilog, re.M)]
+    """The model files of the vendor primitives (:data:`ikseries.constraints.devices.PRIMITIVES`)
+    instantiated in ``verilog``."""
+    return [p.model_path for p in PRIMITIVES.values() if re.search(rf"^\s*{p.name}\b", verilog, re.M)]
 
 
 def _write_if_changed(path: Path, text: str) -> None:
@@ -306,7 +304,7 @@ def _simulator_settings(simulator: str, build_dir: Path, name: str, vfile: Path,
         fix = [verilator_make_fixes(path)]
         if verilator_opt:
             # the slow (run-once) code at -O0: GCC spent over 10 minutes at -O1 on the symbol
-            # table constructor of a core with ~50 MULT18X18D model instances (2 s at -O0)
+            # table constructor of a core with ~50 DSP primitive model instances (2 s at -O0)
             fix += [f"OPT_FAST={verilator_opt}", "OPT_SLOW=-O0", f"OPT_GLOBAL={verilator_opt}"]
         makeflags = " ".join(x for x in (os.environ.get("MAKEFLAGS", ""), *fix) if x) or None
     elif waves:

@@ -11,7 +11,7 @@ from ikseries.architecture import ArchitectureError, choose_architecture
 from ikseries.cli import main
 from ikseries.hdl.export import manifest, robot_verilog
 from ikseries.hdl.leg import LegCore
-from ikseries.hdl.schedule import DSP_SIZES
+from ikseries.constraints.devices import dsp_size
 from ikseries.hdl.shared import RobotCore
 from ikseries.robot import (RobotError, load_preset, parse_robot, preset_text, robot_from_record, robot_record,
                             with_hardware)
@@ -120,7 +120,7 @@ def _targets(plan, n, seed):
 
 
 def test_leg_core_with_folded_evaluator_is_bit_exact(small_plan):
-    core = LegCore(small_plan, 4000, multipliers=2, dsp=DSP_SIZES["ice40"])
+    core = LegCore(small_plan, 4000, multipliers=2, dsp=dsp_size("ice40"))
     assert core.architecture == "folded"
     assert core.latency == core.initiation_interval == core.evaluator.latency > 1
     assert LegCore(small_plan, 4000).initiation_interval == 1

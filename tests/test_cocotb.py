@@ -230,7 +230,8 @@ def test_modulo_core_on_ecp5_dsp_primitives_cocotb(simulator, small_plan, small_
     output registers, ``dsp_registers="ecp5"``; single-block and limb-split products): the
     exported Verilog runs with the primitive's model and stays bit-exact at the same latency."""
     from ikseries.hdl.leg import LegCore
-    from ikseries.sim.runner import MODELS, primitive_models
+    from ikseries.constraints.devices import primitive
+    from ikseries.sim.runner import primitive_models
     _skip_unless_available(simulator)
     core = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=(18, 18), dsp_registers="ecp5")
     plain = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=(18, 18))
@@ -239,7 +240,7 @@ def test_modulo_core_on_ecp5_dsp_primitives_cocotb(simulator, small_plan, small_
     res = run(small_plan_file, PWM_PERIOD, simulator, build_dir, core=core, n_random=300)
     verilog = (build_dir / "ikseries_leg.v").read_text() if (build_dir / "ikseries_leg.v").exists() else \
         next(build_dir.glob("*.v")).read_text()
-    assert verilog.count("REG_OUTPUT_CLK") >= 2 and primitive_models(verilog) == [MODELS["MULT18X18D"]]
+    assert verilog.count("REG_OUTPUT_CLK") >= 2 and primitive_models(verilog) == [primitive("MULT18X18D").model_path]
     print(res.summary())
     assert set(res.tests) == COCOTB_TESTS, res.summary()
     assert res.ok, res.summary()

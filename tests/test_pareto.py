@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from helpers import tiny_plan
-from ikseries import pnr
+from ikseries.constraints.devices import PNR_DEVICES
 from ikseries.pareto import pareto_front, plot_device, run_design, run_matrix
 
 ICE40 = "ice40-up5k-sg48"
@@ -82,10 +82,10 @@ def test_plot_marks_the_front(records, tmp_path):
 
 def test_does_not_fit_is_recorded(records, tmp_path, monkeypatch):
     _, bench = records
-    dev = pnr.PNR_DEVICES[ICE40]
+    dev = PNR_DEVICES[ICE40]
     small = dataclasses.replace(dev, cell_limits=tuple((n, rx, 1 if n == "DSP" else cap)
                                                        for n, rx, cap in dev.cell_limits))
-    monkeypatch.setitem(pnr.PNR_DEVICES, ICE40, small)
+    monkeypatch.setitem(PNR_DEVICES, ICE40, small)
     spec = bench.polynomial_specs(tiny_plan(3, clamp=(0, 100), degree=2), None, ("pipelined",))[0]
     r = run_design(spec, ICE40, 48_000_000, tmp_path / "w")
     assert r["status"] == "does-not-fit"
@@ -129,9 +129,9 @@ def test_verdicts_on_hand_made_records(records):
     assert pv[4].startswith("against the iterative CORDIC (a target every 17 cycles: 800 LUT, 2 DSP, 900.0 ns")
     assert "-> loses on LUT; also loses on FF 800 vs 500 (1.6x); BRAM 5 vs 0; throughput 3.3 vs 9 M/s (0.37x)" in pv[5]
     assert pv[6] == "  verdict: not met (LUT and DSP each, latency no worse)"
-    # when the placed LUT4 slots disagree with Yosys' LUT count, the line says so
+    # when the placed LUT slots disagree with Yosys' LUT count, the line says so
     pv = bench.verdict_poly_vs_cordic([{**poly, "DSP": 2, "latency_ns": 200.0, "LC": 5200}, {**cordic, "LC": 5100}])
-    assert pv[1].endswith("; nextpnr's placed LUT4 slots say the opposite on LUT: LC 5200 vs 5100")
+    assert pv[1].endswith("; nextpnr's placed LUT slots say the opposite on LUT: LC 5200 vs 5100")
 
 
 def test_jobs_must_be_one_or_two(tmp_path):

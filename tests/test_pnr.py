@@ -16,9 +16,10 @@ from amaranth.back import verilog as amaranth_verilog
 
 from helpers import tiny_plan
 from ikseries.cli import main
+from ikseries.constraints.devices import PNR_DEVICES
 from ikseries.hdl.export import leg_verilog
 from ikseries.hdl.leg import LegCore
-from ikseries.pnr import (HARNESS_TOP, PNR_DEVICES, DoesNotFitError, Port, _log_overflow, harness_verilog,
+from ikseries.pnr import (HARNESS_TOP, DoesNotFitError, Port, _log_overflow, harness_verilog,
                           place_and_route, verilog_ports)
 from ikseries.pnr_report import SECTION_TITLE, insert_section, render_markdown
 

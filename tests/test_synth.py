@@ -5,7 +5,8 @@ import pytest
 from amaranth import Elaboratable, Module, Signal, signed
 from amaranth.back import verilog
 
-from ikseries.synth import CATEGORIES, RIPPLE_LUTS, TARGETS, SynthError, categorise, synth_counts
+from ikseries.constraints.devices import CATEGORIES, FAMILIES
+from ikseries.synth import SynthError, categorise, synth_counts
 
 
 class _Tiny(Elaboratable):
@@ -53,7 +54,7 @@ def tiny_result(tiny_verilog, tmp_path_factory):
               "MULT18X18D": 4, "ALU54B": 1, "DP16KD": 2, "PDPW16KD": 1, "TRELLIS_DPR16X4": 5,
               "TRELLIS_IO": 7},
      {"LUT": 16, "mux": 3, "FF": 20, "carry": 3, "DSP": 5, "BRAM": 3, "LUTRAM": 5, "io": 7}),
-    ("xilinx", {"LUT1": 1, "LUT2": 2, "LUT3": 3, "LUT4": 4, "LUT5": 5, "LUT6": 6, "INV": 1,
+    ("xc7", {"LUT1": 1, "LUT2": 2, "LUT3": 3, "LUT4": 4, "LUT5": 5, "LUT6": 6, "INV": 1,
                 "FDRE": 10, "FDSE": 1, "FDCE": 2, "FDPE": 3, "CARRY4": 7, "DSP48E1": 2,
                 "RAMB18E1": 1, "RAMB36E1": 2, "MUXF7": 3, "MUXF8": 1, "RAM64M": 1,
                 "SRLC32E": 2, "IBUF": 4, "OBUF": 5, "BUFG": 1},
@@ -72,7 +73,7 @@ def test_ecp5_lut_counts_the_lut4s_of_carry_cells():
     assert categorise("ecp5", {"LUT4": 7, "CCU2C": 4})[0]["LUT"] == 7 + 2 * 4
     assert categorise("ecp5", {"CCU2C": 1})[0]["LUT"] == 2
     assert categorise("ice40", {"SB_LUT4": 7, "SB_CARRY": 4})[0]["LUT"] == 7
-    assert categorise("xilinx", {"LUT2": 7, "CARRY4": 4})[0]["LUT"] == 7
+    assert categorise("xc7", {"LUT2": 7, "CARRY4": 4})[0]["LUT"] == 7
 
 
 def test_categorise_unknown_cells_are_other():
@@ -80,7 +81,7 @@ def test_categorise_unknown_cells_are_other():
     assert counts["LUT"] == 3 and counts["other"] == 1
     assert other == {"EHXPLLL": 1}
     # iCE40's LUT is not a Xilinx LUT and vice versa
-    assert categorise("xilinx", {"SB_LUT4": 1})[0]["other"] == 1
+    assert categorise("xc7", {"SB_LUT4": 1})[0]["other"] == 1
     assert categorise("ice40", {"LUT4": 1})[0]["other"] == 1
 
 
@@ -90,7 +91,7 @@ def test_all_targets_run(tiny_result):
     res, messages, wd = tiny_result
     assert list(res) == ["ice40", "ecp5", "xc7"]
     for t, r in res.items():
-        assert r["target"] == t and r["device"] == TARGETS[t][0]
+        assert r["target"] == t and r["device"] == FAMILIES[t].title
         assert (wd / t / "stat.json").is_file() and (wd / t / "yosys.log").is_file()
         assert r["seconds"] > 0
         assert r["yosys_seconds"] is not None and r["yosys_seconds"] > 0
@@ -103,7 +104,7 @@ def test_counts_are_consistent(tiny_result):
         cells, counts = r["cells"], r["counts"]
         assert "$scopeinfo" not in cells
         assert set(counts) == set(CATEGORIES)
-        ripple = RIPPLE_LUTS.get(TARGETS[t][2], 0) * counts["carry"]   # ECP5: CCU2C's LUT4s
+        ripple = FAMILIES[t].ripple_luts * counts["carry"]   # ECP5: CCU2C's LUT4s
         assert sum(cells.values()) == r["num_cells"] == sum(counts.values()) - ripple, t
         assert counts["other"] == sum(r["other_cells"].values()), t
         assert r["other_cells"] == {}, (t, r["other_cells"])  # every cell of this design is known

@@ -4,7 +4,7 @@ from __future__ import annotations
 from ..leg import LegCore
 from ..modulo import ModuloEvaluator, modulo_schedule
 from . import Architecture, BuildTarget, Timing
-from .options import dsp_label, dsp_size, positive_int
+from .options import dsp_label, dsp_size, positive_int, primitive_families
 
 __all__ = ["Modulo"]
 
@@ -21,8 +21,8 @@ class Modulo(Architecture):
         DSP family whose block size splits wide products into limbs (None, "none": full width
         products; the evaluator's default 18 x 18).
     primitives : bool
-        Products on instantiated ECP5 MULT18X18D blocks with their own registers (needs
-        ``dsp="ecp5"``).
+        Products on the DSP family's instantiated primitives with their own registers (needs a
+        ``dsp`` family that has them, see :mod:`ikseries.constraints`).
     """
 
     name = "modulo"
@@ -32,14 +32,14 @@ class Modulo(Architecture):
         dsp_size(dsp)
         if not isinstance(primitives, bool):
             raise ValueError(f"primitives must be true or false, not {primitives!r}")
-        if primitives and dsp != "ecp5":
-            raise ValueError(f"dsp must be 'ecp5' with primitives (the only DSP primitive instantiated is "
-                             f"the ECP5 MULT18X18D), not {dsp!r}")
+        if primitives and dsp not in primitive_families():
+            raise ValueError(f"dsp must be one of {', '.join(primitive_families())} with primitives (the "
+                             f"families whose DSP primitives are instantiated), not {dsp!r}")
         self.dsp, self.primitives = dsp, primitives
 
     @property
     def _size(self):
-        return dsp_size(self.dsp) or (18, 18)
+        return dsp_size(self.dsp) or dsp_size("ecp5")   # the evaluator's default block
 
     def timing(self, plan) -> Timing:
         s = modulo_schedule(plan, self.interval, self._size)
@@ -47,11 +47,11 @@ class Modulo(Architecture):
 
     def evaluator(self, plan):
         return ModuloEvaluator(plan, self.interval, dsp=self._size,
-                               dsp_registers="ecp5" if self.primitives else None)
+                               dsp_registers=self.dsp if self.primitives else None)
 
     def build(self, plan, target: BuildTarget):
         return LegCore(plan, target.period, interval=self.interval, dsp=dsp_size(self.dsp),
-                       dsp_registers="ecp5" if self.primitives else None)
+                       dsp_registers=self.dsp if self.primitives else None)
 
     def multiplier_units(self, plan) -> int:
         return modulo_schedule(plan, self.interval, self._size).units

@@ -1,9 +1,9 @@
 """Option checks shared by the polynomial architectures."""
 from __future__ import annotations
 
-from ..schedule import DSP_SIZES
+from ...constraints.devices import FAMILIES, PRIMITIVES
 
-__all__ = ["dsp_size", "positive_int", "dsp_label"]
+__all__ = ["dsp_size", "positive_int", "dsp_label", "primitive_families"]
 
 
 def dsp_size(dsp: str | None) -> tuple[int, int] | None:
@@ -11,9 +11,9 @@ def dsp_size(dsp: str | None) -> tuple[int, int] | None:
     products)."""
     if dsp in (None, "none"):
         return None
-    if dsp not in DSP_SIZES:
-        raise ValueError(f"dsp must be None, 'none' or one of {', '.join(DSP_SIZES)}, not {dsp!r}")
-    return DSP_SIZES[dsp]
+    if dsp not in FAMILIES:
+        raise ValueError(f"dsp must be None, 'none' or one of {', '.join(FAMILIES)}, not {dsp!r}")
+    return FAMILIES[dsp].dsp
 
 
 def dsp_label(dsp: str | None) -> str:
@@ -26,3 +26,8 @@ def positive_int(value, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
         raise ValueError(f"{name} must be an integer >= 1, not {value!r}")
     return value
+
+
+def primitive_families() -> tuple[str, ...]:
+    """Families whose DSP primitives a modulo core can instantiate (with their registers)."""
+    return tuple(dict.fromkeys(p.family for p in PRIMITIVES.values()))

@@ -1,0 +1,234 @@
+"""The kinds of device fact: families, parts, place-and-route targets and vendor primitives.
+
+Each family module (:mod:`ikseries.constraints.ice40`, ...) fills these frozen dataclasses with
+its own numbers; :mod:`ikseries.constraints.devices` collects them into the registry.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+__all__ = ["CATEGORIES", "Family", "Nextpnr", "Part", "PnrDevice", "Primitive"]
+
+#: resource categories of a synthesised design; every raw Yosys cell falls in exactly one
+#: (unknown cells in "other")
+CATEGORIES = ("LUT", "FF", "carry", "DSP", "BRAM", "SPRAM", "LUTRAM", "mux", "io", "other")
+
+
+@dataclass(frozen=True)
+class Nextpnr:
+    """How nextpnr places and routes a family.
+
+    Parameters
+    ----------
+    flavour : str
+        nextpnr architecture (``nextpnr-<flavour>``, YoWASP package ``yowasp-nextpnr-<flavour>``).
+    pin_file : str
+        Name of the pin constraint file.
+    pin_args : tuple of str
+        nextpnr arguments that read ``pin_file`` (and let it place every other pin).
+    clock_pin_text : str
+        Text of ``pin_file`` placing the clock port ``{port}`` on pin ``{pin}``.
+    """
+    flavour: str
+    pin_file: str
+    pin_args: tuple[str, ...]
+    clock_pin_text: str
+
+    @property
+    def binary(self) -> str:
+        return f"nextpnr-{self.flavour}"
+
+    @property
+    def package(self) -> str:
+        """The YoWASP distribution that provides the WebAssembly build."""
+        return f"yowasp-nextpnr-{self.flavour}"
+
+    @property
+    def module(self) -> str:
+        return f"yowasp_nextpnr_{self.flavour}"
+
+    @property
+    def runner(self) -> str:
+        """The function of :attr:`module` that runs nextpnr on an argv list."""
+        return f"run_nextpnr_{self.flavour}"
+
+    @property
+    def env(self) -> str:
+        """Environment variable naming a native nextpnr to use instead (split on whitespace)."""
+        return f"IKSERIES_NEXTPNR_{self.flavour.upper()}"
+
+    def clock_constraint(self, port: str, pin: str) -> str:
+        """Contents of :attr:`pin_file` placing clock ``port`` on ``pin``."""
+        return self.clock_pin_text.format(port=port, pin=pin)
+
+
+@dataclass(frozen=True)
+class Family:
+    """An FPGA family as synthesis and the evaluators see it.
+
+    Parameters
+    ----------
+    name : str
+        Registry name, the value of ``hardware.dsp`` and the Yosys target name.
+    title : str
+        Device label of Yosys results (the family's reference part for single-part families).
+    label : str
+        The family in prose ("ECP5").
+    dsp : (int, int)
+        Signed operand widths of one DSP multiplier block.
+    dsp_cell : str
+        Yosys cell of that block.
+    yosys : str
+        Yosys synthesis command, without ``-top``.
+    rules : tuple of (str, str)
+        (category of :data:`CATEGORIES`, regex over Yosys cell types) in order; the first full
+        match wins.
+    carry_cell : str
+        Yosys cell of the hard carry chain.
+    carry_bits : int
+        Adder bits per :attr:`carry_cell`.
+    ripple_luts : int
+        LUTs each carry cell occupies besides its own cell (ECP5 CCU2C: a slice in ripple mode
+        uses both of its LUT4s); counted in ``LUT``.
+    nextpnr : Nextpnr or None
+        Place and route, None where nextpnr has no such architecture.
+    lc_note : str
+        What nextpnr's placed logic cell ("LC") is on this family (empty without nextpnr).
+    """
+    name: str
+    title: str
+    label: str
+    dsp: tuple[int, int]
+    dsp_cell: str
+    yosys: str
+    rules: tuple[tuple[str, str], ...]
+    carry_cell: str
+    carry_bits: int
+    ripple_luts: int = 0
+    nextpnr: Nextpnr | None = None
+    lc_note: str = ""
+
+    def categorise(self, cells: dict[str, int]) -> tuple[dict[str, int], dict[str, int]]:
+        """Sort raw ``num_cells_by_type`` into :data:`CATEGORIES`.
+
+        ``$scopeinfo`` is ignored. Returns ``(counts, other_cells)``; ``sum(counts.values())``
+        equals the raw total without $scopeinfo plus :attr:`ripple_luts` per carry cell, which
+        ``LUT`` includes.
+        """
+        counts = dict.fromkeys(CATEGORIES, 0)
+        other: dict[str, int] = {}
+        for name, n in cells.items():
+            if name == "$scopeinfo":
+                continue
+            for cat, rx in self.rules:
+                if re.fullmatch(rx, name):
+                    counts[cat] += int(n)
+                    break
+            else:
+                counts["other"] += int(n)
+                other[name] = other.get(name, 0) + int(n)
+        counts["LUT"] += self.ripple_luts * counts["carry"]
+        return counts, other
+
+
+@dataclass(frozen=True)
+class Part:
+    """A device of a family with its capacities (the vendor's data sheet).
+
+    Parameters
+    ----------
+    name : str
+        Registry name, the value of ``hardware.fit_device``.
+    family : str
+        Its :class:`Family` name.
+    part : str
+        The vendor's part name.
+    capacity : tuple of (str, int)
+        Category of :data:`CATEGORIES` -> how many the part has, for the categories it limits.
+    """
+    name: str
+    family: str
+    part: str
+    capacity: tuple[tuple[str, int], ...]
+
+    @property
+    def capacities(self) -> dict[str, int]:
+        return dict(self.capacity)
+
+    def overflows(self, counts: dict) -> dict[str, tuple[int, int]]:
+        """Categories where ``counts`` exceed the part: {category: (used, available)}."""
+        return {k: (counts.get(k, 0), v) for k, v in self.capacity if counts.get(k, 0) > v}
+
+
+@dataclass(frozen=True)
+class PnrDevice:
+    """A place-and-route target: a part in a package, its nextpnr options, pins and limits.
+
+    Parameters
+    ----------
+    name : str
+        Registry name ("<part>-<package>").
+    family : str
+        Its :class:`Family` name (nextpnr flavour, Yosys target).
+    description : str
+    nextpnr_args : tuple of str
+        nextpnr arguments selecting the part and package.
+    user_io : int
+        User I/O pins of the package.
+    clock_pin : str
+        A global-buffer-capable pin of a common board for the clock.
+    cell_limits : tuple of (str, str or None, int)
+        Resource -> (regex over Yosys cell types, capacity), checked before nextpnr; regex None:
+        the category of :meth:`Family.categorise`.
+    bels : tuple of (str, str)
+        Report column -> nextpnr utilisation key (BEL type).
+    part : str
+        Its :class:`Part` name.
+    """
+    name: str
+    family: str
+    description: str
+    nextpnr_args: tuple[str, ...]
+    user_io: int
+    clock_pin: str
+    cell_limits: tuple[tuple[str, str | None, int], ...]
+    bels: tuple[tuple[str, str], ...]
+    part: str
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """A vendor primitive the exported Verilog may instantiate, with its simulation model.
+
+    Parameters
+    ----------
+    name : str
+        Verilog module name of the primitive.
+    family : str
+        Its :class:`Family` name.
+    operand_bits : int
+        Signed width of each multiplier operand port.
+    product_bits : int
+        Width of the product port.
+    model : str
+        File name of the behavioural model in ``ikseries/sim/models/`` (package data).
+    instance : callable
+        ``instance(m, a, b, product, enable)`` -> the Amaranth ``Instance`` of one registered
+        multiplication ``product = a * b`` in the sync domain (operand and product registers
+        inside the primitive, clock enable ``enable``, synchronous reset = the domain's reset),
+        its ports connected to the operands and ``product`` in ``m``'s comb domain.
+    """
+    name: str
+    family: str
+    operand_bits: int
+    product_bits: int
+    model: str
+    instance: Callable
+
+    @property
+    def model_path(self) -> Path:
+        """Path of :attr:`model`, a file of the ``ikseries.sim`` package."""
+        return Path(__file__).resolve().parent.parent / "sim" / "models" / self.model
