@@ -7,7 +7,7 @@ from amaranth.hdl import Module, Mux, Signal, signed
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-__all__ = ["LimbMultiplier", "limb_split"]
+__all__ = ["LimbMultiplier", "check_dsp", "limb_split"]
 
 
 def _check_width(name, w):
@@ -15,7 +15,8 @@ def _check_width(name, w):
         raise ValueError(f"{name} must be an integer >= 2 (signed bits), not {w!r}")
 
 
-def _check_dsp(dsp):
+def check_dsp(dsp):
+    """Refuse a ``dsp`` that is not None or a pair of signed operand widths."""
     ok = dsp is None or (isinstance(dsp, tuple) and len(dsp) == 2 and all(
         isinstance(d, int) and not isinstance(d, bool) and d >= 2 for d in dsp))
     if not ok:
@@ -34,7 +35,7 @@ def limb_split(a_width: int, b_width: int, dsp: tuple[int, int] | None):
     """
     _check_width("a_width", a_width)
     _check_width("b_width", b_width)
-    _check_dsp(dsp)
+    check_dsp(dsp)
     if dsp is None:
         return (a_width - 1, b_width - 1), (1, 1), (a_width, b_width)
     bits = (dsp[0] - 1, dsp[1] - 1)

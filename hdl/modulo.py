@@ -12,7 +12,7 @@ from ..constraints.devices import PRIMITIVES, dsp_size, family_primitives
 from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan
 from .evaluator import input_layout, node_expression, output_layout
-from .limbmul import _check_dsp
+from .limbmul import check_dsp
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
            "CLAMP_LATENCY"]
@@ -280,7 +280,7 @@ class ModuloEvaluator(wiring.Component):
         if isinstance(initiation_interval, bool) or not isinstance(initiation_interval, int) \
                 or initiation_interval < 1:
             raise ValueError(f"initiation_interval must be an integer >= 1, not {initiation_interval!r}")
-        _check_dsp(dsp)
+        check_dsp(dsp)
         prim_families = dict.fromkeys(p.family for p in PRIMITIVES.values())
         if dsp_registers is not None and (not isinstance(dsp_registers, str) or dsp_registers not in prim_families
                                           or dsp != dsp_size(dsp_registers)):

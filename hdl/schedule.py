@@ -65,7 +65,7 @@ from dataclasses import dataclass, field
 
 from ..fit.ops import OPS
 from ..fit.plan import Plan, signed_bits
-from .limbmul import _check_dsp, limb_split
+from .limbmul import check_dsp, limb_split
 
 __all__ = ["ALU_OPS", "MicroOp", "Program", "READ_DELAY", "WRITE_DELAY", "compile_program",
            "resolve_view"]
@@ -180,7 +180,7 @@ class Program:
 def _check_params(multipliers, dsp):
     if not isinstance(multipliers, int) or isinstance(multipliers, bool) or multipliers < 1:
         raise ValueError(f"multipliers must be a positive integer, not {multipliers!r}")
-    _check_dsp(dsp)
+    check_dsp(dsp)
 
 
 class _Lowering:
