@@ -7,8 +7,8 @@ section's body lines: figures only as the JSON holds them, formatted the same wa
 """
 from __future__ import annotations
 
-from ikseries.fit.comparison import render_comparison
-from ikseries.fit.divided import render_markdown as render_divided
+from ikseries.fit.baselines.comparison import render_comparison
+from ikseries.fit.baselines.divided import render_markdown as render_divided
 
 
 def table(head, rows) -> list[str]:
