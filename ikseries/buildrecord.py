@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
+
+from .atomic import atomic_write
 
 __all__ = ["RECORD_NAME", "RECORD_FORMAT", "BuildRecordError", "OutputDirError", "check_output_dir", "remove_created", "recorded_files",
            "write_record", "add_to_record"]
@@ -103,17 +104,7 @@ def write_record(build_dir, names) -> None:
     the directory, then renamed over the record)."""
     build_dir = Path(build_dir)
     text = json.dumps({"format": RECORD_FORMAT, "files": sorted(set(names))}, indent=1) + "\n"
-    fd, tmp = tempfile.mkstemp(prefix=".ikseries-build-", suffix=".tmp", dir=build_dir)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)      # like the build's other files (mkstemp makes it 0600)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, build_dir / RECORD_NAME)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(build_dir / RECORD_NAME, text)
 
 
 def add_to_record(build_dir, *names: str) -> None:

@@ -11,10 +11,10 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 from pathlib import Path
 
 from . import __version__
+from .atomic import atomic_write
 from .robot import fit_record, robot_record
 
 __all__ = ["PlanLookupError", "cache_dir", "plan_key", "cached_plan_path", "store_plan", "read_plan", "find_plan"]
@@ -59,15 +59,7 @@ def store_plan(robot, text: str) -> Path:
     """
     dest = cached_plan_path(robot)
     dest.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.stem[:16]}-", suffix=".tmp", dir=dest.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, dest)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return dest
+    return atomic_write(dest, text)
 
 
 def read_plan(robot, path: Path, given: bool):

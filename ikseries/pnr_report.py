@@ -22,13 +22,13 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 import json
-import os
 import shutil
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable, Iterable
 
+from .atomic import atomic_write
 from .buildrecord import add_to_record
 from .constraints.devices import PNR_DEVICES, family, pnr_families
 from .pnr import DoesNotFitError, place_and_route
@@ -147,17 +147,6 @@ def _version(dist: str) -> str:
         return "not installed"
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _load_build(build_dir: Path) -> tuple[dict, Path]:
     man_path = build_dir / "manifest.json"
     if not build_dir.is_dir() or not man_path.is_file():
@@ -231,7 +220,7 @@ def report_build(build_dir, devices: Iterable[str] = tuple(PNR_DEVICES), *, seed
            "tools": {t: _version(t) for t in _TOOLS},
            "devices": dict(zip(devices, results))}
     md = insert_section((build_dir / "report.md").read_text(), render_section(pnr))
-    _atomic_write(build_dir / "pnr.json", json.dumps(pnr, indent=1, sort_keys=True) + "\n")
-    _atomic_write(build_dir / "report.md", md)
+    atomic_write(build_dir / "pnr.json", json.dumps(pnr, indent=1, sort_keys=True) + "\n")
+    atomic_write(build_dir / "report.md", md)
     add_to_record(build_dir, "pnr.json")    # a rebuild then removes it with the Verilog it describes
     return pnr
