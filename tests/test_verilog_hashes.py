@@ -15,7 +15,7 @@ def _params():
         yield pytest.param(name, marks=marks, id=name)
 
 
-@pytest.mark.parametrize("name", _params())
+@pytest.mark.parametrize("name", list(_params()))
 def test_verilog_is_byte_identical_to_its_record(name, plan):
     quick = name in vh.QUICK and vh.CONFIGS[name][0] == "cylinder-leg"
     assert vh.sha256_of(name, plan if quick else None) == vh.recorded()[name]
