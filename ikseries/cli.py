@@ -112,10 +112,10 @@ def cmd_build(args):
         if bad:
             raise CliError(f"--cocotb must be auto, none or a list from {','.join(SIMULATORS)}, not {bad[0]!r}")
     rep = build(robot, out, synth=not args.no_synth, vcd=args.vcd, cocotb=sims, progress=_progress(args.quiet))
-    worst = max(s["error_pu"]["total"] for s in rep["servos"])
-    print(f"{robot.name}: max error {worst:.3f} pu (tolerance {robot.tolerance_pu:g}), "
-          f"latency {rep['latency_cycles']} cycles, {rep['architecture']['description']}, "
-          f"every leg refreshed {rep['refresh_hz']:,.0f} times/s, output in {out}/")
+    choice = rep.core.choice
+    print(f"{robot.name}: max error {rep.worst_error_pu:.3f} pu (tolerance {robot.tolerance_pu:g}), "
+          f"latency {choice.core.latency} cycles, {choice.candidate.describe()}, "
+          f"every leg refreshed {choice.refresh_hz:,.0f} times/s, output in {out}/")
 
 
 def _eval_plan(robot, args, say):

@@ -1,7 +1,120 @@
-"""Human-readable report (Markdown) from the build's report.json data."""
+"""The build report: one object made from the build steps' results, writing its own
+``report.json`` (:meth:`BuildReport.record`) and ``report.md`` (:func:`render_markdown` of that
+record, so a report can be rendered again from its JSON)."""
 from __future__ import annotations
 
-__all__ = ["render_markdown"]
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["BuildReport", "render_markdown"]
+
+
+@dataclass(frozen=True)
+class BuildReport:
+    """What a build made and measured, from its steps (:mod:`ikseries.steps`).
+
+    ``synthesis`` and ``cocotb`` are None when the build skipped them; ``manifest`` is the
+    build's manifest.json data; ``error_map`` what :func:`ikseries.plots.error_map` returned.
+    """
+    robot: object
+    fitted: object       # ikseries.steps.Fitted
+    core: object         # ikseries.steps.Core
+    manifest: dict
+    simulation: object   # ikseries.steps.Simulation
+    synthesis: object | None
+    cocotb: object | None
+    error_map: dict
+
+    @property
+    def verilog_file(self) -> str:
+        return f"{self.core.module}.v"
+
+    @property
+    def worst_error_pu(self) -> float:
+        """The largest sampled total error over the servos (pu)."""
+        return max(s["total"] for s in self.fitted.accuracy["servos"].values())
+
+    def times(self) -> dict:
+        """Seconds per step, in build order (skipped steps left out)."""
+        t = {"fit_s": self.fitted.fit_s, "accuracy_s": self.fitted.accuracy_s, "verilog_s": self.core.verilog_s}
+        if self.synthesis is not None:
+            t["synth_s"] = self.synthesis.seconds
+        if self.cocotb is not None:
+            t["cocotb_s"] = self.cocotb.seconds
+        return t
+
+    def record(self) -> dict:
+        """JSON-ready data (report.json)."""
+        robot, plan, man = self.robot, self.fitted.plan, self.manifest
+        rec = {
+            "robot": robot.name,
+            "ikseries_version": plan.meta.get("ikseries_version"),
+            "tolerance_pu": robot.tolerance_pu,
+            "clock_hz": robot.clock_hz,
+            "ticks_per_pu": robot.ticks_per_pu,
+            "verilog": self.verilog_file,
+            "module": man["module"],
+            "accuracy_points": self.fitted.accuracy["points"],
+            "servos": [_servo_record(sf, o, plan, self.fitted.accuracy)
+                       for sf, o in zip(self.fitted.servos, plan.outputs)],
+            "plan": _plan_record(plan),
+            "latency_cycles": man["latency_cycles"],
+            "latency_ns": man["latency_ns"],
+            "initiation_interval": man["initiation_interval"],
+            "legs": man["legs"],
+            "refresh_hz": man["refresh_hz"],
+            "min_refresh_hz": robot.min_refresh_hz,
+            "architecture": man["architecture"],
+            "throughput_targets_per_s": man["throughput"]["targets_per_second_at_clock"],
+            "simulation": self.simulation.record(),
+            "cocotb": self.cocotb.record() if self.cocotb is not None else {},
+            "cocotb_note": self.cocotb.note if self.cocotb is not None else None,
+            "error_map": self.error_map,
+            "resources": self.synthesis.targets if self.synthesis is not None else None,
+            "times_s": self.times(),
+        }
+        if "primitives" in man:
+            rec["primitives"] = man["primitives"]
+        return rec
+
+    def markdown(self) -> str:
+        """Human-readable report (report.md)."""
+        return render_markdown(self.record())
+
+    def write(self, directory: Path) -> None:
+        """Write report.json and report.md into ``directory``."""
+        rec = self.record()
+        (Path(directory) / "report.json").write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
+        (Path(directory) / "report.md").write_text(render_markdown(rec))
+
+
+def _servo_record(sf, output, plan, accuracy: dict) -> dict:
+    """One servo's fit (of plan output ``output``), coefficients, sampled error and certificate."""
+    cone = plan.cone(output.node)
+    return {
+        "name": sf.name,
+        "total_degree": sf.degree,
+        "variables": sf.features.structure(),
+        "piecewise": sf.features.piecewise_record(),
+        "powers": dict(zip(sf.features.names, sf.features.allowed)),
+        "terms": len(sf.poly),
+        "accumulator_frac_bits": sf.frac,
+        "multipliers": sum(1 for i in cone if plan.nodes[i].op == "mul"),
+        "coefficients": [{"exponents": list(e), "integer": q, "value": sf.poly[e]}
+                         for e, q in sf.integers().items()],
+        "error_pu": accuracy["servos"][sf.name],
+        "certified_rounding_bound_pu": sf.bound_pu,
+        "certificate": next((c for c in plan.meta.get("certificate", {}).get("servos", [])
+                             if c["name"] == sf.name), None),
+    }
+
+
+def _plan_record(plan) -> dict:
+    return {"nodes": len(plan.nodes), "multipliers": plan.count("mul"), "adders": plan.count("add"),
+            "clamps": plan.count("clamp"), "lookup_tables": plan.count("lut"),
+            "feature_frac_bits": plan.meta["features"]["frac_bits"],
+            "max_width": max(n.width for n in plan.nodes)}
 
 
 def _row(cells) -> str:
@@ -65,11 +178,14 @@ def _carry_note(families: dict) -> str:
     return text
 
 
-def render_markdown(r: dict) -> str:
-    out = [f"# ikseries report: {r['robot']}", "",
-           f"ikseries {r['ikseries_version']}; Verilog module `{r['module']}` in `{r['verilog']}`; "
-           f"clock {r['clock_hz'] / 1e6:g} MHz ({r['ticks_per_pu']:g} ticks per pulse unit).", "",
-           "## Accuracy", "",
+def _header(r: dict) -> list[str]:
+    return [f"# ikseries report: {r['robot']}", "",
+            f"ikseries {r['ikseries_version']}; Verilog module `{r['module']}` in `{r['verilog']}`; "
+            f"clock {r['clock_hz'] / 1e6:g} MHz ({r['ticks_per_pu']:g} ticks per pulse unit).", ""]
+
+
+def _accuracy_section(r: dict) -> list[str]:
+    out = ["## Accuracy", "",
            f"Max |error| in pulse units (pu; tolerance ±{r['tolerance_pu']:g} pu) over "
            f"{r['accuracy_points']:,} representable workspace points (dense grid, random, every face). "
            "approximation: the fitted series in exact arithmetic vs the reference IK; quantization: "
@@ -92,12 +208,16 @@ def render_markdown(r: dict) -> str:
         out += ["", "Where the error lies: total error on a " + " x ".join(f"{v} ({k})" for k, v in g.items())
                 + " grid of representable inputs, maximum over the last coordinate:", "",
                 f"![error map]({r['error_map']['file']})"]
-    out += ["", "## Series", "",
-            "Variables: *radial* = (x² + y², z), *cartesian* = (x, y, z) in the servo-axis frame, "
-            "*direct* = the input ports; total-degree terms unless marked *tensor terms* (a degree per "
-            "variable); chosen per servo as the fewest multipliers that meet the approximation budget.", "",
-            _row(["servo", "variables", "total degree", "powers", "terms", "multipliers (incl. coordinate stage)",
-                  "coefficient frac bits"]), _row(["---"] * 7)]
+    return out
+
+
+def _series_section(r: dict) -> list[str]:
+    out = ["", "## Series", "",
+           "Variables: *radial* = (x² + y², z), *cartesian* = (x, y, z) in the servo-axis frame, "
+           "*direct* = the input ports; total-degree terms unless marked *tensor terms* (a degree per "
+           "variable); chosen per servo as the fewest multipliers that meet the approximation budget.", "",
+           _row(["servo", "variables", "total degree", "powers", "terms", "multipliers (incl. coordinate stage)",
+                 "coefficient frac bits"]), _row(["---"] * 7)]
     for s in r["servos"]:
         p = s["powers"]
         out.append(_row([s["name"], s["variables"], s["total_degree"],
@@ -108,49 +228,62 @@ def render_markdown(r: dict) -> str:
             f"(the coordinate stage is shared by all servos), {pl['adders']} adders, "
             + (f"{pl['lookup_tables']} coefficient tables, " if pl.get("lookup_tables") else "") +
             f"features with {pl['feature_frac_bits']} fractional bits, widest intermediate "
-            f"{pl['max_width']} bits.", "",
-            "## Timing", "",
+            f"{pl['max_width']} bits.", ""]
+    return out
+
+
+def _cocotb_line(sim: str, c: dict) -> str:
+    return (f"- cocotb on {sim} (exported Verilog): {', '.join(c['tests'])} passed"
+            + (f" ({c['random_targets']} random targets plus the corners)" if "random_targets" in c else "")
+            + f", latency {c['latency_cycles_measured']} cycles"
+            + (f", a target every {c['initiation_interval']} cycles" if "initiation_interval" in c else "")
+            + f" (build {c['build_s']} s, simulation {c['test_s']} s).")
+
+
+def _timing_section(r: dict) -> list[str]:
+    return ["## Timing", "",
             f"- Latency: **{r['latency_cycles']} cycles** ({r['latency_ns']:.1f} ns at the configured clock), "
             f"measured in the Amaranth simulation: {r['simulation']['latency_cycles_measured']} cycles "
             f"({r['simulation']['targets']} targets, {r['simulation']['mismatches']} mismatches against "
             "the golden model).",
-            *[f"- cocotb on {sim} (exported Verilog): {', '.join(c['tests'])} passed"
-              + (f" ({c['random_targets']} random targets plus the corners)" if "random_targets" in c else "")
-              + f", latency {c['latency_cycles_measured']} cycles"
-              + (f", a target every {c['initiation_interval']} cycles" if "initiation_interval" in c else "")
-              + f" (build {c['build_s']} s, simulation {c['test_s']} s)."
-              for sim, c in (r.get("cocotb") or {}).items()],
+            *[_cocotb_line(sim, c) for sim, c in (r.get("cocotb") or {}).items()],
             *([f"- {r['cocotb_note']}."] if r.get("cocotb_note") else []),
             *_throughput_lines(r), ""]
+
+
+def _resources_section(r: dict) -> list[str]:
     res = r.get("resources")
-    out += ["## FPGA resources (Yosys, before place-and-route)", ""]
-    if res:
-        from .constraints.devices import FAMILIES, reference_part
-        cats = ["LUT", "FF", "carry", "DSP", "BRAM"]
-        out += [_row(["target", *cats, "fits reference device?", "synthesis time (s)"]),
-                _row(["---"] * (len(cats) + 3))]
-        for tgt, d in res.items():
-            c = d["counts"]
-            ref = reference_part(tgt)
-            over = ref.overflows(c)
-            fits = (f"{ref.part}: " + ("yes (by cell count)" if not over else
-                    "no: " + ", ".join(f"{k} {u}/{a}" for k, (u, a) in over.items())))
-            out.append(_row([tgt, *(c.get(k, 0) for k in cats), fits, d.get("seconds", "")]))
-        if r.get("primitives"):
-            fam = FAMILIES[r["primitives"]["family"]].label
-            out += ["", f"{fam} only: the Verilog instantiates {fam} "
-                    + ", ".join(r["primitives"]["cells"]) + " primitives."]
-        out += ["", "Cell counts after synthesis, before place-and-route; " + _carry_note(FAMILIES) + " "
-                + ("This fully pipelined, one-target-per-cycle design is sized for throughput, not area."
-                   if r.get("initiation_interval", 1) == 1 else
-                   "This design trades throughput for area: its multipliers are shared over "
-                   "several operations" + (" and every leg." if r.get("legs", 1) > 1 else "."))]
-    else:
-        out.append("Synthesis was skipped (--no-synth).")
-    out += ["", "## Coefficients", "",
-            "Integer coefficient = round(value * 2**frac_bits); a term is the product of the "
-            "servo's normalised variables (see plan.json `meta.features`) raised to the listed "
-            "powers; value in PWM ticks.", ""]
+    out = ["## FPGA resources (Yosys, before place-and-route)", ""]
+    if not res:
+        return out + ["Synthesis was skipped (--no-synth)."]
+    from .constraints.devices import FAMILIES, reference_part
+    cats = ["LUT", "FF", "carry", "DSP", "BRAM"]
+    out += [_row(["target", *cats, "fits reference device?", "synthesis time (s)"]),
+            _row(["---"] * (len(cats) + 3))]
+    for tgt, d in res.items():
+        c = d["counts"]
+        ref = reference_part(tgt)
+        over = ref.overflows(c)
+        fits = (f"{ref.part}: " + ("yes (by cell count)" if not over else
+                "no: " + ", ".join(f"{k} {u}/{a}" for k, (u, a) in over.items())))
+        out.append(_row([tgt, *(c.get(k, 0) for k in cats), fits, d.get("seconds", "")]))
+    if r.get("primitives"):
+        fam = FAMILIES[r["primitives"]["family"]].label
+        out += ["", f"{fam} only: the Verilog instantiates {fam} "
+                + ", ".join(r["primitives"]["cells"]) + " primitives."]
+    out += ["", "Cell counts after synthesis, before place-and-route; " + _carry_note(FAMILIES) + " "
+            + ("This fully pipelined, one-target-per-cycle design is sized for throughput, not area."
+               if r.get("initiation_interval", 1) == 1 else
+               "This design trades throughput for area: its multipliers are shared over "
+               "several operations" + (" and every leg." if r.get("legs", 1) > 1 else "."))]
+    return out
+
+
+def _coefficients_section(r: dict) -> list[str]:
+    out = ["", "## Coefficients", "",
+           "Integer coefficient = round(value * 2**frac_bits); a term is the product of the "
+           "servo's normalised variables (see plan.json `meta.features`) raised to the listed "
+           "powers; value in PWM ticks.", ""]
     for s in r["servos"]:
         out += [f"### {s['name']}", "", _row(["powers of " + ", ".join(s["powers"]), "integer", "value"]),
                 _row(["---"] * 3)]
@@ -162,6 +295,13 @@ def render_markdown(r: dict) -> str:
         out += [_row([" ".join(map(str, c["exponents"])), _values(c["integer"], "{}"), _values(c["value"], "{:.10g}")])
                 for c in s["coefficients"]]
         out.append("")
+    return out
+
+
+def render_markdown(r: dict) -> str:
+    """report.md from a build's report record (:meth:`BuildReport.record`, report.json)."""
     t = r["times_s"]
-    out += ["## Build times", "", ", ".join(f"{k[:-2]} {v:g} s" for k, v in t.items()), ""]
+    out = [*_header(r), *_accuracy_section(r), *_series_section(r), *_timing_section(r),
+           *_resources_section(r), *_coefficients_section(r),
+           "## Build times", "", ", ".join(f"{k[:-2]} {v:g} s" for k, v in t.items()), ""]
     return "\n".join(out)

@@ -6,11 +6,11 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 
 import pytest
 
 import ikseries.build as build_mod
+import ikseries.steps as steps_mod
 from ikseries.build import BuildError, build, planned_outputs
 from ikseries.buildrecord import RECORD_NAME, add_to_record, recorded_files
 from ikseries.cli import main
@@ -37,7 +37,7 @@ def fast_fit(monkeypatch, small_fitted):
     """build() gets the session's fit of the small robot instead of fitting (a fresh copy each
     time: the build stores the robot description in the plan's meta)."""
     plan, fits = small_fitted
-    monkeypatch.setattr(build_mod, "fit_robot", lambda robot, progress: (_copy(plan), fits))
+    monkeypatch.setattr(steps_mod, "fit_robot", lambda robot, progress: (_copy(plan), fits))
 
 
 @pytest.mark.parametrize("name, options", [
@@ -47,7 +47,7 @@ def fast_fit(monkeypatch, small_fitted):
     ("cocotb_icarus.log", ["--cocotb", "icarus"]),
 ])
 def test_foreign_file_is_refused_before_the_fit(capsys, monkeypatch, tmp_path, name, options):
-    monkeypatch.setattr(build_mod, "fit_robot", _no_fit)
+    monkeypatch.setattr(steps_mod, "fit_robot", _no_fit)
     out = tmp_path / "out"
     out.mkdir()
     (out / name).write_text("the user's own file")
@@ -66,7 +66,7 @@ def test_foreign_sim_models_directory_is_refused(monkeypatch, tmp_path, small_ro
     robot = with_hardware(small_robot, architecture="modulo", dsp="ecp5", dsp_primitives=True)
     assert "sim_models" in planned_outputs(robot, vcd=False, cocotb=[])
     assert "sim_models" not in planned_outputs(small_robot, vcd=False, cocotb=[])
-    monkeypatch.setattr(build_mod, "fit_robot", _no_fit)
+    monkeypatch.setattr(steps_mod, "fit_robot", _no_fit)
     (tmp_path / "sim_models").mkdir()
     (tmp_path / "sim_models" / "mine.v").write_text("module mine; endmodule\n")
     with pytest.raises(BuildError, match=r"holds sim_models, not written by an ikseries build"):
@@ -75,7 +75,7 @@ def test_foreign_sim_models_directory_is_refused(monkeypatch, tmp_path, small_ro
 
 
 def test_corrupt_build_record_is_refused(capsys, monkeypatch, tmp_path):
-    monkeypatch.setattr(build_mod, "fit_robot", _no_fit)
+    monkeypatch.setattr(steps_mod, "fit_robot", _no_fit)
     (tmp_path / RECORD_NAME).write_text('{"format": "ikseries-build-files", "files": ["../etc"]}')
     code, _, err = run(capsys, "build", "-q", "--no-synth", "--cocotb", "none", "-o", str(tmp_path))
     assert code == 1 and err.startswith(f"ikseries: error: {tmp_path / RECORD_NAME} must be an ikseries build "
@@ -117,18 +117,18 @@ def test_rebuild_replaces_only_what_a_build_wrote(fast_fit, monkeypatch, tmp_pat
 _INTERRUPTED = """
 import sys, time
 from pathlib import Path
-import ikseries.build as b
+import ikseries.steps as steps
 from ikseries.cli import main
 from ikseries.fit.plan import Plan
 import json
 plan = Plan.from_json(json.loads(Path(sys.argv[1]).read_text()))
-b.fit_robot = lambda robot, progress: (plan, None)
+steps.fit_robot = lambda robot, progress: (plan, None)
 
 def slow_simulation(core, plan, progress, vcd=None):
     Path(vcd).write_text("partial waveform")      # a half-written output in the temporary directory
     print("simulating", flush=True)
     time.sleep(60)
-b._simulate = slow_simulation
+steps.simulate = slow_simulation
 sys.exit(main(["build", sys.argv[2], "-q", "--no-synth", "--vcd", "--cocotb", "none", "-o", sys.argv[3]]))
 """
 

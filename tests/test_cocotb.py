@@ -185,13 +185,13 @@ def test_cocotb_bench_detects_wrong_modulo_timing(wrong, small_plan, small_plan_
 
 def test_build_notes_simulators_auto_skipped(monkeypatch, tmp_path):
     """The note mechanism remains for a real reason: "auto" skips a missing simulator and says so."""
-    from ikseries import build as build_mod
+    from ikseries import steps
     from ikseries.sim import runner
     monkeypatch.setattr(runner, "simulator_available", lambda s: (False, f"no {s} here"))
     msgs = []
-    res, note = build_mod._cocotb(tmp_path / "plan.json", PWM_PERIOD, "auto", tmp_path, tmp_path, msgs.append)
-    assert res == {}
-    assert note == "cocotb skipped on icarus (no icarus here), verilator (no verilator here)"
+    res = steps.cocotb(tmp_path / "plan.json", PWM_PERIOD, "auto", tmp_path, tmp_path, msgs.append)
+    assert res.runs == () and res.record() == {}
+    assert res.note == "cocotb skipped on icarus (no icarus here), verilator (no verilator here)"
     assert msgs == ["cocotb on icarus: skipped (no icarus here)", "cocotb on verilator: skipped (no verilator here)"]
 
 

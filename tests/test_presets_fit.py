@@ -42,5 +42,5 @@ def test_planar_arm_builds_end_to_end(tmp_path):
     """The whole `ikseries build` pipeline on a 2-input, 2-servo robot (no synthesis/cocotb)."""
     robot = load_preset("planar-arm")
     rep = build(robot, tmp_path / "arm", synth=False, cocotb=[], progress=lambda m: None)
-    assert all(s["error_pu"]["total"] <= robot.tolerance_pu for s in rep["servos"])
+    assert all(s["error_pu"]["total"] <= robot.tolerance_pu for s in rep.record()["servos"])
     assert (tmp_path / "arm" / "planar_arm_core.v").read_text().count("pwm_s") >= 2
