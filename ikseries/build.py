@@ -161,7 +161,7 @@ def planned_outputs(robot, *, vcd: bool, cocotb) -> set[str]:
     if vcd:
         out.add("sim.vcd")
     out |= {f"cocotb_{s}.log" for s in (SIMULATORS if cocotb == "auto" else cocotb)}
-    if robot.dsp_primitives:          # the only builds that instantiate vendor primitives
+    if robot.hardware.dsp_primitives:          # the only builds that instantiate vendor primitives
         out.add("sim_models")
     return out
 
@@ -209,7 +209,7 @@ def _install(tmp: Path, out_dir: Path) -> list[str]:
 def _fit_and_measure(robot, progress, times: dict):
     """(plan, fits, accuracy) of ``robot``, refused unless the sampled error meets the tolerance."""
     t0 = time.perf_counter()
-    progress(f"fitting {robot.name} (tolerance ±{robot.tolerance_pu:g} pu)")
+    progress(f"fitting {robot.name} (tolerance ±{robot.fit.tolerance_pu:g} pu)")
     try:
         plan, fits = fit_robot(robot, progress)
     except FitError as e:
@@ -226,9 +226,9 @@ def _fit_and_measure(robot, progress, times: dict):
                                               for s, w in acc["servos"].items()}}
     worst = max(acc["servos"].items(), key=lambda kv: kv[1]["total"])
     progress(f"accuracy on {acc['points']} points: worst {worst[0]} {worst[1]['total']:.3f} pu")
-    if worst[1]["total"] > robot.tolerance_pu:
+    if worst[1]["total"] > robot.fit.tolerance_pu:
         raise BuildError(f"servo {worst[0]} misses the tolerance: {worst[1]['total']:.4f} pu > "
-                         f"{robot.tolerance_pu:g} pu at {worst[1]['at']}")
+                         f"{robot.fit.tolerance_pu:g} pu at {worst[1]['at']}")
     return plan, fits, acc
 
 
@@ -296,7 +296,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
             (tmp / "sim_models").mkdir(exist_ok=True)
             shutil.copyfile(model, tmp / "sim_models" / model.name)
         family = getattr(core, "dsp_registers", None)   # the family of those primitives, if any
-        (tmp / f"{name}.sdc").write_text(clock_sdc(name, robot.clock_hz))
+        (tmp / f"{name}.sdc").write_text(clock_sdc(name, robot.hardware.clock_hz))
         resources = None
         if synth:
             from .constraints.devices import FAMILIES
@@ -314,7 +314,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         cocotb_res, cocotb_note = {}, None
         if cocotb:
             t0 = time.perf_counter()
-            cocotb_res, cocotb_note = _cocotb(tmp / "plan.json", robot.pwm_period_ticks, cocotb,
+            cocotb_res, cocotb_note = _cocotb(tmp / "plan.json", robot.hardware.pwm_period_ticks, cocotb,
                                               tmp / "cocotb", tmp, progress, core, manifest_file=tmp / "manifest.json")
             times["cocotb_s"] = round(time.perf_counter() - t0, 1)
             shutil.rmtree(tmp / "cocotb", ignore_errors=True)
@@ -350,8 +350,8 @@ def make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, t
     report = {
         "robot": robot.name,
         "ikseries_version": plan.meta.get("ikseries_version"),
-        "tolerance_pu": robot.tolerance_pu,
-        "clock_hz": robot.clock_hz,
+        "tolerance_pu": robot.fit.tolerance_pu,
+        "clock_hz": robot.hardware.clock_hz,
         "ticks_per_pu": robot.ticks_per_pu,
         "verilog": vfile,
         "module": man["module"],
@@ -366,7 +366,7 @@ def make_report(robot, plan, fits, acc, sim, cocotb_res, emap, man, resources, t
         "initiation_interval": man["initiation_interval"],
         "legs": man["legs"],
         "refresh_hz": man["refresh_hz"],
-        "min_refresh_hz": robot.min_refresh_hz,
+        "min_refresh_hz": robot.hardware.min_refresh_hz,
         "architecture": man["architecture"],
         "throughput_targets_per_s": man["throughput"]["targets_per_second_at_clock"],
         "simulation": sim,
