@@ -184,8 +184,9 @@ def hexapod_spec(clock_hz_for_refresh=None) -> DesignSpec:
                      "hexapod_core"),
         lambda dev: core.latency, lambda dev: core.initiation_interval,
         max(e["total"] for e in m["servos"].values()), devices=(ICE40,),
-        extra={"legs": core.legs, "servos": core.legs * len(core.servos), "robot_clock_mhz": robot.hardware.clock_hz / 1e6,
-               "multipliers": choice.candidate.multipliers, "architecture_reason": choice.reason,
+        extra={"legs": core.legs, "servos": core.legs * len(core.servos),
+               "robot_clock_mhz": robot.hardware.clock_hz / 1e6, "multipliers": choice.candidate.multipliers,
+               "architecture_reason": choice.reason,
                "max_error_pu_per_servo": {s: e["total"] for s, e in m["servos"].items()},
                "certified_pu": _certified(cert)})
 

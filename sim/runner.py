@@ -32,7 +32,8 @@ from pathlib import Path
 from ..constraints.devices import PRIMITIVES
 from .cocotb_leg.config import CLOCK_NS, ENV_CONFIG, RunConfig
 
-__all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_CONFIG", "VERILATOR_OPT", "BenchClock", "BenchRobot", "default_n_random",
+__all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_CONFIG", "VERILATOR_OPT", "BenchClock", "BenchRobot",
+           "default_n_random",
            "Result", "simulator_available", "verilator_bin_dir", "verilator_path", "verilator_make_fixes",
            "export", "bench_manifest", "run"]
 

@@ -35,12 +35,14 @@ def auto_robot(small_robot):
 
 def test_defaults_and_hexapod_preset():
     r = parse_robot(base())
-    assert (r.legs, r.hardware.architecture, r.hardware.multipliers, r.hardware.dsp, r.hardware.min_refresh_hz) == (1, "pipelined", 1, "ice40", 1000.0)
+    hw = r.hardware
+    assert (r.legs, hw.architecture, hw.multipliers, hw.dsp, hw.min_refresh_hz) == (1, "pipelined", 1, "ice40", 1000.0)
     assert parse_robot(base(legs=2)).hardware.architecture == "auto"
     h = load_preset("hexapod")
-    assert (h.legs, h.hardware.architecture, h.hardware.dsp, h.hardware.min_refresh_hz, h.ticks_per_pu) == (6, "auto", "ice40", 1000.0, 12.0)
+    hw = h.hardware
+    assert (h.legs, hw.architecture, hw.dsp, hw.min_refresh_hz, h.ticks_per_pu) == (6, "auto", "ice40", 1000.0, 12.0)
     leg = load_preset("hexapod-leg")
-    assert (h.geometry, h.workspace.inputs, h.joint_calibration) == (leg.geometry, leg.workspace.inputs, leg.joint_calibration)
+    assert (h.geometry, h.workspace, h.calibration) == (leg.geometry, leg.workspace, leg.calibration)
 
 
 @pytest.mark.parametrize("top, hw, message", [
@@ -96,7 +98,8 @@ def test_record_round_trip_and_old_records_load():
     d = base(legs=3)
     d["hardware"].update(architecture="folded", multipliers=2, dsp="xc7", min_refresh_hz=250)
     r = parse_robot(d)
-    assert (r.legs, r.hardware.architecture, r.hardware.multipliers, r.hardware.dsp, r.hardware.min_refresh_hz) == (3, "folded", 2, "xc7", 250.0)
+    hw = r.hardware
+    assert (r.legs, hw.architecture, hw.multipliers, hw.dsp, hw.min_refresh_hz) == (3, "folded", 2, "xc7", 250.0)
     assert robot_from_record(robot_record(r)) == r
     old = flat_record(robot_record(r))
     for k in ("legs", "architecture", "multipliers", "dsp", "min_refresh_hz"):
@@ -193,13 +196,15 @@ def test_explicit_and_shared_configurations(auto_robot, small_plan):
     c = choose_architecture(six, small_plan)
     assert isinstance(c.core, RobotCore) and c.candidate.name == "shared" and c.core.legs == 6
     assert c.refresh_hz == c.core.refresh_hz == six.hardware.clock_hz / (6 * c.core.initiation_interval)
-    c = choose_architecture(dataclasses.replace(six, hardware=dataclasses.replace(six.hardware, architecture="folded", multipliers=2)), small_plan)
+    c = choose_architecture(dataclasses.replace(six, hardware=dataclasses.replace(six.hardware, architecture="folded",
+                                                                                  multipliers=2)), small_plan)
     assert c.candidate.multipliers == 2 and c.core.evaluator.multipliers == 2
 
 
 def test_unreachable_rate_for_several_legs_names_the_best(auto_robot, small_plan):
     six = dataclasses.replace(auto_robot, legs=6, hardware=dataclasses.replace(auto_robot.hardware, min_refresh_hz=1e7))
-    best = max((RobotCore(small_plan, 6, six.hardware.pwm_period_ticks, six.hardware.clock_hz, multipliers=k, dsp=(16, 16))
+    best = max((RobotCore(small_plan, 6, six.hardware.pwm_period_ticks, six.hardware.clock_hz, multipliers=k,
+                          dsp=(16, 16))
                 for k in (1, 2)), key=lambda core: core.refresh_hz)
     with pytest.raises(ArchitectureError) as e:
         choose_architecture(six, small_plan)
@@ -213,7 +218,8 @@ def test_unreachable_rate_for_several_legs_names_the_best(auto_robot, small_plan
 
 def test_flat_robot_top_ports_match_the_manifest(auto_robot, small_plan):
     robot = dataclasses.replace(auto_robot, legs=6)
-    core = RobotCore(small_plan, 6, robot.hardware.pwm_period_ticks, robot.hardware.clock_hz, multipliers=1, dsp=(16, 16))
+    core = RobotCore(small_plan, 6, robot.hardware.pwm_period_ticks, robot.hardware.clock_hz, multipliers=1,
+                     dsp=(16, 16))
     v = robot_verilog(core, "hexa_core")
     top = re.search(r"^module hexa_core\(.*?^endmodule", v, re.M | re.S).group(0)
     ports = {name: int(w) + 1 if w else 1 for w, name in

@@ -117,7 +117,8 @@ def test_preset_box_has_no_wrap_and_pulses_within_limits(arm_robot):
     for a in arm_robot.geometry.ik(*g):
         assert np.max(np.abs(np.diff(a, axis=0))) < 1 and np.max(np.abs(np.diff(a, axis=1))) < 1
         assert 0 < a.min() and a.max() < 360
-    lo, hi = arm_robot.calibration.pulse_min_us / arm_robot.calibration.pulse_unit_us, arm_robot.calibration.pulse_max_us / arm_robot.calibration.pulse_unit_us
+    cal = arm_robot.calibration
+    lo, hi = cal.pulse_min_us / cal.pulse_unit_us, cal.pulse_max_us / cal.pulse_unit_us
     for p in arm_robot.pulses_pu(*g):
         assert lo < p.min() and p.max() < hi
     # and the pure formula is the checked IK over the box (no wrap to undo)

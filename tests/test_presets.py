@@ -57,7 +57,8 @@ def test_preset_loads_with_its_documented_parameters(robot):
     assert g.coordinates == "cartesian"
     assert robot.servos == ("s1", "s2", "s3") and len(g.servo_names) == 3
     assert [i.name for i in robot.workspace.inputs] == list(g.inputs) and all(u == "mm" for u in g.input_units)
-    assert (robot.calibration.pulse_unit_us, robot.calibration.neutral_pulse_pu, robot.calibration.pu_per_degree, robot.fit.tolerance_pu) == (0.5, 3000, 20, 0.5)
+    cal = robot.calibration
+    assert (cal.pulse_unit_us, cal.neutral_pulse_pu, cal.pu_per_degree, robot.fit.tolerance_pu) == (0.5, 3000, 20, 0.5)
     if robot.name == "hexapod-leg":
         assert (g.coxa, g.femur, g.tibia, g.body_height) == (15, 80, 130, 78)
         assert (robot.calibration.pulse_min_us, robot.calibration.pulse_max_us) == (600, 2400)
@@ -109,7 +110,8 @@ def test_neutral_pose_gives_the_neutral_pulse(robot):
     pose = [robot.calibration.neutral_pose[i.name] for i in robot.workspace.inputs]
     np.testing.assert_allclose(robot.pulses_pu(*pose), robot.calibration.neutral_pulse_pu, rtol=0, atol=1e-9)
     moved = dict(robot.calibration.neutral_pose, y=robot.calibration.neutral_pose["y"] + 10.0)
-    assert not np.allclose(robot.pulses_pu(*(moved[i.name] for i in robot.workspace.inputs)), robot.calibration.neutral_pulse_pu)
+    assert not np.allclose(robot.pulses_pu(*(moved[i.name] for i in robot.workspace.inputs)),
+                           robot.calibration.neutral_pulse_pu)
 
 
 # -- unreachable targets -------------------------------------------------------------

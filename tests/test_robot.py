@@ -224,7 +224,7 @@ def test_presets_are_proven_reachable_in_few_cells():
     from ikseries.robot import load_preset
     for name in preset_names():
         r = load_preset(name)
-        cells = prove_box_reachable(r.geometry, [i.min for i in r.workspace.inputs], [i.max for i in r.workspace.inputs])
+        cells = prove_box_reachable(r.geometry, r.workspace.lows, r.workspace.highs)
         assert cells <= 1000, name
 
 
