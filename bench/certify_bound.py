@@ -67,14 +67,14 @@ def main(argv=None):
         rows.append({"servo": s.name, "sampled_approximation_pu": m["approximation"],
                      "sampled_total_pu": m["total"], "certified": {**s.__dict__, "total_pu": s.total_pu}})
     try:
-        cert.check(robot.tolerance_pu)
-        verdict = f"certified within the tolerance {robot.tolerance_pu:g} pu"
+        cert.check(robot.fit.tolerance_pu)
+        verdict = f"certified within the tolerance {robot.fit.tolerance_pu:g} pu"
     except CertificationError as e:
         verdict = f"NOT certified: {e}"
     print(verdict)
     out = {"preset": args.preset, "nodes": len(plan.nodes), "points_sampled": sampled["points"],
            "seconds_sampled": t_sampled, "seconds_certify": t_cert, "max_cells": args.max_cells,
-           "tolerance_pu": robot.tolerance_pu, "verdict": verdict, "servos": rows,
+           "tolerance_pu": robot.fit.tolerance_pu, "verdict": verdict, "servos": rows,
            "certificate": cert.to_json()}
     FACTS["write_result"](args.json, out, run)
     print(f"wrote {args.json}")

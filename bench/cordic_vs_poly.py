@@ -200,7 +200,7 @@ def main(argv=None):
             continue
         say(f"== {step.__name__}")
         step(ctx)
-    result = {"robot": robot.name, "tolerance_pu": robot.tolerance_pu,
+    result = {"robot": robot.name, "tolerance_pu": robot.fit.tolerance_pu,
               "points": len(next(iter(ctx["points"].values()))),
               "designs": {n: d["record"] for n, d in ctx["designs"].items()},
               "notes": ctx["notes"], "seconds": round(time.perf_counter() - t0, 1)}

@@ -44,8 +44,8 @@ def main(argv=None):
     if not isinstance(robot.geometry, PlanarArm):
         sys.exit(f"--preset must name a planar-arm robot, not {args.preset!r}")
     t0 = time.perf_counter()
-    result = run_divided_differences(robot.geometry, pu_per_degree=robot.pu_per_degree,
-                                     tolerance_pu=robot.tolerance_pu, samples=args.samples, grid=args.grid)
+    result = run_divided_differences(robot.geometry, pu_per_degree=robot.calibration.pu_per_degree,
+                                     tolerance_pu=robot.fit.tolerance_pu, samples=args.samples, grid=args.grid)
     result["seconds"] = time.perf_counter() - t0
     result["preset"] = args.preset
     print(render_markdown(result))

@@ -69,7 +69,7 @@ def main(argv=None):
             print(f"  {n:,} points, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
     secs = time.perf_counter() - t0
     out = {"robot": robot.name, "points": n, "stride": args.stride, "seconds": round(secs, 1),
-           "tolerance_pu": robot.tolerance_pu,
+           "tolerance_pu": robot.fit.tolerance_pu,
            "servos": {s: {**total[s], "worst_at": worst_at.get(s)} for s in total}}
     print(f"{robot.name}: {n:,} points (stride {args.stride}) in {secs:.0f} s")
     print(f"{'servo':6} {'approx':>8} {'quant':>8} {'round':>8} {'total':>8}  worst at")
@@ -78,7 +78,7 @@ def main(argv=None):
               f"{e['total']:8.4f}  {e['worst_at']}")
     dest = FACTS["write_result"](args.json, out, run)
     print(f"wrote {dest}")
-    return 0 if all(e["total"] <= robot.tolerance_pu for e in total.values()) else 1
+    return 0 if all(e["total"] <= robot.fit.tolerance_pu for e in total.values()) else 1
 
 
 if __name__ == "__main__":

@@ -49,7 +49,7 @@ def bench_preset(name: str) -> dict:
                        "coefficient_bits": coef_bits, "coefficient_frac_bits": sf.frac,
                        "sampled_max_pu": acc["servos"][sf.name]["total"],
                        "certified_max_pu": cs["total_pu"], "certified": cs["converged"]})
-    return {"preset": name, "tolerance_pu": robot.tolerance_pu, "fit_s": fit_s, "fit_cpu_s": fit_cpu,
+    return {"preset": name, "tolerance_pu": robot.fit.tolerance_pu, "fit_s": fit_s, "fit_cpu_s": fit_cpu,
             "points": acc["points"], "plan_multipliers": plan.count("mul"),
             "servos": servos}
 

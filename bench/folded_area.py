@@ -74,7 +74,7 @@ def main(argv=None):
     plan = fit_robot(robot)[0]
     print(f"plan: {len(plan.nodes)} nodes, {plan.count('mul')} mul, widest node "
           f"{max(n.width for n in plan.nodes)} bits (fit {time.time() - t0:.0f} s)")
-    period = robot.pwm_period_ticks
+    period = robot.hardware.pwm_period_ticks
     designs = {}
     for target in ("ice40", "ecp5"):
         for k in args.ks:

@@ -106,7 +106,7 @@ def main(argv=None):
           f"{plan.count('mul')} multipliers")
     t0 = time.perf_counter()
     res = measure(robot, plan, fits, [None, *args.extra], args.guard)
-    fitted = "horner" if robot.lowering == "horner" else f"mix+{MIX_EXTRA_MULTIPLIERS}"
+    fitted = "horner" if robot.fit.lowering == "horner" else f"mix+{MIX_EXTRA_MULTIPLIERS}"
     if fitted in res and (res[fitted]["latency"], res[fitted]["multipliers"]) != (plan.depth, plan.count("mul")):
         raise SystemExit(f"the {fitted} rebuild does not reproduce the fitted plan")
     print(table(res))

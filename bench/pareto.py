@@ -184,8 +184,9 @@ def hexapod_spec(clock_hz_for_refresh=None) -> DesignSpec:
                      "hexapod_core"),
         lambda dev: core.latency, lambda dev: core.initiation_interval,
         max(e["total"] for e in m["servos"].values()), devices=(ICE40,),
-        extra={"legs": core.legs, "servos": core.legs * len(core.servos), "robot_clock_mhz": robot.clock_hz / 1e6,
-               "multipliers": choice.candidate.multipliers, "architecture_reason": choice.reason,
+        extra={"legs": core.legs, "servos": core.legs * len(core.servos),
+               "robot_clock_mhz": robot.hardware.clock_hz / 1e6, "multipliers": choice.candidate.multipliers,
+               "architecture_reason": choice.reason,
                "max_error_pu_per_servo": {s: e["total"] for s, e in m["servos"].items()},
                "certified_pu": _certified(cert)})
 
@@ -381,10 +382,10 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
     from ikseries.fit.baselines.cordic import CordicDesign
     from ikseries.fit.baselines.cordic_sizing import measure_cordic, size_cordic
     from ikseries.fit.fitter import fit_robot
-    from ikseries.robot import load_preset, with_hardware
+    from ikseries.robot import load_preset, with_fit, with_hardware
 
     robot = load_preset("cylinder-leg")
-    info = {"robot": robot.name, "tolerance_pu": robot.tolerance_pu}
+    info = {"robot": robot.name, "tolerance_pu": robot.fit.tolerance_pu}
     specs: list[DesignSpec] = []
     points = None
 
@@ -407,7 +408,7 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
         specs += polynomial_specs(plan, worst, poly_names, extra)
     dsp_names = [d for d in designs if d in DSP_DESIGNS]
     if dsp_names:
-        plan, worst, extra = fitted(with_hardware(robot, products="dsp", dsp="ecp5"), "DSP-sized plan",
+        plan, worst, extra = fitted(with_fit(with_hardware(robot, dsp="ecp5"), products="dsp"), "DSP-sized plan",
                                     products="dsp ({}x{})".format(*dsp_size("ecp5")))
         specs += dsp_specs(plan, worst, dsp_names, extra)
     cordic_names = [d for d in designs if d in CORDIC_DESIGNS]

@@ -61,7 +61,7 @@ def _load(args) -> tuple[Plan, str, str, int, int, str]:
         from ikseries.robot import load_preset
         robot = load_preset(args.preset)
         plan = fit_robot(robot)[0]
-        core = LegCore(plan, robot.pwm_period_ticks)
+        core = LegCore(plan, robot.hardware.pwm_period_ticks)
         return plan, leg_verilog(core, TOP), TOP, core.latency, 1, f"fitted preset {args.preset}"
     bdir = Path(args.build_dir)
     if not (bdir / "manifest.json").is_file() or not (bdir / "plan.json").is_file():

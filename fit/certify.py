@@ -155,8 +155,8 @@ def _plan_function(plan: Plan, node: int):
 # -- the reference --------------------------------------------------------------------------------
 def _reference_function(robot, servo: int, ticks_per_pu: float):
     """``values -> Interval`` of the reference pulse width of ``servo`` in ticks."""
-    cal = robot.calibration
-    names = [i.name for i in robot.inputs]
+    cal = robot.joint_calibration
+    names = [i.name for i in robot.workspace.inputs]
     slope = cal.directions[servo] * cal.pu_per_degree
     neutral = cal.neutral_angles[servo]
 
@@ -417,7 +417,7 @@ def _error_function(plan: Plan, robot, k: int):
 
 
 def _box(robot, plan: Plan) -> tuple[list[str], np.ndarray, np.ndarray]:
-    names = [i.name for i in robot.inputs]
+    names = [i.name for i in robot.workspace.inputs]
     if sorted(names) != sorted(i.name for i in plan.inputs):
         raise ValueError(f"plan inputs must be the robot's inputs {names}, "
                          f"not {[i.name for i in plan.inputs]}")
@@ -469,7 +469,7 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
         tpp = o.ticks_per_pu
         out_round, clamp_rng = output_rounding(plan, k)
         rounding_pu, out_pu = quant[o.preround] / tpp, out_round / tpp
-        target = robot.tolerance_pu - rounding_pu - out_pu if target_pu is None else float(target_pu)
+        target = robot.fit.tolerance_pu - rounding_pu - out_pu if target_pu is None else float(target_pu)
         err = _error_function(plan, robot, k)
         edges, cut = _table_edges(plan, plan.cone(o.preround), names, box_lo, box_hi)
         best, sampled, cells, evaluated, (f_lo, f_hi) = _refine(

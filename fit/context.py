@@ -47,9 +47,9 @@ class Budget:
 def operand_bits(robot) -> tuple[int, int] | None:
     """The signed operand widths every plan multiplication must fit: those of the DSP block
     of ``hardware.dsp`` when ``fit.products = "dsp"``; else None (exact products)."""
-    if getattr(robot, "products", "exact") != "dsp" or robot.dsp not in FAMILIES:
+    if robot.fit.products != "dsp" or robot.hardware.dsp not in FAMILIES:
         return None
-    return FAMILIES[robot.dsp].dsp
+    return FAMILIES[robot.hardware.dsp].dsp
 
 
 @dataclass(frozen=True)
@@ -81,10 +81,10 @@ class FitContext:
     @classmethod
     def for_robot(cls, robot, quantization_share: float) -> "FitContext":
         """The context of ``robot`` with ``quantization_share`` of the tolerance for rounding."""
-        budget = Budget.split(robot.tolerance_pu, robot.ticks_per_pu, quantization_share)
-        mixed = getattr(robot, "lowering", "mixed") == "mixed"
+        budget = Budget.split(robot.fit.tolerance_pu, robot.ticks_per_pu, quantization_share)
+        mixed = robot.fit.lowering == "mixed"
         # cos/sin error e moves the tip by up to R_max * e; keep that to ~1 % of the budget
-        rmax = max(abs(robot.inputs[0].min), abs(robot.inputs[0].max))
+        rmax = max(abs(robot.workspace.inputs[0].min), abs(robot.workspace.inputs[0].max))
         stage = coordinate_stage(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)), table=mixed)
         return cls(robot, tuple(plan_inputs(robot)), stage, budget, operand_bits(robot), mixed)
 

@@ -199,7 +199,7 @@ class _Stage:
     def _rho2_normaliser(self, robot) -> Normaliser | None:
         if not self.has_plan_axes:
             return None
-        axes = [np.linspace(i.min, i.max, 65) for i in robot.inputs]
+        axes = [np.linspace(i.min, i.max, 65) for i in robot.workspace.inputs]
         grid = [g.ravel() for g in np.meshgrid(*axes, indexing="ij")]
         r2 = self.rho2(*grid)
         return Normaliser.for_range(float(r2.min()), float(r2.max()))
@@ -223,7 +223,7 @@ class CylindricalStage(_Stage):
 
     def __init__(self, robot, trig_tol: float, table: bool = False):
         g = robot.geometry
-        r, th, z = robot.inputs
+        r, th, z = robot.workspace.inputs
         self.geometry = g
         self.offset = g.neutral_distance
         self.trig = fit_trig(th.min, th.max, trig_tol)
@@ -321,8 +321,8 @@ class CartesianStage(_Stage):
 
     def __init__(self, robot):
         self.geometry = robot.geometry
-        self.names = tuple(i.name for i in robot.inputs)
-        self.norms = tuple(Normaliser.for_range(i.min, i.max, i.frac_bits) for i in robot.inputs)
+        self.names = tuple(i.name for i in robot.workspace.inputs)
+        self.norms = tuple(Normaliser.for_range(i.min, i.max, i.frac_bits) for i in robot.workspace.inputs)
         self.rho2_norm = self._rho2_normaliser(robot)
 
     def frame(self, *inputs):

@@ -50,8 +50,8 @@ def workspace_samples(robot, n_random: int, n_face: int, seed: int, edges: bool 
     """Random interior points, points on every face and (optionally) every edge of the
     workspace box (real values)."""
     rng = np.random.default_rng(seed)
-    lo = np.array([i.min for i in robot.inputs])
-    hi = np.array([i.max for i in robot.inputs])
+    lo = np.array([i.min for i in robot.workspace.inputs])
+    hi = np.array([i.max for i in robot.workspace.inputs])
     pts = [lo + (hi - lo) * rng.random((n_random, len(lo)))]
     for k in range(len(lo)):
         for v in (lo[k], hi[k]):
@@ -81,7 +81,7 @@ class _Samples:
         self.points = (workspace_samples(robot, *FIT_SAMPLES, FIT_SEED),
                        workspace_samples(robot, *CHECK_SAMPLES, FIT_SEED + 1, edges=True))
         self.targets = [robot.pulses_pu(*p) for p in self.points]
-        self.raw = {i.name: (self.points[0][k], self.points[1][k]) for k, i in enumerate(robot.inputs)}
+        self.raw = {i.name: (self.points[0][k], self.points[1][k]) for k, i in enumerate(robot.workspace.inputs)}
         self._feats: dict = {}
 
     def sets(self, k: int, candidates) -> dict:
@@ -114,7 +114,7 @@ def _plan_meta(ctx: FitContext, fits: list[ServoFit], fv: int, mults: dict) -> d
         "budget_pu": vars(ctx.budget),
         "method": {"fit": "Lawson near-minimax + exchange on a check set; per servo the variable set "
                           "and total degree with the fewest multipliers, then pruned",
-                   "lowering": getattr(robot, "lowering", "mixed"),
+                   "lowering": robot.fit.lowering,
                    "operand_bits": list(ctx.operand_bits) if ctx.operand_bits else None,
                    "seed": FIT_SEED, "fit_samples": FIT_SAMPLES, "check_samples": CHECK_SAMPLES,
                    "max_degree": MAX_DEGREE},
@@ -154,7 +154,7 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> Fi
             if bigger is None:
                 raise FormatError(f"{e} ({share:.0%} of the tolerance) with every product fitting "
                                   f"{bits[0]} x {bits[1]} DSP operands (fit.products = \"dsp\", hardware.dsp = "
-                                  f"{robot.dsp!r}); use fit.products = \"exact\", a wider DSP or a looser "
+                                  f"{robot.hardware.dsp!r}); use fit.products = \"exact\", a wider DSP or a looser "
                                   f"tolerance") from None
             progress(f"{e} with products fitting {bits} DSP operands: refitting with "
                      f"{bigger:.0%} of the tolerance for rounding")
@@ -203,7 +203,7 @@ def _fit_attempts(ctx: FitContext, progress, certified: bool) -> FitResult:
             return FitResult(plan, fits)
         cert = _certificate(ctx, plan, progress)
         failed = [k for k, c in enumerate(cert.servos)
-                  if not (c.converged and c.total_pu <= robot.tolerance_pu)]
+                  if not (c.converged and c.total_pu <= robot.fit.tolerance_pu)]
         if not failed:
             return FitResult(plan, fits)
         for k in failed:
@@ -212,7 +212,7 @@ def _fit_attempts(ctx: FitContext, progress, certified: bool) -> FitResult:
         progress(f"certified bound above the tolerance for {', '.join(robot.servos[k] for k in failed)}: "
                  "refitting with a 15 % tighter approximation budget")
     try:
-        cert.check(robot.tolerance_pu)
+        cert.check(robot.fit.tolerance_pu)
     except CertificationError as e:
         raise FitError(f"fit refused: {e}") from None
     raise FitError("fit refused: certification failed")  # check() raises whenever a servo failed

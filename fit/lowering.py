@@ -29,7 +29,7 @@ class FeatureNodes:
             else:
                 robot = self.ctx.robot
                 self._kinds[kind] = [nm.build(self.b, self.b.input_nodes[i.name], self.fv)
-                                     for nm, i in zip(input_norms(robot), robot.inputs)]
+                                     for nm, i in zip(input_norms(robot), robot.workspace.inputs)]
         return self._kinds[kind]
 
 

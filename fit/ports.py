@@ -10,7 +10,7 @@ def plan_inputs(robot) -> list[PlanInput]:
     """One :class:`PlanInput` per robot input: its fractional bits, in-range integer bounds and
     the narrowest port holding them."""
     out = []
-    for i in robot.inputs:
+    for i in robot.workspace.inputs:
         w, signed = bits_for(i.lo, i.hi)
         out.append(PlanInput(i.name, i.unit, i.frac_bits, i.lo, i.hi, w, signed))
     return out

@@ -145,8 +145,8 @@ def feature_sets(ctx, k: int) -> list[FeatureSet]:
     robot, stage = ctx.robot, ctx.stage
     rng = np.random.default_rng(FIT_SEED + k)
     n = 2000
-    pts = [i.min + (i.max - i.min) * rng.random(n) for i in robot.inputs]
-    cal = robot.calibration
+    pts = [i.min + (i.max - i.min) * rng.random(n) for i in robot.workspace.inputs]
+    cal = robot.joint_calibration
     fk = lambda *c: cal.pulses(stage.ik_frame(*c))[k]  # noqa: E731
     frame = list(stage.frame(*pts))
     cartesian = analyse(fk, frame, stage.norms, stage.names, "cartesian")
@@ -163,7 +163,7 @@ def feature_sets(ctx, k: int) -> list[FeatureSet]:
     out.append(cartesian)
     if stage.kind != "cartesian":
         fi = lambda *c: robot.pulses_pu(*c)[k]  # noqa: E731
-        out.append(analyse(fi, pts, input_norms(robot), [i.name for i in robot.inputs], "direct"))
+        out.append(analyse(fi, pts, input_norms(robot), [i.name for i in robot.workspace.inputs], "direct"))
     # the same variables with tensor-product terms (a per-variable degree) where that differs
     out += [dataclasses.replace(fs, tensor=True) for fs in list(out)
             if sum(a != "none" for a in fs.allowed) > 1]
@@ -172,7 +172,7 @@ def feature_sets(ctx, k: int) -> list[FeatureSet]:
 
 def input_norms(robot) -> list:
     """The normalisers of the robot's input ports (the "direct" variables)."""
-    return [Normaliser.for_range(i.min, i.max, i.frac_bits) for i in robot.inputs]
+    return [Normaliser.for_range(i.min, i.max, i.frac_bits) for i in robot.workspace.inputs]
 
 
 def feature_values(ctx, kind: str, pts) -> np.ndarray:

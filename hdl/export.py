@@ -139,7 +139,7 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
     ``architecture``: the record of the architecture choice
     (:meth:`ikseries.architecture.Choice.record`), stored as is.
     """
-    clk = robot.clock_hz
+    clk = robot.hardware.clock_hz
     ii = core.initiation_interval
     shared = isinstance(core, RobotCore)
     man = {

@@ -23,7 +23,7 @@ def verification_points(robot, n_points: int = 1_000_000, n_face: int = 10_000, 
     The grid has about ``grid_points`` points spread evenly over the axes (never finer than
     the port grid), e.g. 86 x 86 x 86 for a 3-input robot.
     """
-    specs = robot.inputs
+    specs = robot.workspace.inputs
     rng = np.random.default_rng(seed)
     every = int(np.prod([i.hi - i.lo + 1 for i in specs], dtype=np.float64)) <= n_points
     per_axis = max(2, round(grid_points ** (1 / len(specs))))
@@ -54,7 +54,7 @@ def measure(robot, plan, points: dict | None = None, chunk: int = 200_000) -> di
     keep = {o.node for o in plan.outputs} | {o.preround for o in plan.outputs}
     for start in range(0, n, chunk):
         ints = {k: v[start:start + chunk] for k, v in points.items()}
-        real = [ints[i.name] * 2.0 ** -i.frac_bits for i in robot.inputs]
+        real = [ints[i.name] * 2.0 ** -i.frac_bits for i in robot.workspace.inputs]
         ref = robot.pulses_pu(*real)
         iv = golden.evaluate(plan, ints, keep)
         fv = golden.evaluate_ideal(plan, ints, {o.preround for o in plan.outputs})
@@ -71,6 +71,6 @@ def measure(robot, plan, points: dict | None = None, chunk: int = 200_000) -> di
                 m = float(np.max(np.abs(e)))
                 if key == "total" and m > w["total"]:
                     j = int(np.argmax(np.abs(e)))
-                    w["at"] = {i.name: float(real[q][j]) for q, i in enumerate(robot.inputs)}
+                    w["at"] = {i.name: float(real[q][j]) for q, i in enumerate(robot.workspace.inputs)}
                 w[key] = max(w[key], m)
     return {"points": n, "servos": worst}

@@ -98,30 +98,30 @@ class Choice:
 
 def build_target(robot) -> BuildTarget:
     """What the robot's core drives: its PWM period at its clock."""
-    return BuildTarget(robot.pwm_period_ticks, robot.clock_hz)
+    return BuildTarget(robot.hardware.pwm_period_ticks, robot.hardware.clock_hz)
 
 
 def _configuration(arch: str, k, robot) -> Architecture:
     if robot.legs > 1:
-        return Shared(robot.legs, k, robot.dsp)
+        return Shared(robot.legs, k, robot.hardware.dsp)
     if arch == "modulo":
-        prim = bool(getattr(robot, "dsp_primitives", False)) and robot.dsp in primitive_families()
-        return Modulo(k, robot.dsp, primitives=prim)
+        prim = robot.hardware.dsp_primitives and robot.hardware.dsp in primitive_families()
+        return Modulo(k, robot.hardware.dsp, primitives=prim)
     if arch == "folded":
-        return Folded(k, robot.dsp)
+        return Folded(k, robot.hardware.dsp)
     return Pipelined()
 
 
 def candidates(robot) -> list[Architecture]:
     """The configurations the robot description allows, in the order they are tried."""
-    if robot.architecture == "auto":
+    if robot.hardware.architecture == "auto":
         order = AUTO_ORDER
-    elif robot.architecture == "fastest":
+    elif robot.hardware.architecture == "fastest":
         order = FASTEST_ORDER
-    elif robot.architecture == "folded":
-        order = (("folded", robot.multipliers),)
-    elif robot.architecture == "modulo":
-        order = (("modulo", robot.interval),)
+    elif robot.hardware.architecture == "folded":
+        order = (("folded", robot.hardware.multipliers),)
+    elif robot.hardware.architecture == "modulo":
+        order = (("modulo", robot.hardware.interval),)
     else:
         order = (("pipelined", None),)
     if robot.legs > 1:       # the legs share one folded evaluator
@@ -145,8 +145,8 @@ def _chosen(robot, plan, cand: Architecture, hz: float, reason: str, tried, fit_
 
 def choose_architecture(robot, plan, *, synth: SynthFunction | None = None,
                         progress: Callable[[str], None] | None = None) -> Choice:
-    """The first configuration of :func:`candidates` that meets ``robot.min_refresh_hz``
-    (for "fastest": the fastest of them whose Yosys counts fit ``robot.fit_device``).
+    """The first configuration of :func:`candidates` that meets ``robot.hardware.min_refresh_hz``
+    (for "fastest": the fastest of them whose Yosys counts fit ``robot.hardware.fit_device``).
 
     Rates come from each architecture's :meth:`~ikseries.hdl.architectures.Architecture.timing`
     (pure schedule data); only the chosen core (and, for "fastest", each one synthesised) is
@@ -155,36 +155,36 @@ def choose_architecture(robot, plan, *, synth: SynthFunction | None = None,
     Raises :class:`ArchitectureError` (one line, naming the best rate reached, or for
     "fastest" the smallest configuration synthesised and what overflowed) if none does.
     """
-    if robot.architecture == "fastest":
+    if robot.hardware.architecture == "fastest":
         return _choose_fastest(robot, plan, synth or synth_candidate, progress or (lambda msg: None))
     tried = []
     for cand in candidates(robot):
         t = cand.timing(plan)
-        hz = t.refresh_hz(robot.clock_hz)
+        hz = t.refresh_hz(robot.hardware.clock_hz)
         tried.append(Tried(cand, t.initiation_interval, hz))
-        if hz < robot.min_refresh_hz:
+        if hz < robot.hardware.min_refresh_hz:
             continue
-        if robot.architecture == "auto":
+        if robot.hardware.architecture == "auto":
             smaller = "; smaller ones: " + ", ".join(f"{t.candidate.describe()} {t.refresh_hz:,.0f} Hz"
                                                      for t in tried[:-1]) if len(tried) > 1 else ""
             reason = (f"auto: the smallest configuration that refreshes every leg at least "
-                      f"{robot.min_refresh_hz:g} times a second at {robot.clock_hz / 1e6:g} MHz "
+                      f"{robot.hardware.min_refresh_hz:g} times a second at {robot.hardware.clock_hz / 1e6:g} MHz "
                       f"({hz:,.0f} Hz, initiation interval {t.initiation_interval} cycles){smaller}")
         else:
-            reason = (f"hardware.architecture = {robot.architecture}: {hz:,.0f} Hz >= "
-                      f"min_refresh_hz {robot.min_refresh_hz:g} Hz")
+            reason = (f"hardware.architecture = {robot.hardware.architecture}: {hz:,.0f} Hz >= "
+                      f"min_refresh_hz {robot.hardware.min_refresh_hz:g} Hz")
         return _chosen(robot, plan, cand, hz, reason, tried)
     _rate_error(robot, max(tried, key=lambda t: t.refresh_hz))
 
 
 def _rate_error(robot, best: Tried):
-    what = ("the rate of hardware.architecture" if robot.architecture in ("pipelined", "folded", "modulo")
+    what = ("the rate of hardware.architecture" if robot.hardware.architecture in ("pipelined", "folded", "modulo")
             else "the best rate of any architecture")
     raise ArchitectureError(
         f"hardware.min_refresh_hz must be at most {best.refresh_hz:.6g} Hz, {what} for {robot.name} at "
-        f"{robot.clock_hz / 1e6:g} MHz with {robot.legs} leg{'s' if robot.legs != 1 else ''} "
+        f"{robot.hardware.clock_hz / 1e6:g} MHz with {robot.legs} leg{'s' if robot.legs != 1 else ''} "
         f"({best.candidate.describe()}, initiation interval {best.initiation_interval} cycles), "
-        f"not {robot.min_refresh_hz:g}")
+        f"not {robot.hardware.min_refresh_hz:g}")
 
 
 def synth_candidate(cand: Architecture, core, target: str) -> dict:
@@ -205,19 +205,19 @@ def _usage(counts: dict, cap: dict) -> str:
 
 
 def _choose_fastest(robot, plan, synth: SynthFunction, progress) -> Choice:
-    dev = device_part(robot.fit_device)
+    dev = device_part(robot.hardware.fit_device)
     target, part, cap = dev.family, dev.part, dev.capacities
     rated = []
     for cand in candidates(robot):
         t = cand.timing(plan)
-        rated.append((cand, t.initiation_interval, t.refresh_hz(robot.clock_hz)))
+        rated.append((cand, t.initiation_interval, t.refresh_hz(robot.hardware.clock_hz)))
     # fastest first; at equal rates the one with fewer multipliers (the pipelined one has none)
     rated.sort(key=lambda r: (-r[2], r[0].multipliers or 0))
     tried = []
     for cand, ii, hz in rated:
-        if hz < robot.min_refresh_hz:
+        if hz < robot.hardware.min_refresh_hz:
             tried.append(Tried(cand, ii, hz, rejected=f"{hz:,.0f} Hz < hardware.min_refresh_hz "
-                                                      f"{robot.min_refresh_hz:g} (not synthesised)"))
+                                                      f"{robot.hardware.min_refresh_hz:g} (not synthesised)"))
             continue
         progress(f"fastest on {part}: synthesising {cand.describe()} ({hz:,.0f} Hz)")
         core = cand.build(plan, build_target(robot))
@@ -232,7 +232,7 @@ def _choose_fastest(robot, plan, synth: SynthFunction, progress) -> Choice:
         tried.append(Tried(cand, ii, hz, counts))
         return _chosen(robot, plan, cand, hz, _fastest_reason(robot, part, cap, counts, ii, hz, tried,
                                                               rated[len(tried):]),
-                       tried, robot.fit_device, core)
+                       tried, robot.hardware.fit_device, core)
     _fastest_error(robot, dev, tried)
 
 
@@ -242,9 +242,9 @@ def _fastest_reason(robot, part, cap, counts, ii, hz, tried, rest) -> str:
     slower = "; slower ones, not tried: " + ", ".join(f"{c.describe()} {h:,.0f} Hz" for c, _, h in rest) \
         if rest else ""
     return (f"fastest: the fastest configuration whose Yosys cell counts fit {part} "
-            f"(hardware.fit_device = {robot.fit_device}; {_usage(counts, cap)}; an estimate before "
+            f"(hardware.fit_device = {robot.hardware.fit_device}; {_usage(counts, cap)}; an estimate before "
             f"place-and-route, which can still fail on a nearly full device), refreshing every leg "
-            f"{hz:,.0f} times a second at {robot.clock_hz / 1e6:g} MHz (initiation interval "
+            f"{hz:,.0f} times a second at {robot.hardware.clock_hz / 1e6:g} MHz (initiation interval "
             f"{ii} cycles){faster}{slower}")
 
 
@@ -256,8 +256,8 @@ def _fastest_error(robot, dev, tried):
     over = dev.overflows(smallest.counts)
     slower = [t for t in tried if t.counts is None]
     raise ArchitectureError(
-        f"hardware.fit_device = {robot.fit_device}: no configuration fits {dev.part} by Yosys cell counts "
+        f"hardware.fit_device = {robot.hardware.fit_device}: no configuration fits {dev.part} by Yosys cell counts "
         f"(before place-and-route); the smallest synthesised, {smallest.candidate.describe()} "
         f"({smallest.refresh_hz:,.0f} Hz), needs "
         + ", ".join(f"{k} {u:,} > {a:,}" for k, (u, a) in over.items())
-        + (f"; slower ones are below hardware.min_refresh_hz {robot.min_refresh_hz:g}" if slower else ""))
+        + (f"; slower ones are below hardware.min_refresh_hz {robot.hardware.min_refresh_hz:g}" if slower else ""))

@@ -40,7 +40,7 @@ def planned_outputs(robot, *, vcd: bool, cocotb) -> set[str]:
     if vcd:
         out.add("sim.vcd")
     out |= {f"cocotb_{s}.log" for s in (SIMULATORS if cocotb == "auto" else cocotb)}
-    if robot.dsp_primitives:          # the only builds that instantiate vendor primitives
+    if robot.hardware.dsp_primitives:          # the only builds that instantiate vendor primitives
         out.add("sim_models")
     return out
 
@@ -148,7 +148,7 @@ def _write_outputs(robot, fitted, core, tmp: Path, *, synth, vcd, cocotb, progre
     for model in primitive_models(core.verilog):   # vendor primitives: our simulation model
         (tmp / "sim_models").mkdir(exist_ok=True)
         shutil.copyfile(model, tmp / "sim_models" / model.name)
-    (tmp / f"{name}.sdc").write_text(clock_sdc(name, robot.clock_hz))
+    (tmp / f"{name}.sdc").write_text(clock_sdc(name, robot.hardware.clock_hz))
     synthesis = None
     if synth:
         family = getattr(component, "dsp_registers", None)   # the family of its primitives, if any
@@ -161,7 +161,7 @@ def _write_outputs(robot, fitted, core, tmp: Path, *, synth, vcd, cocotb, progre
     (tmp / "manifest.json").write_text(json.dumps(man, indent=1, sort_keys=True) + "\n")
     cocotb_runs = None
     if cocotb:
-        cocotb_runs = steps.cocotb(tmp / "plan.json", robot.pwm_period_ticks, cocotb, tmp / "cocotb", tmp,
+        cocotb_runs = steps.cocotb(tmp / "plan.json", robot.hardware.pwm_period_ticks, cocotb, tmp / "cocotb", tmp,
                                    progress, component, manifest_file=tmp / "manifest.json")
         shutil.rmtree(tmp / "cocotb", ignore_errors=True)
     report = BuildReport(robot, fitted, core, man, sim, synthesis, cocotb_runs, emap)

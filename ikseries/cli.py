@@ -58,7 +58,7 @@ def _hardware_overrides(robot, args):
     (validated). --fit-device also sets the DSP size to the device's family unless --dsp is given;
     --architecture other than fastest drops the description's hardware.fit_device."""
     from .constraints.devices import FIT_DEVICES
-    from .robot import ARCHITECTURES, DSP_CHOICES, PRODUCTS, check_architecture_options, with_hardware
+    from .robot import ARCHITECTURES, DSP_CHOICES, PRODUCTS, check_architecture_options, with_fit, with_hardware
     opts = {}
     if args.architecture is not None:
         if args.architecture not in ARCHITECTURES:
@@ -94,9 +94,10 @@ def _hardware_overrides(robot, args):
         given |= {"dsp_primitives", "dsp"}
     if given & {"architecture", "fit_device"}:   # either names the other in the error
         given |= {"architecture", "fit_device"}
+    fit = {k: opts.pop(k) for k in ("products",) if k in opts}
     new = with_hardware(robot, {k: v for k, v in labels.items() if k in given}, **opts) if opts else robot
     check_architecture_options(new, set(opts), labels)
-    return new
+    return with_fit(new, **fit) if fit else new
 
 
 def cmd_build(args):
@@ -113,7 +114,7 @@ def cmd_build(args):
             raise CliError(f"--cocotb must be auto, none or a list from {','.join(SIMULATORS)}, not {bad[0]!r}")
     rep = build(robot, out, synth=not args.no_synth, vcd=args.vcd, cocotb=sims, progress=_progress(args.quiet))
     choice = rep.core.choice
-    print(f"{robot.name}: max error {rep.worst_error_pu:.3f} pu (tolerance {robot.tolerance_pu:g}), "
+    print(f"{robot.name}: max error {rep.worst_error_pu:.3f} pu (tolerance {robot.fit.tolerance_pu:g}), "
           f"latency {choice.core.latency} cycles, {choice.candidate.describe()}, "
           f"every leg refreshed {choice.refresh_hz:,.0f} times/s, output in {out}/")
 
@@ -137,12 +138,12 @@ def cmd_fit(args):
         raise CliError(str(e)) from None
     if args.method == "ikseries":
         worst = max(s["sampled_max_pu"] for s in rec["servos"])
-        print(f"{robot.name}: ikseries fit, max error {worst:.3f} pu (tolerance {robot.tolerance_pu:g}), "
+        print(f"{robot.name}: ikseries fit, max error {worst:.3f} pu (tolerance {robot.fit.tolerance_pu:g}), "
               f"output in {out}/")
     elif args.method == "paper":
         worst = {m: max(s["max_error_pu"] for s in f["servos"].values()) for m, f in rec["methods"].items()}
         print(f"{robot.name}: paper max error {worst['paper']:.3f} pu, ikseries {worst['ikseries']:.3f} pu "
-              f"(tolerance {robot.tolerance_pu:g}), output in {out}/")
+              f"(tolerance {robot.fit.tolerance_pu:g}), output in {out}/")
     else:
         print(f"{robot.name}: divided differences on {len(rec['cases'])} paths, output in {out}/")
 
@@ -154,23 +155,23 @@ def cmd_eval(args):
     from .sim import golden
     robot = _robot(args)
     vals = args.values
-    if len(vals) != len(robot.inputs):
-        names = ", ".join(i.name for i in robot.inputs)
-        raise CliError(f"eval needs {len(robot.inputs)} values ({names}) for {robot.name}, not {len(vals)}")
-    for v, spec in zip(vals, robot.inputs):
+    if len(vals) != len(robot.workspace.inputs):
+        names = ", ".join(i.name for i in robot.workspace.inputs)
+        raise CliError(f"eval needs {len(robot.workspace.inputs)} values ({names}) for {robot.name}, not {len(vals)}")
+    for v, spec in zip(vals, robot.workspace.inputs):
         if not np.isfinite(v) or not spec.min <= v <= spec.max:
             raise CliError(f"{spec.name} must be within [{spec.min:g}, {spec.max:g}] {spec.unit}, not {v:g}")
     plan, which = _eval_plan(robot, args, _progress(args.quiet))
-    ints = golden.quantize_inputs(plan, dict(zip([i.name for i in robot.inputs], [[v] for v in vals])))
-    q = [float(ints[i.name][0]) * 2.0 ** -i.frac_bits for i in robot.inputs]
+    ints = golden.quantize_inputs(plan, dict(zip([i.name for i in robot.workspace.inputs], [[v] for v in vals])))
+    q = [float(ints[i.name][0]) * 2.0 ** -i.frac_bits for i in robot.workspace.inputs]
     try:
         ref_q = robot.pulses_pu(*q)   # the reference at the input the hardware sees
     except UnreachableError as e:
         raise CliError(str(e)) from None
     outs = golden.outputs(plan, ints)
     print(which)
-    print("input (port integers): " + ", ".join(f"{i.name}={int(ints[i.name][0])}" for i in robot.inputs)
-          + "  = " + ", ".join(f"{i.name}={v:g} {i.unit}" for i, v in zip(robot.inputs, q)))
+    print("input (port integers): " + ", ".join(f"{i.name}={int(ints[i.name][0])}" for i in robot.workspace.inputs)
+          + "  = " + ", ".join(f"{i.name}={v:g} {i.unit}" for i, v in zip(robot.workspace.inputs, q)))
     print(f"{'servo':6} {'reference pu':>14} {'golden ticks':>13} {'golden pu':>11} {'error pu':>9}")
     for k, o in enumerate(plan.outputs):
         pu = outs[o.name][0] / o.ticks_per_pu

@@ -51,9 +51,9 @@ def _ikseries(robot, progress) -> tuple[dict, dict]:
              "coefficient_frac_bits": sf.frac, "sampled_max_pu": acc["servos"][sf.name]["total"],
              "certified_rounding_pu": sf.bound_pu, "certified_total_pu": cert[sf.name]["total_pu"]}
             for sf in fits]
-    rec = {"robot": robot.name, "method": "ikseries", "tolerance_pu": robot.tolerance_pu,
+    rec = {"robot": robot.name, "method": "ikseries", "tolerance_pu": robot.fit.tolerance_pu,
            "points": acc["points"], "servos": rows}
-    md = [f"# {robot.name}: ikseries fit", "", f"Tolerance ±{robot.tolerance_pu:g} pu; sampled on "
+    md = [f"# {robot.name}: ikseries fit", "", f"Tolerance ±{robot.fit.tolerance_pu:g} pu; sampled on "
           f"{acc['points']:,} representable points.", "",
           "| servo | variables | degree | terms | multiplications | coefficient frac bits | "
           "sampled max (pu) | certified rounding (pu) | certified total (pu) |",
@@ -101,8 +101,8 @@ def _divided(robot, progress) -> tuple[dict, dict]:
         raise FitCommandError(f"--method divided-differences needs a planar-arm robot, not {robot.name!r} "
                               f"(geometry {type(robot.geometry).__name__})")
     progress("divided differences on the three tool paths")
-    res = run_divided_differences(robot.geometry, pu_per_degree=robot.pu_per_degree,
-                                  tolerance_pu=robot.tolerance_pu)
+    res = run_divided_differences(robot.geometry, pu_per_degree=robot.calibration.pu_per_degree,
+                                  tolerance_pu=robot.fit.tolerance_pu)
     return {"divided.json": _dump(res), "divided.md": render_markdown(res)}, res
 
 

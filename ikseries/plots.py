@@ -18,7 +18,7 @@ def error_map(robot, plan, path: Path, n_plot: int = 161, n_rest: int = 41) -> d
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    specs = list(robot.inputs)
+    specs = list(robot.workspace.inputs)
     counts = [(round(s.max - s.min) + 1 if s.unit == "deg" else n_plot) if k < 2 else n_rest
               for k, s in enumerate(specs)]
     axes = [np.unique(np.round(np.linspace(s.lo, s.hi, n)).astype(np.int64)) for s, n in zip(specs, counts)]
@@ -44,11 +44,11 @@ def error_map(robot, plan, path: Path, n_plot: int = 161, n_rest: int = 41) -> d
             err = err[:, None]
         maxima[o.name] = float(err.max())
         im = ax.imshow(err, origin="lower", aspect="auto", extent=extent, cmap="viridis",
-                       vmin=0, vmax=robot.tolerance_pu)
+                       vmin=0, vmax=robot.fit.tolerance_pu)
         ax.set_title(f"{o.name}: {'max over ' + rest + ' of ' if rest else ''}|error|, peak {err.max():.3f} pu")
         ax.set_xlabel(f"{xa.name} ({xa.unit})")
         ax.set_ylabel(f"{ya.name} ({ya.unit})")
-        fig.colorbar(im, ax=ax, label=f"pu (tolerance {robot.tolerance_pu:g})")
+        fig.colorbar(im, ax=ax, label=f"pu (tolerance {robot.fit.tolerance_pu:g})")
     fig.savefig(path, dpi=80, metadata={"Software": None})
     plt.close(fig)
     return {"file": Path(path).name, "grid": {s.name: len(a) for s, a in zip(specs, axes)}, "max_pu": maxima}

@@ -57,7 +57,7 @@ class Fitted:
 def fit(robot, progress) -> Fitted:
     """Fit ``robot`` and measure the plan; refused unless the sampled error meets the tolerance."""
     t0 = time.perf_counter()
-    progress(f"fitting {robot.name} (tolerance ±{robot.tolerance_pu:g} pu)")
+    progress(f"fitting {robot.name} (tolerance ±{robot.fit.tolerance_pu:g} pu)")
     try:
         plan, servos = fit_robot(robot, progress)
     except FitError as e:
@@ -74,9 +74,9 @@ def fit(robot, progress) -> Fitted:
                                               for s, w in acc["servos"].items()}}
     worst = max(acc["servos"].items(), key=lambda kv: kv[1]["total"])
     progress(f"accuracy on {acc['points']} points: worst {worst[0]} {worst[1]['total']:.3f} pu")
-    if worst[1]["total"] > robot.tolerance_pu:
+    if worst[1]["total"] > robot.fit.tolerance_pu:
         raise StepError(f"servo {worst[0]} misses the tolerance: {worst[1]['total']:.4f} pu > "
-                        f"{robot.tolerance_pu:g} pu at {worst[1]['at']}")
+                        f"{robot.fit.tolerance_pu:g} pu at {worst[1]['at']}")
     return Fitted(plan, tuple(servos or ()), acc, fit_s, accuracy_s)
 
 

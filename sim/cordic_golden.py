@@ -104,7 +104,7 @@ def errors_pu(robot, design, ints: dict, reference=None, chunk: int = 250_000) -
     ``reference`` (per-servo float pu arrays for ``ints``) may be passed to skip recomputing it.
     """
     if reference is None:
-        real = [np.asarray(ints[i.name]) * 2.0 ** -i.frac_bits for i in robot.inputs]
+        real = [np.asarray(ints[i.name]) * 2.0 ** -i.frac_bits for i in robot.workspace.inputs]
         reference = robot.pulses_pu(*real)
     out = outputs(robot, design, ints, chunk)
     tpp = robot.ticks_per_pu

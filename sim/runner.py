@@ -32,7 +32,8 @@ from pathlib import Path
 from ..constraints.devices import PRIMITIVES
 from .cocotb_leg.config import CLOCK_NS, ENV_CONFIG, RunConfig
 
-__all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_CONFIG", "VERILATOR_OPT", "BenchRobot", "default_n_random",
+__all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_CONFIG", "VERILATOR_OPT", "BenchClock", "BenchRobot",
+           "default_n_random",
            "Result", "simulator_available", "verilator_bin_dir", "verilator_path", "verilator_make_fixes",
            "export", "bench_manifest", "run"]
 
@@ -234,12 +235,18 @@ def _parse_results(xml: Path) -> dict:
 
 
 @dataclasses.dataclass(frozen=True)
+class BenchClock:
+    """The hardware options of a :class:`BenchRobot`: only the clock frequency."""
+    clock_hz: float
+
+
+@dataclasses.dataclass(frozen=True)
 class BenchRobot:
     """What :func:`ikseries.hdl.export.manifest` reads of a robot description, for a run without
     one: the name and the clock frequency (a leg core: the bench's clock, ``CLOCK_NS``; a robot
     core: its own ``clock_hz``, which sets its refresh rate)."""
     name: str
-    clock_hz: float
+    hardware: BenchClock
 
 
 def bench_manifest(plan, core, name: str) -> dict:
@@ -248,7 +255,7 @@ def bench_manifest(plan, core, name: str) -> dict:
     from ikseries.hdl.export import manifest
     from ikseries.hdl.shared import RobotCore
     clock = core.clock_hz if isinstance(core, RobotCore) else 1e9 / CLOCK_NS
-    return manifest(BenchRobot(name, clock), plan, core, name)
+    return manifest(BenchRobot(name, BenchClock(clock)), plan, core, name)
 
 
 def _read_manifest(path, period: int, name: str | None) -> dict:

@@ -58,7 +58,7 @@ def plan(fitted):
 @pytest.fixture(scope="session")
 def small_robot(robot):
     """The default leg at a loose tolerance (4 pu): a small plan for fast HDL tests."""
-    return dataclasses.replace(robot, name="cylinder-leg-small", tolerance_pu=4.0)
+    return dataclasses.replace(robot, name="cylinder-leg-small", fit=dataclasses.replace(robot.fit, tolerance_pu=4.0))
 
 
 @pytest.fixture(scope="session")

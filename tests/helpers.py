@@ -1,4 +1,4 @@
-"""Small hand-built plans for exhaustive tests."""
+"""Small hand-built plans for exhaustive tests, and robot records in the flat layout."""
 import numpy as np
 
 from ikseries.fit.horner import horner
@@ -121,3 +121,14 @@ def simulate_bit_exact(core, plan, targets, **kw):
     for s in exp:
         assert np.array_equal(res.outputs[s], exp[s]), s
     return res
+
+
+def flat_record(record: dict) -> dict:
+    """A :func:`ikseries.robot.robot_record` in the flat layout that plans were written with
+    before the description had parts: every field at the top level, the workspace as
+    ``inputs``."""
+    flat = {k: record[k] for k in ("name", "description", "legs", "geometry")}
+    flat["inputs"] = record["workspace"]["inputs"]
+    for part in ("calibration", "fit", "hardware"):
+        flat.update(record[part])
+    return flat

@@ -15,6 +15,7 @@ from ikseries.constraints.devices import dsp_size
 from ikseries.hdl.shared import RobotCore
 from ikseries.robot import (RobotError, load_preset, parse_robot, preset_text, robot_from_record, robot_record,
                             with_hardware)
+from helpers import flat_record
 from ikseries.sim import golden
 from ikseries.sim.amaranth_sim import simulate_leg
 from ikseries.sim.targets import corner_targets, random_targets
@@ -29,17 +30,19 @@ def base(**top):
 @pytest.fixture
 def auto_robot(small_robot):
     """The session's small leg with architecture auto (a single leg defaults to pipelined)."""
-    return dataclasses.replace(small_robot, architecture="auto")
+    return dataclasses.replace(small_robot, hardware=dataclasses.replace(small_robot.hardware, architecture="auto"))
 
 
 def test_defaults_and_hexapod_preset():
     r = parse_robot(base())
-    assert (r.legs, r.architecture, r.multipliers, r.dsp, r.min_refresh_hz) == (1, "pipelined", 1, "ice40", 1000.0)
-    assert parse_robot(base(legs=2)).architecture == "auto"
+    hw = r.hardware
+    assert (r.legs, hw.architecture, hw.multipliers, hw.dsp, hw.min_refresh_hz) == (1, "pipelined", 1, "ice40", 1000.0)
+    assert parse_robot(base(legs=2)).hardware.architecture == "auto"
     h = load_preset("hexapod")
-    assert (h.legs, h.architecture, h.dsp, h.min_refresh_hz, h.ticks_per_pu) == (6, "auto", "ice40", 1000.0, 12.0)
+    hw = h.hardware
+    assert (h.legs, hw.architecture, hw.dsp, hw.min_refresh_hz, h.ticks_per_pu) == (6, "auto", "ice40", 1000.0, 12.0)
     leg = load_preset("hexapod-leg")
-    assert (h.geometry, h.inputs, h.calibration) == (leg.geometry, leg.inputs, leg.calibration)
+    assert (h.geometry, h.workspace, h.calibration) == (leg.geometry, leg.workspace, leg.calibration)
 
 
 @pytest.mark.parametrize("top, hw, message", [
@@ -95,13 +98,15 @@ def test_record_round_trip_and_old_records_load():
     d = base(legs=3)
     d["hardware"].update(architecture="folded", multipliers=2, dsp="xc7", min_refresh_hz=250)
     r = parse_robot(d)
-    assert (r.legs, r.architecture, r.multipliers, r.dsp, r.min_refresh_hz) == (3, "folded", 2, "xc7", 250.0)
+    hw = r.hardware
+    assert (r.legs, hw.architecture, hw.multipliers, hw.dsp, hw.min_refresh_hz) == (3, "folded", 2, "xc7", 250.0)
     assert robot_from_record(robot_record(r)) == r
-    old = robot_record(r)
+    old = flat_record(robot_record(r))
     for k in ("legs", "architecture", "multipliers", "dsp", "min_refresh_hz"):
         del old[k]                       # a record written before these fields existed
     assert robot_from_record(old) == parse_robot(base())
-    bad = {**robot_record(r), "dsp": "gowin"}
+    bad = robot_record(r)
+    bad["hardware"]["dsp"] = "gowin"
     with pytest.raises(RobotError, match="^hardware.dsp must be one of ice40, ecp5, xc7, none, not 'gowin'$"):
         robot_from_record(bad)
 
@@ -111,7 +116,7 @@ def test_with_hardware_names_the_option():
     with pytest.raises(RobotError) as e:
         with_hardware(r, {"architecture": "--architecture"}, architecture="pipelined")
     assert str(e.value).startswith("--architecture must be auto, folded or fastest for legs = 6")
-    assert with_hardware(r, multipliers=2).multipliers == 2
+    assert with_hardware(r, multipliers=2).hardware.multipliers == 2
 
 
 def _targets(plan, n, seed):
@@ -149,31 +154,33 @@ def test_leg_core_evaluator_errors(small_plan, kw, msg):
 def test_auto_takes_the_smallest_configuration_that_meets_the_rate(auto_robot, small_plan):
     c = choose_architecture(auto_robot, small_plan)
     assert (c.candidate.name, c.candidate.multipliers, c.candidate.dsp) == ("folded", 1, "ice40")
-    ii = LegCore(small_plan, auto_robot.pwm_period_ticks, multipliers=1, dsp=(16, 16)).initiation_interval
-    assert c.core.initiation_interval == ii and c.refresh_hz == auto_robot.clock_hz / ii
+    ii = LegCore(small_plan, auto_robot.hardware.pwm_period_ticks, multipliers=1, dsp=(16, 16)).initiation_interval
+    assert c.core.initiation_interval == ii and c.refresh_hz == auto_robot.hardware.clock_hz / ii
     assert [t.candidate.name for t in c.tried] == ["folded"]
     # too fast for any folded evaluator: the modulo-scheduled one with the longest interval
     # that meets the rate, after trying k = 1, 2 and the longer intervals
-    half = dataclasses.replace(auto_robot, min_refresh_hz=auto_robot.clock_hz / 2)
+    half = dataclasses.replace(auto_robot, hardware=dataclasses.replace(auto_robot.hardware,
+                                                                 min_refresh_hz=auto_robot.hardware.clock_hz / 2))
     c = choose_architecture(half, small_plan)
     assert (c.candidate.name, c.candidate.interval) == ("modulo", 2) and c.core.architecture == "modulo"
-    assert c.core.initiation_interval == 2 and c.refresh_hz == auto_robot.clock_hz / 2
+    assert c.core.initiation_interval == 2 and c.refresh_hz == auto_robot.hardware.clock_hz / 2
     assert [(t.candidate.name, t.candidate.multipliers or t.candidate.interval) for t in c.tried] == [
         ("folded", 1), ("folded", 2), ("modulo", 16), ("modulo", 8), ("modulo", 4), ("modulo", 2)]
-    assert all(t.refresh_hz < half.min_refresh_hz for t in c.tried[:-1])
+    assert all(t.refresh_hz < half.hardware.min_refresh_hz for t in c.tried[:-1])
     assert c.record()["multipliers"] == c.core.evaluator.multipliers
     # one target per cycle: the pipelined evaluator
-    fast = dataclasses.replace(auto_robot, min_refresh_hz=auto_robot.clock_hz)
+    fast = dataclasses.replace(auto_robot, hardware=dataclasses.replace(auto_robot.hardware,
+                                                                 min_refresh_hz=auto_robot.hardware.clock_hz))
     c = choose_architecture(fast, small_plan)
     assert c.candidate.name == "pipelined" and isinstance(c.core, LegCore)
-    assert c.core.initiation_interval == 1 and c.refresh_hz == auto_robot.clock_hz
+    assert c.core.initiation_interval == 1 and c.refresh_hz == auto_robot.hardware.clock_hz
     rec = c.record()
     assert rec["architecture"] == "pipelined" and rec["reason"].startswith("auto: the smallest configuration")
 
 
 def test_explicit_modulo_configuration(auto_robot, small_plan):
-    c = choose_architecture(dataclasses.replace(auto_robot, architecture="modulo", interval=5, dsp="ecp5",
-                                                min_refresh_hz=1.0), small_plan)
+    c = choose_architecture(dataclasses.replace(auto_robot, hardware=dataclasses.replace(
+        auto_robot.hardware, architecture="modulo", interval=5, dsp="ecp5", min_refresh_hz=1.0)), small_plan)
     assert (c.candidate.name, c.candidate.interval) == ("modulo", 5)
     assert c.core.architecture == "modulo" and c.core.initiation_interval == 5
     assert c.record()["multipliers"] == c.core.evaluator.multipliers
@@ -181,21 +188,23 @@ def test_explicit_modulo_configuration(auto_robot, small_plan):
 
 
 def test_explicit_and_shared_configurations(auto_robot, small_plan):
-    c = choose_architecture(dataclasses.replace(auto_robot, architecture="folded", multipliers=2, dsp="none"),
-                            small_plan)
+    c = choose_architecture(dataclasses.replace(auto_robot, hardware=dataclasses.replace(
+        auto_robot.hardware, architecture="folded", multipliers=2, dsp="none")), small_plan)
     assert (c.candidate.name, c.candidate.multipliers, c.candidate.dsp) == ("folded", 2, "none")
     assert c.core.evaluator.dsp is None and c.core.evaluator.multipliers == 2
     six = dataclasses.replace(auto_robot, legs=6)
     c = choose_architecture(six, small_plan)
     assert isinstance(c.core, RobotCore) and c.candidate.name == "shared" and c.core.legs == 6
-    assert c.refresh_hz == c.core.refresh_hz == six.clock_hz / (6 * c.core.initiation_interval)
-    c = choose_architecture(dataclasses.replace(six, architecture="folded", multipliers=2), small_plan)
+    assert c.refresh_hz == c.core.refresh_hz == six.hardware.clock_hz / (6 * c.core.initiation_interval)
+    c = choose_architecture(dataclasses.replace(six, hardware=dataclasses.replace(six.hardware, architecture="folded",
+                                                                                  multipliers=2)), small_plan)
     assert c.candidate.multipliers == 2 and c.core.evaluator.multipliers == 2
 
 
 def test_unreachable_rate_for_several_legs_names_the_best(auto_robot, small_plan):
-    six = dataclasses.replace(auto_robot, legs=6, min_refresh_hz=1e7)
-    best = max((RobotCore(small_plan, 6, six.pwm_period_ticks, six.clock_hz, multipliers=k, dsp=(16, 16))
+    six = dataclasses.replace(auto_robot, legs=6, hardware=dataclasses.replace(auto_robot.hardware, min_refresh_hz=1e7))
+    best = max((RobotCore(small_plan, 6, six.hardware.pwm_period_ticks, six.hardware.clock_hz, multipliers=k,
+                          dsp=(16, 16))
                 for k in (1, 2)), key=lambda core: core.refresh_hz)
     with pytest.raises(ArchitectureError) as e:
         choose_architecture(six, small_plan)
@@ -209,7 +218,8 @@ def test_unreachable_rate_for_several_legs_names_the_best(auto_robot, small_plan
 
 def test_flat_robot_top_ports_match_the_manifest(auto_robot, small_plan):
     robot = dataclasses.replace(auto_robot, legs=6)
-    core = RobotCore(small_plan, 6, robot.pwm_period_ticks, robot.clock_hz, multipliers=1, dsp=(16, 16))
+    core = RobotCore(small_plan, 6, robot.hardware.pwm_period_ticks, robot.hardware.clock_hz, multipliers=1,
+                     dsp=(16, 16))
     v = robot_verilog(core, "hexa_core")
     top = re.search(r"^module hexa_core\(.*?^endmodule", v, re.M | re.S).group(0)
     ports = {name: int(w) + 1 if w else 1 for w, name in
@@ -219,7 +229,7 @@ def test_flat_robot_top_ports_match_the_manifest(auto_robot, small_plan):
     assert ports["i_leg"] == ports["o_leg"] == 3
     man = manifest(robot, small_plan, core, "hexa_core", choose_architecture(robot, small_plan).record())
     assert man["legs"] == 6 and man["initiation_interval"] == core.initiation_interval
-    assert man["refresh_hz"] == core.refresh_hz and man["clock_hz"] == robot.clock_hz
+    assert man["refresh_hz"] == core.refresh_hz and man["clock_hz"] == robot.hardware.clock_hz
     assert man["architecture"]["architecture"] == "shared"
     named = [f["port"] for f in man["inputs"]["fields"] + man["outputs"]["fields"]]
     assert named[0] == "i_leg" and "o_leg" in named

@@ -31,9 +31,9 @@ class _SineGeometry:
 def _robot(tolerance=0.5):
     """A robot with the geometry above and an identity calibration (pulse = angle)."""
     return SimpleNamespace(
-        geometry=_SineGeometry(), servos=("y",), tolerance_pu=tolerance,
-        inputs=(SimpleNamespace(name="a"), SimpleNamespace(name="b")),
-        calibration=Calibration(neutral_angles=(0.0,), directions=(1,), neutral_pulse_pu=0.0,
+        geometry=_SineGeometry(), servos=("y",), fit=SimpleNamespace(tolerance_pu=tolerance),
+        workspace=SimpleNamespace(inputs=(SimpleNamespace(name="a"), SimpleNamespace(name="b"))),
+        joint_calibration=Calibration(neutral_angles=(0.0,), directions=(1,), neutral_pulse_pu=0.0,
                                 pu_per_degree=1.0))
 
 
@@ -215,7 +215,7 @@ def test_check_rejects_a_bad_tolerance():
 
 def test_inputs_must_match_the_robot():
     robot = _robot()
-    robot.inputs = (SimpleNamespace(name="a"), SimpleNamespace(name="c"))
+    robot.workspace.inputs = (SimpleNamespace(name="a"), SimpleNamespace(name="c"))
     with pytest.raises(ValueError, match=r"plan inputs must be the robot's inputs \['a', 'c'\]"):
         certify(robot, _plan())
 
@@ -237,10 +237,10 @@ def test_real_plan_bound_is_at_least_the_sampled_error(robot, plan):
 
 def _certified_within_tolerance(robot, plan):
     cert = certify(robot, plan)                       # the default budget
-    cert.check(robot.tolerance_pu)
+    cert.check(robot.fit.tolerance_pu)
     sampled = measure(robot, plan)["servos"]          # >= 10**6 points
     for s in cert.servos:
-        assert s.converged and s.total_pu <= robot.tolerance_pu, s
+        assert s.converged and s.total_pu <= robot.fit.tolerance_pu, s
         assert s.approximation_pu >= sampled[s.name]["approximation"], s
         assert s.total_pu >= sampled[s.name]["total"], s
 

@@ -35,7 +35,7 @@ def _targets(cp, n, seed):
 
 def _random_points(robot, n, seed):
     rng = np.random.default_rng(seed)
-    return {i.name: rng.integers(i.lo, i.hi + 1, n) for i in robot.inputs}
+    return {i.name: rng.integers(i.lo, i.hi + 1, n) for i in robot.workspace.inputs}
 
 
 # -- golden model --------------------------------------------------------------------------
@@ -51,13 +51,13 @@ def test_golden_matches_exact_ik(robot):
 def test_sized_design_within_tolerance_on_fresh_points(robot):
     m = measure_cordic(robot, SIZED, _random_points(robot, 20000, 7))
     for s, e in m["servos"].items():
-        assert e["total"] <= robot.tolerance_pu, (s, e)
+        assert e["total"] <= robot.fit.tolerance_pu, (s, e)
 
 
 def test_too_few_iterations_exceed_tolerance(robot):
     """The error measure can fail: 6 iterations are far too few for +-0.5 pu."""
     m = measure_cordic(robot, dataclasses.replace(SIZED, law_iters=6), _random_points(robot, 5000, 3))
-    assert m["servos"]["s3"]["total"] > robot.tolerance_pu
+    assert m["servos"]["s3"]["total"] > robot.fit.tolerance_pu
 
 
 def test_out_of_range_ports_are_clamped(robot):
@@ -171,12 +171,12 @@ def sized_small(robot):
 def test_size_cordic_meets_tolerance_and_is_locally_minimal(robot, sized_small):
     design, pts = sized_small
     m = measure_cordic(robot, design, pts)
-    assert max(e["total"] for e in m["servos"].values()) <= robot.tolerance_pu
+    assert max(e["total"] for e in m["servos"].values()) <= robot.fit.tolerance_pu
     assert CordicPlan(robot, design).register_bits() < CordicPlan(robot, DEFAULT_DESIGN).register_bits()
     for name in ("law_iters", "uv_iters", "len_frac", "angle_frac"):
         smaller = dataclasses.replace(design, **{name: getattr(design, name) - 1})
         m = measure_cordic(robot, smaller, pts)
-        assert max(e["total"] for e in m["servos"].values()) > robot.tolerance_pu, name
+        assert max(e["total"] for e in m["servos"].values()) > robot.fit.tolerance_pu, name
 
 
 def test_size_cordic_rejects_a_failing_start(robot):

@@ -14,7 +14,8 @@ from ikseries.robot import parse_robot, preset_text, robot_from_record, robot_re
 
 @pytest.fixture
 def fastest(small_robot):
-    return dataclasses.replace(small_robot, architecture="fastest", fit_device="ecp5-25f", dsp="ecp5")
+    return dataclasses.replace(small_robot, hardware=dataclasses.replace(small_robot.hardware, architecture="fastest",
+                                                                        fit_device="ecp5-25f", dsp="ecp5"))
 
 
 class FakeSynth:
@@ -34,7 +35,7 @@ def _rates(robot, plan):
     out = {}
     for c in candidates(robot):
         core = c.build(plan, build_target(robot))
-        out[(c.name, c.multipliers or c.interval)] = robot.clock_hz / core.initiation_interval
+        out[(c.name, c.multipliers or c.interval)] = robot.hardware.clock_hz / core.initiation_interval
     return out
 
 
@@ -51,7 +52,7 @@ def test_fastest_fitting_configuration_is_chosen(fastest, small_plan):
     assert [call for call, _ in synth.calls] == order[:3] and {t for _, t in synth.calls} == {"ecp5"}
     cand = c.candidate
     assert (cand.name, cand.multipliers or cand.interval, cand.dsp) == (*order[2], "ecp5")
-    assert c.refresh_hz == rates[order[2]] == fastest.clock_hz / c.core.initiation_interval
+    assert c.refresh_hz == rates[order[2]] == fastest.hardware.clock_hz / c.core.initiation_interval
     rej = [t.rejected for t in c.tried]
     assert rej[0] == ("does not fit LFE5U-25F by Yosys cell counts (before place-and-route): DSP 40 > 28")
     assert rej[1].endswith("LUT 30,000 > 24,288") and rej[2] is None
@@ -91,8 +92,9 @@ def test_slower_than_min_refresh_is_not_synthesised(fastest, small_plan):
     rates = _rates(fastest, small_plan)
     slow = max(v for k, v in rates.items() if k[0] == "folded") * 1.01
     synth = FakeSynth(lambda c: {"DSP": 130})
+    slow_robot = dataclasses.replace(fastest, hardware=dataclasses.replace(fastest.hardware, min_refresh_hz=slow))
     with pytest.raises(ArchitectureError) as e:
-        choose_architecture(dataclasses.replace(fastest, min_refresh_hz=slow), small_plan, synth=synth)
+        choose_architecture(slow_robot, small_plan, synth=synth)
     assert [call for call, _ in synth.calls] == [k for k in sorted(rates, key=lambda k: -rates[k])
                                                  if rates[k] >= slow]
     assert [call for call, _ in synth.calls][:2] == [("pipelined", None), ("modulo", 2)]
@@ -100,14 +102,16 @@ def test_slower_than_min_refresh_is_not_synthesised(fastest, small_plan):
                                  f"{slow:g}")
     # even the pipelined core is too slow: the rate error, nothing synthesised
     synth.calls.clear()
+    slow_robot = dataclasses.replace(fastest, hardware=dataclasses.replace(fastest.hardware, min_refresh_hz=1e9))
     with pytest.raises(ArchitectureError, match="^hardware.min_refresh_hz must be at most 4.8e\\+07 Hz, the best "
                                                 "rate of any architecture .*pipelined"):
-        choose_architecture(dataclasses.replace(fastest, min_refresh_hz=1e9), small_plan, synth=synth)
+        choose_architecture(slow_robot, small_plan, synth=synth)
     assert synth.calls == []
 
 
 def test_several_legs_try_shared_configurations_only(fastest, small_plan):
-    six = dataclasses.replace(fastest, legs=6, fit_device="ice40-up5k", dsp="ice40")
+    six = dataclasses.replace(fastest, legs=6, hardware=dataclasses.replace(fastest.hardware, fit_device="ice40-up5k",
+                                                                                dsp="ice40"))
     synth = FakeSynth(lambda c: {})
     c = choose_architecture(six, small_plan, synth=synth)
     assert synth.calls[0][1] == "ice40" and len(synth.calls) == 1
@@ -119,22 +123,24 @@ def test_fit_device_options_and_record(small_robot):
     d = tomllib.loads(preset_text("cylinder-leg"))
     d["hardware"].update(architecture="fastest", fit_device="ecp5-25f")
     r = parse_robot(d)
-    assert (r.architecture, r.fit_device, r.dsp) == ("fastest", "ecp5-25f", "ecp5")   # DSP size of the device
+    hw = r.hardware
+    assert (hw.architecture, hw.fit_device, hw.dsp) == ("fastest", "ecp5-25f", "ecp5")   # DSP size of the device
     assert robot_from_record(robot_record(r)) == r
     d["hardware"]["dsp"] = "none"
-    assert parse_robot(d).dsp == "none"
+    assert parse_robot(d).hardware.dsp == "none"
     ns = dict(architecture=None, multipliers=None, dsp=None, fit_device=None)
     cli = _hardware_overrides(small_robot, argparse.Namespace(**{**ns, "architecture": "fastest",
                                                                  "fit_device": "xc7a35t"}))
-    assert (cli.architecture, cli.fit_device, cli.dsp) == ("fastest", "xc7a35t", "xc7")
+    assert (cli.hardware.architecture, cli.hardware.fit_device, cli.hardware.dsp) == ("fastest", "xc7a35t", "xc7")
     back = _hardware_overrides(r, argparse.Namespace(**{**ns, "architecture": "auto"}))
-    assert (back.architecture, back.fit_device) == ("auto", None)
+    assert (back.hardware.architecture, back.hardware.fit_device) == ("auto", None)
 
 
 def test_fastest_runs_yosys(small_robot, small_plan):
     """End to end on the small plan for the iCE40UP5K: the pipelined core needs more DSPs than
     the 8 it has; a slower (modulo-scheduled or folded) one fits."""
-    robot = dataclasses.replace(small_robot, architecture="fastest", fit_device="ice40-up5k", dsp="ice40")
+    robot = dataclasses.replace(small_robot, hardware=dataclasses.replace(small_robot.hardware, architecture="fastest",
+                                                                          fit_device="ice40-up5k", dsp="ice40"))
     c = choose_architecture(robot, small_plan)
     first = c.tried[0]
     assert first.candidate.name == "pipelined" and first.counts["DSP"] > 8

@@ -18,7 +18,7 @@ def accuracy(robot, plan):
 def test_every_servo_within_tolerance_on_a_million_points(robot, accuracy):
     assert accuracy["points"] >= 1_000_000
     for name, e in accuracy["servos"].items():
-        assert e["total"] <= robot.tolerance_pu, (name, e)
+        assert e["total"] <= robot.fit.tolerance_pu, (name, e)
         # the split is consistent: total <= sum of the parts
         assert e["total"] <= e["approximation"] + e["quantization"] + e["rounding"] + 1e-9
         assert e["rounding"] <= 0.5 / robot.ticks_per_pu + 1e-12
@@ -29,7 +29,7 @@ def test_measured_quantization_within_certified_bound(robot, plan, accuracy):
     for o in plan.outputs:
         cert = bounds[o.preround] / o.ticks_per_pu
         assert accuracy["servos"][o.name]["quantization"] <= cert
-        assert cert <= Budget.split(robot.tolerance_pu, robot.ticks_per_pu).quantization
+        assert cert <= Budget.split(robot.fit.tolerance_pu, robot.ticks_per_pu).quantization
 
 
 def test_symmetry_and_unused_variables_are_found(fitted):
@@ -73,7 +73,7 @@ def test_feature_analysis_detects_parity_and_dependence():
 
 def test_verification_points_cover_grid_faces_and_range(robot):
     pts = verification_points(robot)
-    for i in robot.inputs:
+    for i in robot.workspace.inputs:
         v = pts[i.name]
         assert v.min() == i.lo and v.max() == i.hi
         assert np.count_nonzero(v == i.lo) >= 10_000 and np.count_nonzero(v == i.hi) >= 10_000
@@ -81,8 +81,8 @@ def test_verification_points_cover_grid_faces_and_range(robot):
 
 
 def test_verification_points_are_every_point_of_a_small_workspace(small_robot):
-    small = [dataclasses.replace(i, max=i.min + 2, frac_bits=1) for i in small_robot.inputs]
-    robot = dataclasses.replace(small_robot, inputs=tuple(small))
+    small = [dataclasses.replace(i, max=i.min + 2, frac_bits=1) for i in small_robot.workspace.inputs]
+    robot = dataclasses.replace(small_robot, workspace=dataclasses.replace(small_robot.workspace, inputs=tuple(small)))
     pts = verification_points(robot, n_points=10_000, n_face=0)
     got = set(zip(*(pts[i.name].tolist() for i in small)))
     assert got == set(itertools.product(*(range(i.lo, i.hi + 1) for i in small)))
@@ -95,7 +95,7 @@ def test_fit_is_deterministic(small_robot, small_plan):
 
 def test_tolerance_below_output_rounding_is_refused(robot):
     with pytest.raises(FitError, match="tolerance 0.01 pu leaves no approximation budget"):
-        fit_robot(dataclasses.replace(robot, tolerance_pu=0.01))
+        fit_robot(dataclasses.replace(robot, fit=dataclasses.replace(robot.fit, tolerance_pu=0.01)))
 
 
 def test_looser_tolerance_gives_a_smaller_plan(plan, small_plan):
@@ -127,7 +127,7 @@ def test_a_plan_that_fails_certification_is_refitted_then_refused(small_robot, m
     def failing(robot, plan, **kw):
         cert = real(robot, plan, **kw)
         budgets.append(plan.meta["budget_pu"]["approximation"])
-        s = dataclasses.replace(cert.servos[1], approximation_pu=robot.tolerance_pu)   # s2 fails
+        s = dataclasses.replace(cert.servos[1], approximation_pu=robot.fit.tolerance_pu)   # s2 fails
         return dataclasses.replace(cert, servos=(cert.servos[0], s, *cert.servos[2:]))
 
     refits = []
@@ -240,8 +240,8 @@ def test_default_plan_takes_cos_and_sin_from_theta_tables(plan):
 @pytest.fixture(scope="module")
 def dsp_sized(small_robot):
     """The small leg fitted with fit.products = "dsp" for iCE40 16x16 blocks."""
-    from ikseries.robot import with_hardware
-    robot = with_hardware(small_robot, products="dsp", dsp="ice40")
+    from ikseries.robot import with_fit, with_hardware
+    robot = with_fit(with_hardware(small_robot, dsp="ice40"), products="dsp")
     return robot, fit_robot(robot)[0]
 
 
@@ -254,25 +254,25 @@ def test_products_dsp_fit_every_product_into_one_dsp_block_and_stay_certified(ds
              and max(bits_for(small_plan.nodes[a].lo, small_plan.nodes[a].hi)[0] for a in n.args) > 16]
     assert exact                       # without the option some products are wider
     assert plan.meta["method"]["operand_bits"] == [16, 16]
-    assert all(c["total_pu"] <= robot.tolerance_pu for c in plan.meta["certificate"]["servos"])
+    assert all(c["total_pu"] <= robot.fit.tolerance_pu for c in plan.meta["certificate"]["servos"])
 
 
 def test_products_dsp_give_rounding_a_larger_share_when_the_usual_one_is_too_small(small_robot, monkeypatch):
     from ikseries.fit import fitter
-    from ikseries.robot import with_hardware
+    from ikseries.robot import with_fit, with_hardware
     seen, msgs = [], []
     real = fitter.choose_formats
 
     def choose(ctx, fits, progress):
-        seen.append(ctx.budget.quantization / ctx.robot.tolerance_pu)
+        seen.append(ctx.budget.quantization / ctx.robot.fit.tolerance_pu)
         if len(seen) == 1:
             raise fitter.FormatError("no fixed-point format keeps the certified rounding error within 0.4 pu")
         return real(ctx, fits, progress)
     monkeypatch.setattr(fitter, "choose_formats", choose)
-    robot = with_hardware(small_robot, products="dsp", dsp="ecp5")
+    robot = with_fit(with_hardware(small_robot, dsp="ecp5"), products="dsp")
     plan, _ = fit_robot(robot, msgs.append, certified=False)
     assert seen == pytest.approx([0.10, 0.25])
-    assert plan.meta["budget_pu"]["quantization"] == pytest.approx(0.25 * robot.tolerance_pu)
+    assert plan.meta["budget_pu"]["quantization"] == pytest.approx(0.25 * robot.fit.tolerance_pu)
     assert any("refitting with 25% of the tolerance for rounding" in m for m in msgs)
     seen.clear()
     with pytest.raises(fitter.FormatError):     # exact products: no second share
@@ -282,13 +282,13 @@ def test_products_dsp_give_rounding_a_larger_share_when_the_usual_one_is_too_sma
 
 def test_products_dsp_say_why_when_no_rounding_share_is_enough(small_robot, monkeypatch):
     from ikseries.fit import fitter
-    from ikseries.robot import with_hardware
+    from ikseries.robot import with_fit, with_hardware
 
     def never(ctx, fits, progress):
         raise fitter.FormatError(f"no fixed-point format keeps the certified rounding error within "
                                  f"{ctx.budget.quantization:g} pu in 63-bit intermediates")
     monkeypatch.setattr(fitter, "choose_formats", never)
-    robot = with_hardware(small_robot, products="dsp", dsp="ice40")
+    robot = with_fit(with_hardware(small_robot, dsp="ice40"), products="dsp")
     with pytest.raises(fitter.FormatError, match=r"^no fixed-point format keeps the certified rounding error "
                        r"within 1.6 pu in 63-bit intermediates \(40% of the tolerance\) with every product "
                        r"fitting 16 x 16 DSP operands \(fit.products = \"dsp\", hardware.dsp = 'ice40'\); use "

@@ -36,7 +36,7 @@ def test_hexapod_build_report_and_ports(hexapod):
     ii = rep["initiation_interval"]
     assert rep["simulation"]["initiation_interval_measured"] == ii == man["initiation_interval"]
     assert rep["simulation"]["latency_cycles_measured"] == rep["latency_cycles"] == man["latency_cycles"]
-    assert rep["refresh_hz"] == man["refresh_hz"] == robot.clock_hz / (6 * ii) >= 1000
+    assert rep["refresh_hz"] == man["refresh_hz"] == robot.hardware.clock_hz / (6 * ii) >= 1000
     assert rep["simulation"]["mismatches"] == rep["simulation"]["leg_mismatches"] == 0
     assert rep["simulation"]["legs_addressed"] == [0, 1, 2, 3, 4, 5]
     c = rep["cocotb"]["icarus"]
@@ -67,7 +67,7 @@ def test_hexapod_core_rate_matches_a_rebuilt_core(hexapod):
     rep = json.loads((hexapod / "report.json").read_text())
     plan = Plan.from_json(json.loads((hexapod / "plan.json").read_text()))
     robot = load_preset("hexapod")
-    core = RobotCore(plan, 6, robot.pwm_period_ticks, robot.clock_hz, multipliers=1, dsp=(16, 16))
+    core = RobotCore(plan, 6, robot.hardware.pwm_period_ticks, robot.hardware.clock_hz, multipliers=1, dsp=(16, 16))
     assert (core.latency, core.initiation_interval, core.refresh_hz) == (
         rep["latency_cycles"], rep["initiation_interval"], rep["refresh_hz"])
 

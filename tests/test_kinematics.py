@@ -6,14 +6,14 @@ from ikseries.kinematics import CylinderLeg, UnreachableError
 
 def test_neutral_pose_pulses_are_the_neutral_pulse(robot):
     p = robot.pulses_pu(0.0, 0.0, 20.0)
-    assert np.allclose(p, robot.neutral_pulse_pu)
+    assert np.allclose(p, robot.calibration.neutral_pulse_pu)
 
 
 def test_fk_inverts_ik_over_the_workspace(robot):
     rng = np.random.default_rng(3)
     n = 200_000
     r, th, z = (np.concatenate([lo + (hi - lo) * rng.random(n), [lo, hi]]) for lo, hi in
-                ((i.min, i.max) for i in robot.inputs))
+                ((i.min, i.max) for i in robot.workspace.inputs))
     g = robot.geometry
     angles = g.ik(r, th, z)
     x, y, zz = g.to_cartesian(r, th, z)
@@ -46,10 +46,10 @@ def test_unreachable_target_names_the_point():
 
 def test_direction_sign_mirrors_the_pulse(robot):
     import dataclasses
-    flipped = dataclasses.replace(robot, directions=(-1, 1, -1))
+    flipped = dataclasses.replace(robot, calibration=dataclasses.replace(robot.calibration, directions=(-1, 1, -1)))
     a = np.array(robot.pulses_pu(30.0, 40.0, 5.0))
     b = np.array(flipped.pulses_pu(30.0, 40.0, 5.0))
-    n = robot.neutral_pulse_pu
+    n = robot.calibration.neutral_pulse_pu
     assert np.allclose(b[0] - n, -(a[0] - n)) and np.isclose(b[1], a[1]) and np.allclose(b[2] - n, -(a[2] - n))
 
 

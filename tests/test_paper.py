@@ -37,11 +37,11 @@ def pplan(robot, pfit):
 @pytest.fixture(scope="module")
 def points(robot):
     rng = np.random.default_rng(3)
-    return {i.name: rng.integers(i.lo, i.hi + 1, 30_000) for i in robot.inputs}
+    return {i.name: rng.integers(i.lo, i.hi + 1, 30_000) for i in robot.workspace.inputs}
 
 
 def _real(robot, ports):
-    return [ports[i.name] * 2.0 ** -i.frac_bits for i in robot.inputs]
+    return [ports[i.name] * 2.0 ** -i.frac_bits for i in robot.workspace.inputs]
 
 
 # -- term structure ---------------------------------------------------------------------------
@@ -148,7 +148,7 @@ def test_plan_matches_the_float_series_within_the_certified_bound(robot, pfit, p
         want = evaluate_servo(s, *real)                         # pu, the paper's series
         got_pre = iv[o.preround] * 2.0 ** -pplan.nodes[o.preround].frac / tpp
         bound = bounds[o.preround] / tpp
-        assert 0 < bound <= 0.1 * robot.tolerance_pu
+        assert 0 < bound <= 0.1 * robot.fit.tolerance_pu
         assert np.max(np.abs(got_pre - want)) <= bound + 1e-6
         got = iv[o.node] / tpp
         assert np.max(np.abs(got - np.clip(want, lo / tpp, hi / tpp))) <= bound + 0.5 / tpp + 1e-6
@@ -210,7 +210,7 @@ def test_compare_reports_both_methods(robot, pplan, small_plan, points):
     md = render_comparison(res)
     for method, figs in res["methods"].items():
         for name, f in figs["servos"].items():
-            ok = "yes" if f["max_error_pu"] <= robot.tolerance_pu else "**no**"
+            ok = "yes" if f["max_error_pu"] <= robot.fit.tolerance_pu else "**no**"
             assert f"| {name} | {method} | {f['terms']} |" in md
             assert any(line.startswith(f"| {name} | {method} |") and line.endswith(f"| {ok} |")
                        for line in md.splitlines())

@@ -16,7 +16,7 @@ def arm_robot():
 
 
 def _box_grid(robot, n=81):
-    (x, y) = robot.inputs
+    (x, y) = robot.workspace.inputs
     return np.meshgrid(np.linspace(x.min, x.max, n), np.linspace(y.min, y.max, n), indexing="ij")
 
 
@@ -108,7 +108,7 @@ def test_rates_match_finite_differences_of_ik():
 # -- the preset --------------------------------------------------------------------------------
 def test_preset_neutral_pose_and_servos(arm_robot):
     assert arm_robot.servos == ("s1", "s2") and arm_robot.geometry == PlanarArm(35.0, 30.0, 10.0, 180.0)
-    assert [i.name for i in arm_robot.inputs] == ["x", "y"]
+    assert [i.name for i in arm_robot.workspace.inputs] == ["x", "y"]
     assert np.allclose(arm_robot.pulses_pu(-50.0, 0.0), 3000.0)
 
 
@@ -117,7 +117,8 @@ def test_preset_box_has_no_wrap_and_pulses_within_limits(arm_robot):
     for a in arm_robot.geometry.ik(*g):
         assert np.max(np.abs(np.diff(a, axis=0))) < 1 and np.max(np.abs(np.diff(a, axis=1))) < 1
         assert 0 < a.min() and a.max() < 360
-    lo, hi = arm_robot.pulse_min_us / arm_robot.pulse_unit_us, arm_robot.pulse_max_us / arm_robot.pulse_unit_us
+    cal = arm_robot.calibration
+    lo, hi = cal.pulse_min_us / cal.pulse_unit_us, cal.pulse_max_us / cal.pulse_unit_us
     for p in arm_robot.pulses_pu(*g):
         assert lo < p.min() and p.max() < hi
     # and the pure formula is the checked IK over the box (no wrap to undo)

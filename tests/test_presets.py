@@ -23,15 +23,15 @@ def robot(request):
 def _samples(robot, n, seed):
     """n uniform random points in the workspace box plus its corners, one array per input."""
     rng = np.random.default_rng(seed)
-    lo = np.array([i.min for i in robot.inputs])
-    hi = np.array([i.max for i in robot.inputs])
+    lo = np.array([i.min for i in robot.workspace.inputs])
+    hi = np.array([i.max for i in robot.workspace.inputs])
     corners = np.array(np.meshgrid(*zip(lo, hi), indexing="ij")).reshape(len(lo), -1)
     pts = lo[:, None] + (hi - lo)[:, None] * rng.random((len(lo), n))
     return tuple(np.concatenate([pts, corners], axis=1))
 
 
 def _grid(robot, n):
-    axes = [np.linspace(i.min, i.max, n) for i in robot.inputs]
+    axes = [np.linspace(i.min, i.max, n) for i in robot.workspace.inputs]
     return tuple(g.ravel() for g in np.meshgrid(*axes, indexing="ij"))
 
 
@@ -56,15 +56,16 @@ def test_preset_loads_with_its_documented_parameters(robot):
     g = robot.geometry
     assert g.coordinates == "cartesian"
     assert robot.servos == ("s1", "s2", "s3") and len(g.servo_names) == 3
-    assert [i.name for i in robot.inputs] == list(g.inputs) and all(u == "mm" for u in g.input_units)
-    assert (robot.pulse_unit_us, robot.neutral_pulse_pu, robot.pu_per_degree, robot.tolerance_pu) == (0.5, 3000, 20, 0.5)
+    assert [i.name for i in robot.workspace.inputs] == list(g.inputs) and all(u == "mm" for u in g.input_units)
+    cal = robot.calibration
+    assert (cal.pulse_unit_us, cal.neutral_pulse_pu, cal.pu_per_degree, robot.fit.tolerance_pu) == (0.5, 3000, 20, 0.5)
     if robot.name == "hexapod-leg":
         assert (g.coxa, g.femur, g.tibia, g.body_height) == (15, 80, 130, 78)
-        assert (robot.pulse_min_us, robot.pulse_max_us) == (600, 2400)
-        assert robot.neutral_pose == {"x": 74.0, "y": 0.0, "z": 0.0}
+        assert (robot.calibration.pulse_min_us, robot.calibration.pulse_max_us) == (600, 2400)
+        assert robot.calibration.neutral_pose == {"x": 74.0, "y": 0.0, "z": 0.0}
     else:
-        assert (robot.pulse_min_us, robot.pulse_max_us) == (500, 2500)
-        assert robot.neutral_pose == {"x": 0.0, "y": 0.0}
+        assert (robot.calibration.pulse_min_us, robot.calibration.pulse_max_us) == (500, 2500)
+        assert robot.calibration.neutral_pose == {"x": 0.0, "y": 0.0}
 
 
 def test_robot_record_round_trip(robot):
@@ -96,20 +97,21 @@ def test_pure_formula_is_the_checked_ik(robot):
 
 def test_joint_ranges_and_pulse_limits_hold_over_the_workspace(robot):
     g = robot.geometry
-    pts = _grid(robot, 41 if len(robot.inputs) == 3 else 301)
+    pts = _grid(robot, 41 if len(robot.workspace.inputs) == 3 else 301)
     angles = g.ik(*pts)  # raises for a joint out of range
     for a, (lo, hi), name in zip(angles, g.joint_ranges, g.servo_names):
         assert lo + 5 < np.min(a) and np.max(a) < hi - 5, name  # a margin of more than 5 deg
     for p in robot.pulses_pu(*pts):
-        assert robot.pulse_min_us < np.min(p) * robot.pulse_unit_us
-        assert np.max(p) * robot.pulse_unit_us < robot.pulse_max_us
+        assert robot.calibration.pulse_min_us < np.min(p) * robot.calibration.pulse_unit_us
+        assert np.max(p) * robot.calibration.pulse_unit_us < robot.calibration.pulse_max_us
 
 
 def test_neutral_pose_gives_the_neutral_pulse(robot):
-    pose = [robot.neutral_pose[i.name] for i in robot.inputs]
-    np.testing.assert_allclose(robot.pulses_pu(*pose), robot.neutral_pulse_pu, rtol=0, atol=1e-9)
-    moved = dict(robot.neutral_pose, y=robot.neutral_pose["y"] + 10.0)
-    assert not np.allclose(robot.pulses_pu(*(moved[i.name] for i in robot.inputs)), robot.neutral_pulse_pu)
+    pose = [robot.calibration.neutral_pose[i.name] for i in robot.workspace.inputs]
+    np.testing.assert_allclose(robot.pulses_pu(*pose), robot.calibration.neutral_pulse_pu, rtol=0, atol=1e-9)
+    moved = dict(robot.calibration.neutral_pose, y=robot.calibration.neutral_pose["y"] + 10.0)
+    assert not np.allclose(robot.pulses_pu(*(moved[i.name] for i in robot.workspace.inputs)),
+                           robot.calibration.neutral_pulse_pu)
 
 
 # -- unreachable targets -------------------------------------------------------------

@@ -20,12 +20,12 @@ def test_preset_fits_within_tolerance_and_simulates_bit_exact(name):
     plan, fits = fit_robot(robot)
     assert [o.name for o in plan.outputs] == list(robot.servos)
     acc = measure(robot, plan)
-    assert acc["points"] >= min(1_000_000, np.prod([i.hi - i.lo + 1 for i in robot.inputs]))
+    assert acc["points"] >= min(1_000_000, np.prod([i.hi - i.lo + 1 for i in robot.workspace.inputs]))
     for s, e in acc["servos"].items():
-        assert e["total"] <= robot.tolerance_pu, (s, e)
+        assert e["total"] <= robot.fit.tolerance_pu, (s, e)
     # the fit certifies the error over the continuous box (and refuses a plan that fails)
     for s in plan.meta["certificate"]["servos"]:
-        assert s["converged"] and s["total_pu"] <= robot.tolerance_pu, s
+        assert s["converged"] and s["total_pu"] <= robot.fit.tolerance_pu, s
         assert s["approximation_pu"] >= acc["servos"][s["name"]]["approximation"], s
     assert all(m <= 100 for m in output_multipliers(plan).values())
     t = {k: np.concatenate([c, r]) for (k, c), r in
@@ -42,5 +42,5 @@ def test_planar_arm_builds_end_to_end(tmp_path):
     """The whole `ikseries build` pipeline on a 2-input, 2-servo robot (no synthesis/cocotb)."""
     robot = load_preset("planar-arm")
     rep = build(robot, tmp_path / "arm", synth=False, cocotb=[], progress=lambda m: None)
-    assert all(s["error_pu"]["total"] <= robot.tolerance_pu for s in rep.record()["servos"])
+    assert all(s["error_pu"]["total"] <= robot.fit.tolerance_pu for s in rep.record()["servos"])
     assert (tmp_path / "arm" / "planar_arm_core.v").read_text().count("pwm_s") >= 2

@@ -1,3 +1,5 @@
+import hashlib
+import json
 import tomllib
 
 import pytest
@@ -12,7 +14,7 @@ def base():
 def test_presets_list_and_default():
     assert "cylinder-leg" in preset_names()
     r = parse_robot(base())
-    assert r.servos == ("s1", "s2", "s3") and r.ticks_per_pu == 24.0 and r.pwm_period_ticks == 960000
+    assert r.servos == ("s1", "s2", "s3") and r.ticks_per_pu == 24.0 and r.hardware.pwm_period_ticks == 960000
 
 
 def _set(d, path, value):
@@ -97,7 +99,7 @@ def test_products_dsp_makes_the_dsp_family_part_of_the_fit():
     from ikseries.fit.fitter import operand_bits
     from ikseries.robot import fit_record, robot_record, with_hardware
     r = parse_robot(base())
-    assert r.products == "exact" and operand_bits(r) is None
+    assert r.fit.products == "exact" and operand_bits(r) is None
     exact = fit_record(robot_record(r))
     assert "products" not in exact and "dsp" not in exact     # records from before fit.products still match
     assert fit_record(robot_record(with_hardware(r, dsp="xc7"))) == exact
@@ -110,6 +112,77 @@ def test_products_dsp_makes_the_dsp_family_part_of_the_fit():
     assert rec["products"] == "dsp" and rec["dsp"] == "ecp5"
     assert fit_record(robot_record(with_hardware(r, dsp="ice40"))) != rec
     assert operand_bits(with_hardware(r, dsp="none")) is None
+
+
+#: SHA-256 of the canonical JSON of the presets' fit records as the flat records before the
+#: description had parts gave them: the plan cache's keys, so plans cached then are still found
+FIT_RECORD_SHA256 = {"cylinder-leg": "436b5b95a55deedd49e0888710c881eba52e802cafcd1a6d5d9259dca460bc7d",
+                     "planar-arm": "1e538fc33090ae62385b242e5f8d9b8d662a433c4ad45d9e08d71a6ad030f53e"}
+
+
+@pytest.mark.parametrize("preset", sorted(FIT_RECORD_SHA256))
+def test_fit_record_of_a_flat_record_is_the_nested_one(preset):
+    from helpers import flat_record
+    from ikseries.robot import fit_record, load_preset, robot_from_record, robot_record
+    r = load_preset(preset)
+    nested = robot_record(r)
+    assert set(nested) == {"name", "description", "legs", "geometry", "workspace", "calibration", "fit", "hardware"}
+    flat = flat_record(nested)
+    assert fit_record(flat) == fit_record(nested) == r.fit_record()
+    assert robot_from_record(flat) == r
+    key = json.dumps(r.fit_record(), sort_keys=True, separators=(",", ":")).encode()
+    assert hashlib.sha256(key).hexdigest() == FIT_RECORD_SHA256[preset]
+
+
+def test_fit_record_holds_what_the_fit_reads():
+    from ikseries.robot import with_fit, with_hardware
+    r = parse_robot(base())
+    key = r.fit_record()
+    assert set(key) == {"geometry", "inputs", "neutral_pose", "pulse_unit_us", "neutral_pulse_pu", "pu_per_degree",
+                        "directions", "pulse_min_us", "pulse_max_us", "tolerance_pu", "lowering", "clock_hz"}
+    d = base(); d["name"], d["description"], d["legs"] = "other", "another leg", 2
+    _set(d, "hardware.pwm_period_us", 10000.0)
+    _set(d, "hardware.min_refresh_hz", 10.0)
+    assert parse_robot(d).fit_record() == key
+    assert with_hardware(r, architecture="folded", multipliers=2, dsp="xc7").fit_record() == key
+    assert with_fit(r, tolerance_pu=1.0).fit_record() != key
+    assert with_fit(r, lowering="horner").fit_record() != key
+    d = base()
+    _set(d, "hardware.clock_hz", 96_000_000)
+    assert parse_robot(d).fit_record() != key
+
+
+def test_with_fit_validates():
+    from ikseries.robot import with_fit
+    r = parse_robot(base())
+    with pytest.raises(RobotError, match=r"^fit.tolerance_pu must be > 0 pu, not -1$"):
+        with_fit(r, tolerance_pu=-1)
+    with pytest.raises(RobotError, match=r"^fit.lowering must be one of mixed, horner, not 'estrin'$"):
+        with_fit(r, lowering="estrin")
+    with pytest.raises(RobotError, match=r"^fit.tolerance_pu must be > 0.0277778 pu with 24 PWM ticks"):
+        with_fit(r, tolerance_pu=0.02)
+
+
+def test_unknown_field_of_a_flat_record_is_named():
+    from helpers import flat_record
+    from ikseries.robot import robot_from_record, robot_record
+    flat = {**flat_record(robot_record(parse_robot(base()))), "colour": "red"}
+    with pytest.raises(RobotError, match=r"^not a robot record: unknown field 'colour'$"):
+        robot_from_record(flat)
+
+
+def test_plan_with_a_flat_robot_record_is_found(tmp_path):
+    from helpers import flat_record, tiny_plan
+    from ikseries.plancache import PlanLookupError, read_plan
+    from ikseries.robot import robot_record, with_fit
+    r = parse_robot(base())
+    plan = tiny_plan()
+    plan.meta["robot_description"] = flat_record(robot_record(r))
+    path = tmp_path / "plan.json"
+    path.write_text(plan.dumps())
+    assert read_plan(r, path, True).dumps() == plan.dumps()
+    with pytest.raises(PlanLookupError, match="was fitted for a different robot description than 'cylinder-leg'"):
+        read_plan(with_fit(r, tolerance_pu=1.0), path, True)
 
 
 def _pocket(tibia):
@@ -151,7 +224,7 @@ def test_presets_are_proven_reachable_in_few_cells():
     from ikseries.robot import load_preset
     for name in preset_names():
         r = load_preset(name)
-        cells = prove_box_reachable(r.geometry, [i.min for i in r.inputs], [i.max for i in r.inputs])
+        cells = prove_box_reachable(r.geometry, r.workspace.lows, r.workspace.highs)
         assert cells <= 1000, name
 
 

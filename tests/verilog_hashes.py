@@ -52,12 +52,15 @@ QUICK = ("default", "pipelined", "folded1", "folded2", "modulo4", "modulo8", "mo
 
 
 def robot_of(name: str):
-    from ikseries.robot import load_preset, with_hardware
+    from ikseries.robot import load_preset, with_fit, with_hardware
     preset, opts, _ = CONFIGS[name]
     robot = load_preset(preset)
     if opts.get("architecture") not in (None, "fastest"):
         opts = {"fit_device": None, **opts}
-    return with_hardware(robot, **opts) if opts else robot
+    fit = {k: v for k, v in opts.items() if k == "products"}
+    hardware = {k: v for k, v in opts.items() if k != "products"}
+    robot = with_fit(robot, **fit) if fit else robot
+    return with_hardware(robot, **hardware) if hardware else robot
 
 
 _PLANS: dict = {}   # fit-relevant robot record (JSON) -> fitted plan
@@ -70,10 +73,9 @@ def plan_of(name: str, plan=None):
     """The fitted plan of configuration ``name`` (``plan``: the already fitted one to use)."""
     if plan is not None:
         return plan
-    from ikseries.robot import fit_record, robot_record
     from ikseries.fit.fitter import fit_robot
     robot = robot_of(name)
-    key = json.dumps(fit_record(robot_record(robot)), sort_keys=True)
+    key = json.dumps(robot.fit_record(), sort_keys=True)
     if key not in _PLANS:
         _PLANS[key] = fit_robot(robot)[0]
     return _PLANS[key]

@@ -74,7 +74,7 @@ def compare(robot, ikseries_plan: Plan, paper_plan: Plan, points: dict | None = 
     other = [o.name for o in paper_plan.outputs]
     if names != other:
         raise ValueError(f"plans must have the same servos, not {names!r} and {other!r}")
-    return {"robot": robot.name, "tolerance_pu": robot.tolerance_pu,
+    return {"robot": robot.name, "tolerance_pu": robot.fit.tolerance_pu,
             "methods": {"ikseries": plan_figures(robot, ikseries_plan, points),
                         "paper": plan_figures(robot, paper_plan, points)}}
 

@@ -36,7 +36,7 @@ class SizingError(RuntimeError):
 
 
 def _reference(robot, points: dict) -> tuple:
-    real = [np.asarray(points[i.name]) * 2.0 ** -i.frac_bits for i in robot.inputs]
+    real = [np.asarray(points[i.name]) * 2.0 ** -i.frac_bits for i in robot.workspace.inputs]
     return robot.pulses_pu(*real)
 
 
@@ -50,7 +50,7 @@ def measure_cordic(robot, design: CordicDesign, points: dict | None = None, refe
     for s, e in err.items():
         j = int(np.argmax(np.abs(e)))
         out[s] = {"total": float(np.abs(e[j])),
-                  "at": {i.name: float(points[i.name][j] * 2.0 ** -i.frac_bits) for i in robot.inputs}}
+                  "at": {i.name: float(points[i.name][j] * 2.0 ** -i.frac_bits) for i in robot.workspace.inputs}}
     return {"points": int(len(next(iter(points.values())))), "servos": out}
 
 
@@ -58,7 +58,7 @@ def _lowest(name: str, robot) -> int:
     if name in ITERATION_FIELDS:
         return 1
     if name == "angle_frac":
-        return robot.inputs[1].frac_bits
+        return robot.workspace.inputs[1].frac_bits
     return 0
 
 
@@ -66,7 +66,7 @@ def size_cordic(robot, points: dict | None = None, start: CordicDesign = DEFAULT
                 margin_pu: float = 0.0, progress: Callable[[str], None] = lambda msg: None
                 ) -> CordicDesign:
     """The smallest :class:`CordicDesign` (see the module docstring) whose max error on
-    ``points`` (default: ``verification_points(robot)``) is within ``robot.tolerance_pu -
+    ``points`` (default: ``verification_points(robot)``) is within ``robot.fit.tolerance_pu -
     margin_pu`` for every servo.
 
     Raises
@@ -77,13 +77,13 @@ def size_cordic(robot, points: dict | None = None, start: CordicDesign = DEFAULT
         For a negative ``margin_pu`` or one that leaves no tolerance.
     """
     if isinstance(margin_pu, bool) or not isinstance(margin_pu, (int, float)) \
-            or not 0 <= margin_pu < robot.tolerance_pu:
-        raise ValueError(f"margin_pu must be in [0, {robot.tolerance_pu:g}) pu, not {margin_pu!r}")
+            or not 0 <= margin_pu < robot.fit.tolerance_pu:
+        raise ValueError(f"margin_pu must be in [0, {robot.fit.tolerance_pu:g}) pu, not {margin_pu!r}")
     if not isinstance(start, CordicDesign):
         raise TypeError(f"start must be a CordicDesign, not {start!r}")
     points = verification_points(robot) if points is None else points
     reference = _reference(robot, points)
-    limit = robot.tolerance_pu - margin_pu
+    limit = robot.fit.tolerance_pu - margin_pu
     n = len(next(iter(points.values())))
     recent: list = []          # worst points of the last full evaluations
     screen = np.zeros(0, dtype=np.int64)

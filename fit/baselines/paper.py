@@ -173,10 +173,10 @@ def paper_grid(robot, theta_fit: str = "minimax") -> PaperGrid:
 
 
 def _inputs(robot):
-    names = tuple(i.name for i in robot.inputs)
+    names = tuple(i.name for i in robot.workspace.inputs)
     if names != ("r", "theta", "z"):
         raise ValueError(f"robot inputs must be the cylindrical ('r', 'theta', 'z'), not {names!r}")
-    return robot.inputs
+    return robot.workspace.inputs
 
 
 def _theta_parity(robot, k: int, grid: PaperGrid) -> str:
@@ -382,14 +382,14 @@ def paper_errors(robot, fit: PaperFit, points: dict | None = None, chunk: int = 
     n = len(next(iter(points.values())))
     worst = {s.name: {"max_error_pu": 0.0, "at": None} for s in fit.servos}
     for start in range(0, n, chunk):
-        real = [points[i.name][start:start + chunk] * 2.0 ** -i.frac_bits for i in robot.inputs]
+        real = [points[i.name][start:start + chunk] * 2.0 ** -i.frac_bits for i in robot.workspace.inputs]
         ref = robot.pulses_pu(*real)
         for k, s in enumerate(fit.servos):
             e = np.abs(evaluate_servo(s, *real) - ref[k])
             j = int(np.argmax(e))
             if e[j] > worst[s.name]["max_error_pu"]:
                 worst[s.name] = {"max_error_pu": float(e[j]),
-                                 "at": {i.name: float(real[q][j]) for q, i in enumerate(robot.inputs)}}
+                                 "at": {i.name: float(real[q][j]) for q, i in enumerate(robot.workspace.inputs)}}
     return {"points": n, "servos": worst}
 
 
@@ -483,7 +483,7 @@ def paper_plan(robot, fit: PaperFit, progress=lambda msg: None) -> Plan:
     """
     if fit.robot != robot.name:
         raise ValueError(f"fit must be of robot {robot.name!r}, not of {fit.robot!r}")
-    budget = Budget.split(robot.tolerance_pu, robot.ticks_per_pu)
+    budget = Budget.split(robot.fit.tolerance_pu, robot.ticks_per_pu)
     scales = input_scales(robot)
     for s in fit.servos:
         s.frac = _choose_frac(robot, s, scales, budget.quantization)
