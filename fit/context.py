@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .cost import DEFAULT_COST_MODEL, CostModel
 from .features import coordinate_stage
 from ..constraints.devices import FAMILIES
 from .plan import PlanInput
@@ -70,6 +71,8 @@ class FitContext:
         Product operand limit of the plan builder (``fit.products = "dsp"``).
     mixed : bool
         ``fit.lowering = "mixed"``: the Horner/Estrin mix of least depth, else nested Horner.
+    cost_model : CostModel
+        What a servo's structure costs (:mod:`ikseries.fit.cost`); the fit keeps the cheapest.
     """
     robot: object
     inputs: tuple[PlanInput, ...]
@@ -77,16 +80,19 @@ class FitContext:
     budget: Budget
     operand_bits: tuple[int, int] | None
     mixed: bool
+    cost_model: CostModel = DEFAULT_COST_MODEL
 
     @classmethod
-    def for_robot(cls, robot, quantization_share: float) -> "FitContext":
-        """The context of ``robot`` with ``quantization_share`` of the tolerance for rounding."""
+    def for_robot(cls, robot, quantization_share: float, cost_model: CostModel = DEFAULT_COST_MODEL
+                  ) -> "FitContext":
+        """The context of ``robot`` with ``quantization_share`` of the tolerance for rounding,
+        choosing structures by ``cost_model``."""
         budget = Budget.split(robot.fit.tolerance_pu, robot.ticks_per_pu, quantization_share)
         mixed = robot.fit.lowering == "mixed"
         # cos/sin error e moves the tip by up to R_max * e; keep that to ~1 % of the budget
         rmax = max(abs(robot.workspace.inputs[0].min), abs(robot.workspace.inputs[0].max))
         stage = coordinate_stage(robot, trig_tol=min(1e-4, 2e-5 * 40.0 / max(rmax, 1e-9)), table=mixed)
-        return cls(robot, tuple(plan_inputs(robot)), stage, budget, operand_bits(robot), mixed)
+        return cls(robot, tuple(plan_inputs(robot)), stage, budget, operand_bits(robot), mixed, cost_model)
 
     @property
     def ticks_per_pu(self) -> float:

@@ -22,6 +22,7 @@ import numpy as np
 
 from .certify import CertificationError, certify
 from .context import Budget, FitContext, FitError, FormatError, operand_bits
+from .cost import DEFAULT_COST_MODEL, CostModel
 from .lowering import build_plan, output_multipliers
 from .plan import Plan
 from .search import MAX_DEGREE, fit_servo
@@ -130,8 +131,13 @@ def _plan_meta(ctx: FitContext, fits: list[ServoFit], fv: int, mults: dict) -> d
     }
 
 
-def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> FitResult:
+def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True,
+              cost_model: CostModel = DEFAULT_COST_MODEL) -> FitResult:
     """Fit every servo of ``robot`` and return the evaluation plan and the fits.
+
+    Per servo the structure of least ``cost_model`` cost (:mod:`ikseries.fit.cost`; the
+    architecture's, :meth:`ikseries.hdl.architectures.Architecture.cost_model`) that meets the
+    approximation budget is kept.
 
     With ``certified`` (the default) the error over the continuous workspace box is then
     bounded rigorously (:func:`ikseries.fit.certify.certify`) and stored in
@@ -146,10 +152,10 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True) -> Fi
     """
     bits = operand_bits(robot)
     if bits is None:
-        return _fit_attempts(FitContext.for_robot(robot, QUANTIZATION_SHARES[0]), progress, certified)
+        return _fit_attempts(FitContext.for_robot(robot, QUANTIZATION_SHARES[0], cost_model), progress, certified)
     for share, bigger in zip(QUANTIZATION_SHARES, QUANTIZATION_SHARES[1:] + (None,)):
         try:
-            return _fit_attempts(FitContext.for_robot(robot, share), progress, certified)
+            return _fit_attempts(FitContext.for_robot(robot, share, cost_model), progress, certified)
         except FormatError as e:
             if bigger is None:
                 raise FormatError(f"{e} ({share:.0%} of the tolerance) with every product fitting "

@@ -85,12 +85,12 @@ def output_multipliers(plan: Plan) -> dict:
     return {o.name: sum(1 for i in plan.cone(o.node) if plan.nodes[i].op == "mul") for o in plan.outputs}
 
 
-def structure_cost(ctx, fs: FeatureSet, terms: list) -> int:
-    """Multipliers of the servo evaluation (coordinate stage included) for ``terms``,
-    known before fitting: the structure alone decides it."""
+def structure_cost(ctx, fs: FeatureSet, terms: list) -> float:
+    """Cost (``ctx.cost_model``) of the servo evaluation (coordinate stage included) for
+    ``terms``, known before fitting: the structure alone decides it."""
     # distinct coefficients: equal ones would share Horner sub-expressions
     cells = fs.cut.cells if fs.cut else 0
     sf = ServoFit("cost", fs, 0, {e: (1.0 + k / 4096,) * cells if cells else 1.0 + k / 4096
                                   for k, e in enumerate(terms)}, 0.0, frac=16)
     plan = build_plan(ctx, [sf], 16, mixed=False)
-    return output_multipliers(plan)["cost"]
+    return ctx.cost_model.cost(plan, "cost")

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Callable
 
 from .constraints.devices import part as device_part
+from .fit.cost import CostModel
 from .hdl.architectures import Architecture, BuildTarget
 from .hdl.architectures.folded import Folded
 from .hdl.architectures.modulo import Modulo
@@ -36,7 +37,7 @@ from .hdl.architectures.pipelined import Pipelined
 from .hdl.architectures.shared import Shared
 
 __all__ = ["ArchitectureError", "Choice", "Tried", "AUTO_ORDER", "FASTEST_ORDER", "candidates",
-           "choose_architecture", "synth_candidate", "build_target"]
+           "choose_architecture", "cost_model", "synth_candidate", "build_target"]
 
 #: initiation intervals of the modulo-scheduled evaluator that "auto" and "fastest" try
 MODULO_INTERVALS = (16, 8, 4, 2)
@@ -127,6 +128,18 @@ def candidates(robot) -> list[Architecture]:
     if robot.legs > 1:       # the legs share one folded evaluator
         order = [o for o in order if o[0] == "folded"]
     return [_configuration(arch, k, robot) for arch, k in order]
+
+
+def cost_model(robot) -> CostModel:
+    """The cost model (:mod:`ikseries.fit.cost`) the fit of ``robot`` minimises: the one its
+    candidate architectures (:func:`candidates`) offer. The plan is fitted before "auto" or
+    "fastest" picks among them, so they must agree."""
+    models = {c.cost_model() for c in candidates(robot)}
+    if len(models) != 1:
+        raise ArchitectureError(f"hardware.architecture = {robot.hardware.architecture!r} tries architectures "
+                                f"that price a plan differently ({', '.join(sorted({m.name for m in models}))}); "
+                                "name one architecture")
+    return models.pop()
 
 
 def _size_rank(cand: Architecture) -> tuple:

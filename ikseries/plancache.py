@@ -95,6 +95,7 @@ def read_plan(robot, path: Path, given: bool):
 def find_plan(robot, given: Path | None, progress):
     """(plan, line saying which plan it is): the ``given`` file, else the robot's build under
     build/, else this cache, else a fit that is then cached."""
+    from .architecture import ArchitectureError, cost_model
     from .build import default_output_dir
     from .fit.fitter import FitError, fit_robot
     if given is not None:
@@ -105,8 +106,8 @@ def find_plan(robot, given: Path | None, progress):
             return plan, f"plan: {path} ({what})"
     progress(f"no plan for {robot.name} under build/ or in the cache: fitting")
     try:
-        plan = fit_robot(robot, progress)[0]
-    except FitError as e:
+        plan = fit_robot(robot, progress, cost_model=cost_model(robot))[0]
+    except (FitError, ArchitectureError) as e:
         raise PlanLookupError(str(e)) from None
     plan.meta["robot_description"] = robot_record(robot)
     try:

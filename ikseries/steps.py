@@ -20,7 +20,7 @@ import numpy as np
 
 from . import __version__
 from .accuracy import measure
-from .architecture import ArchitectureError, Choice, choose_architecture
+from .architecture import ArchitectureError, Choice, choose_architecture, cost_model
 from .fit.fitter import FitError, fit_robot
 from .fit.plan import Plan
 from .hdl.export import leg_verilog, module_name, robot_verilog
@@ -55,12 +55,14 @@ class Fitted:
 
 
 def fit(robot, progress) -> Fitted:
-    """Fit ``robot`` and measure the plan; refused unless the sampled error meets the tolerance."""
+    """Fit ``robot``, minimising its architectures' cost model
+    (:func:`ikseries.architecture.cost_model`), and measure the plan; refused unless the sampled
+    error meets the tolerance."""
     t0 = time.perf_counter()
     progress(f"fitting {robot.name} (tolerance ±{robot.fit.tolerance_pu:g} pu)")
     try:
-        plan, servos = fit_robot(robot, progress)
-    except FitError as e:
+        plan, servos = fit_robot(robot, progress, cost_model=cost_model(robot))
+    except (FitError, ArchitectureError) as e:
         raise StepError(str(e)) from None
     fit_s = _seconds_since(t0)
     plan.meta["robot_description"] = robot_record(robot)

@@ -90,3 +90,49 @@ def test_records_and_equality():
                                                          "(ecp5 18x18 DSP)"}
     assert Folded(2, "ice40") == Folded(2, "ice40") and Folded(2, "ice40") != Folded(1, "ice40")
     assert Shared(6, 1, "ice40").describe() == "folded evaluator shared by 6 legs, 1 multiplier (ice40 16x16 DSP)"
+
+
+def test_every_architecture_offers_the_multiplier_count():
+    """The fit's cache key does not name the cost model (see ikseries.fit.cost): an architecture
+    offering another model must first add it to Robot.fit_record, then change this test."""
+    from ikseries.fit.cost import DEFAULT_COST_MODEL, MultiplierCount
+    for arch in [*POLYNOMIAL, CordicPipelined(), CordicIterative()]:
+        assert arch.cost_model() == DEFAULT_COST_MODEL == MultiplierCount()
+
+
+def test_cost_model_of_a_robot_is_its_candidates(robot, monkeypatch):
+    from ikseries.architecture import ArchitectureError, cost_model
+    from ikseries.fit.cost import CostModel, MultiplierCount
+    from ikseries.robot import with_hardware
+    fastest = with_hardware(robot, architecture="fastest", fit_device="ecp5-25f")
+    assert cost_model(robot) == cost_model(with_hardware(robot, architecture="auto")) == MultiplierCount()
+
+    class PerTableRead(CostModel):
+        name = "table reads"
+
+        def cost(self, plan, output):
+            return 0.0
+    monkeypatch.setattr(Folded, "cost_model", lambda self: PerTableRead())
+    assert cost_model(robot) == MultiplierCount()       # pipelined only
+    with pytest.raises(ArchitectureError, match=r"^hardware.architecture = 'fastest' tries architectures that "
+                                                r"price a plan differently \(multipliers, table reads\); "
+                                                r"name one architecture$"):
+        cost_model(fastest)
+
+
+def test_the_fitter_prices_structures_by_the_cost_model(small_robot, small_plan):
+    """The fit asks the cost model it is given for every structure it weighs; with the default
+    model's prices it finds the default plan."""
+    from ikseries.fit.cost import MultiplierCount
+    from ikseries.fit.fitter import fit_robot
+
+    class Counting(MultiplierCount):
+        calls = []
+
+        def cost(self, plan, output):
+            c = super().cost(plan, output)
+            self.calls.append(c)
+            return c
+    model = Counting()
+    plan = fit_robot(small_robot, cost_model=model).plan
+    assert len(model.calls) > 10 and plan.dumps() == small_plan.dumps()

@@ -37,7 +37,7 @@ def fast_fit(monkeypatch, small_fitted):
     """build() gets the session's fit of the small robot instead of fitting (a fresh copy each
     time: the build stores the robot description in the plan's meta)."""
     plan, fits = small_fitted
-    monkeypatch.setattr(steps_mod, "fit_robot", lambda robot, progress: (_copy(plan), fits))
+    monkeypatch.setattr(steps_mod, "fit_robot", lambda robot, progress, **options: (_copy(plan), fits))
 
 
 @pytest.mark.parametrize("name, options", [
@@ -122,7 +122,7 @@ from ikseries.cli import main
 from ikseries.fit.plan import Plan
 import json
 plan = Plan.from_json(json.loads(Path(sys.argv[1]).read_text()))
-steps.fit_robot = lambda robot, progress: (plan, None)
+steps.fit_robot = lambda robot, progress, **options: (plan, None)
 
 def slow_simulation(core, plan, progress, vcd=None):
     Path(vcd).write_text("partial waveform")      # a half-written output in the temporary directory
@@ -156,7 +156,7 @@ def test_eval_fits_once_then_uses_the_cache(capsys, monkeypatch, tmp_path, small
     import ikseries.fit.fitter as fitter
     calls = []
 
-    def fit(robot, progress=None):
+    def fit(robot, progress=None, **options):
         calls.append(robot.name)
         return _copy(small_fitted[0]), small_fitted[1]
     monkeypatch.setattr(fitter, "fit_robot", fit)

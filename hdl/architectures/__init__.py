@@ -6,6 +6,8 @@ answers, from the plan alone and before any hardware is elaborated:
 - :meth:`Architecture.timing`: a :class:`Timing` (latency, initiation interval, the stream rule
   that says how the core's handshake behaves, and the legs that share it);
 - :meth:`Architecture.multiplier_units`: the multiplier units it instantiates;
+- :meth:`Architecture.cost_model`: what a plan costs it, the model the fitter minimises
+  (:mod:`ikseries.fit.cost`);
 - :meth:`Architecture.describe` / :meth:`Architecture.record`: what it is, for reports.
 
 and builds on request:
@@ -36,6 +38,8 @@ import abc
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 from typing import ClassVar
+
+from ...fit.cost import DEFAULT_COST_MODEL, CostModel
 
 __all__ = ["STREAM_RULES", "ENTRY_POINT_GROUP", "Timing", "BuildTarget", "Architecture", "architecture_names",
            "architecture_class"]
@@ -115,6 +119,11 @@ class Architecture(abc.ABC):
     @abc.abstractmethod
     def multiplier_units(self, plan) -> int | None:
         """Multiplier units instantiated (None: constant multiplies only)."""
+
+    def cost_model(self) -> CostModel:
+        """What a servo's evaluation costs this architecture (:mod:`ikseries.fit.cost`), for the
+        fitter to minimise: by default one unit per multiplication."""
+        return DEFAULT_COST_MODEL
 
     @abc.abstractmethod
     def describe(self) -> str:
