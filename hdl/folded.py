@@ -9,13 +9,22 @@ from amaranth.lib.wiring import In, Out
 from ..fit.plan import Plan
 from .evaluator import input_layout, output_layout
 from .limbmul import LimbMultiplier
+from .planmemo import per_plan
 from .schedule import ALU_OPS, Program, compile_program
 
-__all__ = ["FoldedEvaluator", "microcode_layout"]
+__all__ = ["FoldedEvaluator", "folded_program", "microcode_layout"]
 
 
 def _bits(n: int) -> int:
     return max(1, (n - 1).bit_length())
+
+
+@per_plan
+def folded_program(plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None) -> Program:
+    """:func:`~ikseries.hdl.schedule.compile_program` of ``plan``, computed once per plan object
+    and options (the architecture's timing and the evaluator share one program; nothing
+    changes a program once compiled)."""
+    return compile_program(plan, multipliers, dsp)
 
 
 def microcode_layout(prog: Program) -> data.StructLayout:
@@ -49,7 +58,7 @@ class FoldedEvaluator(wiring.Component):
     """Evaluates every output of ``plan`` on ``multipliers`` shared multipliers and one ALU.
 
     The plan is lowered, list-scheduled and register-allocated at construction
-    (:func:`ikseries.hdl.schedule.compile_program`); one evaluation then runs through a
+    (:func:`folded_program`); one evaluation then runs through a
     horizontal microcode ROM, one word per cycle. Constants are pre-loaded into the value
     memory (``Memory`` with ``init``: block RAM), which also holds the intermediates (two
     read ports, one write port). The ``lut`` tables are one more ROM (``Memory`` with
@@ -103,7 +112,7 @@ class FoldedEvaluator(wiring.Component):
     """
 
     def __init__(self, plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None):
-        self._prog = compile_program(plan, multipliers, dsp)
+        self._prog = folded_program(plan, multipliers, dsp)
         self._plan = plan
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),

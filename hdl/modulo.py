@@ -13,6 +13,7 @@ from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan
 from .evaluator import input_layout, node_expression, output_layout
 from .limbmul import check_dsp
+from .planmemo import per_plan
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
            "CLAMP_LATENCY"]
@@ -167,6 +168,7 @@ def _settle(plan: Plan, ready: list, start: list):
                 start[i], ready[i] = t, t + (CLAMP_LATENCY if n.op == "clamp" else 1)
 
 
+@per_plan
 def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = dsp_size("ecp5")
                     ) -> ModuloSchedule:
     """List-schedule ``plan`` with its multiplications on shared multipliers, each free once
@@ -182,6 +184,9 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     operand order) that adds the fewest new sources to its operand multiplexers (products that
     share an operand go to one multiplier), then whose widths grow least. Additions, clamps and table reads have their own
     hardware and run as soon as their operands are ready.
+
+    Computed once per plan object and options (:func:`~ikseries.hdl.planmemo.per_plan`): the
+    architecture's timing, its multiplier count and the evaluator share one schedule.
     """
     ii = initiation_interval
     nodes = plan.nodes
