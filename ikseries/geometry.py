@@ -24,8 +24,9 @@ against ``fk`` and its reachability errors.
 from __future__ import annotations
 
 import abc
-from importlib.metadata import entry_points
 from typing import ClassVar
+
+from .plugins import load_registered, registered
 
 __all__ = ["ENTRY_POINT_GROUP", "Geometry", "CylindricalGeometry", "geometry_names", "geometry_class",
            "geometry_type"]
@@ -92,26 +93,19 @@ class CylindricalGeometry(Geometry):
         """Frame coordinates of joint angles (deg)."""
 
 
-def _registered() -> dict:
-    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
-
-
 def geometry_names() -> list[str]:
     """``geometry.type`` names of the registered geometries, sorted."""
-    return sorted(_registered())
+    return list(registered(ENTRY_POINT_GROUP))
 
 
 def geometry_class(name) -> type[Geometry]:
     """The registered geometry class of ``geometry.type = name``."""
-    eps = _registered()
-    if name not in eps:
-        raise ValueError(f"geometry.type must be one of {sorted(eps)}, not {name!r}")
-    return eps[name].load()
+    return load_registered(ENTRY_POINT_GROUP, name, "geometry.type")
 
 
 def geometry_type(geometry: Geometry) -> str:
     """The registered name of ``geometry``'s class."""
-    for name, ep in sorted(_registered().items()):
+    for name, ep in registered(ENTRY_POINT_GROUP).items():
         if type(geometry) is ep.load():
             return name
     raise ValueError(f"geometry must be an instance of a registered geometry class, not {geometry!r}")

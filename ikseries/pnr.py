@@ -315,21 +315,40 @@ def place_and_route(verilog: str, top: str, device: str, clock_hz: int, workdir:
         raise DoesNotFitError(device, top, {"IO": (port_bits, dev.user_io)},
                               "port bits vs package pins; use harness=True for a timing-only run")
     workdir = Path(workdir).resolve()
+    sources, synth_top, clock_pin_name = _write_sources(verilog, top, ports, workdir, use_harness, clock, reset)
+    # the harness's shift registers: one flip-flop per core input bit (clock and reset aside)
+    # and per output bit
+    harness_ffs = (sum(p.width for p in ports if p.direction != "output" and p.name not in (clock, reset))
+                   + sum(p.width for p in ports if p.direction == "output")) if use_harness else 0
+    syn = _synthesise(sources, synth_top, device, top, workdir, timeout)
+    pnr_s = _run_nextpnr(device, top, workdir / dev.family, clock_pin_name, clock_hz, seed, timeout)
+    report, fmax_all, util = _read_report(workdir / dev.family, device)
+    net, fmax = _clock_fmax(fmax_all, device, clock_pin_name)
+    return PnrResult(
+        device=device, top=top, clock_hz=clock_hz, seed=seed, harness=use_harness, port_bits=port_bits,
+        harness_ffs=harness_ffs, fmax_mhz=round(fmax, 3), utilisation=_utilisation(dev, util, syn["counts"]),
+        synth_cells=syn["cells"], nextpnr_utilisation={k: v for k, v in sorted(util.items()) if v.get("used")},
+        critical_path=_critical_path(report, net), seconds={"yosys": syn["seconds"], "nextpnr": pnr_s})
+
+
+def _write_sources(verilog, top, ports, workdir: Path, use_harness: bool, clock, reset):
+    """``core.v`` (and with the harness ``harness.v``) in ``workdir``: the sources, the top
+    module to synthesise and the name of its clock port."""
     workdir.mkdir(parents=True, exist_ok=True)
     (workdir / "core.v").write_text(verilog)
     sources = [workdir / "core.v"]
-    synth_top, harness_ffs = top, 0
-    if use_harness:
-        (workdir / "harness.v").write_text(harness_verilog(ports, top, clock, reset))
-        sources.append(workdir / "harness.v")
-        synth_top, clock_pin_name = HARNESS_TOP, "clk"
-        harness_ffs = sum(p.width for p in ports if p.direction != "output" and p.name not in (clock, reset)) \
-            + sum(p.width for p in ports if p.direction == "output")
-    else:
+    if not use_harness:
         (workdir / "harness.v").unlink(missing_ok=True)
-        clock_pin_name = clock
+        return sources, top, clock
+    (workdir / "harness.v").write_text(harness_verilog(ports, top, clock, reset))
+    sources.append(workdir / "harness.v")
+    return sources, HARNESS_TOP, "clk"
 
-    # -- Yosys
+
+def _synthesise(sources, synth_top, device, top, workdir: Path, timeout) -> dict:
+    """Yosys run of ``synth_top`` for the device's family (with its netlist for nextpnr);
+    raises DoesNotFitError when its cells exceed the device's limits."""
+    dev = PNR_DEVICES[device]
     try:
         syn = synth_counts(sources, synth_top, targets=[dev.family], workdir=workdir, netlist=True,
                            timeout=timeout)[dev.family]
@@ -343,17 +362,21 @@ def place_and_route(verilog: str, top: str, device: str, clock_hz: int, workdir:
             over[res] = (used, cap)
     if over:
         raise DoesNotFitError(device, top, over, "Yosys cell counts vs device capacity")
+    return syn
 
-    # -- nextpnr
-    tdir = workdir / dev.family
+
+def _run_nextpnr(device, top, tdir: Path, clock_pin_name, clock_hz, seed, timeout) -> float:
+    """nextpnr on ``tdir/netlist.json`` (writing ``report.json``): its run time in seconds.
+    Raises DoesNotFitError from its utilisation log, PnrError quoting its log when it fails."""
+    dev = PNR_DEVICES[device]
+    tool = device_family(dev.family).nextpnr
     for stale in ("report.json", "nextpnr.log"):
         (tdir / stale).unlink(missing_ok=True)
     (tdir / tool.pin_file).write_text(tool.clock_constraint(clock_pin_name, dev.clock_pin))
-    pins = list(tool.pin_args)
     cmd = nextpnr_command(dev.family)
     warm_nextpnr(dev.family, cmd)   # parallel first runs would race on YoWASP's cache
     argv = [*cmd, *dev.nextpnr_args, "--json", "netlist.json", "--report", "report.json",
-            "--freq", f"{clock_hz / 1e6:.9g}", "--seed", str(seed), "--timing-allow-fail", *pins,
+            "--freq", f"{clock_hz / 1e6:.9g}", "--seed", str(seed), "--timing-allow-fail", *tool.pin_args,
             "-q", "-l", "nextpnr.log"]
     t0 = time.perf_counter()
     with open(tdir / "nextpnr.out", "wb") as out:
@@ -372,19 +395,33 @@ def place_and_route(verilog: str, top: str, device: str, clock_hz: int, workdir:
         tail = _tail(tdir / "nextpnr.log") or _tail(tdir / "nextpnr.out")
         raise PnrError(f"nextpnr for {device} exited with status {proc.returncode}\n"
                        f"--- last lines of the nextpnr log ---\n{tail}")
+    return pnr_s
+
+
+def _read_report(tdir: Path, device) -> tuple[dict, dict, dict]:
+    """nextpnr's ``report.json``, its ``fmax`` by clock net and its ``utilization`` by BEL type."""
     try:
         report = json.loads((tdir / "report.json").read_text())
-        fmax_all, util = report["fmax"], report["utilization"]
+        return report, report["fmax"], report["utilization"]
     except (OSError, ValueError, KeyError) as e:
         raise PnrError(f"nextpnr for {device} wrote no usable report.json ({e})") from None
+
+
+def _clock_fmax(fmax_all: dict, device, clock_pin_name) -> tuple[str, float]:
+    """The clock net of port ``clock_pin_name`` among nextpnr's clock nets and its achieved
+    Fmax (MHz)."""
     clocks = {k: v for k, v in fmax_all.items()
               if not k.startswith("$PACKER") and re.search(rf"(^|\$){re.escape(clock_pin_name)}(\$|$)", k)}
     if len(clocks) != 1:
         raise PnrError(f"nextpnr for {device} reported no single Fmax for clock port {clock_pin_name!r} "
                        f"(clock nets: {sorted(fmax_all)}); does the design have register-to-register paths?")
-    fmax = float(next(iter(clocks.values()))["achieved"])
+    net = next(iter(clocks))
+    return net, float(clocks[net]["achieved"])
 
-    counts = syn["counts"]
+
+def _utilisation(dev: PnrDevice, util: dict, counts: dict) -> dict:
+    """Used and available per resource: nextpnr's BELs, the LUTs and FFs (Yosys counts against
+    the logic cells where nextpnr has no column) and the carry cells."""
     utilisation = {}
     for col, bel in dev.bels:
         u = util.get(bel, {"used": 0, "available": 0})
@@ -393,12 +430,7 @@ def place_and_route(verilog: str, top: str, device: str, clock_hz: int, workdir:
     utilisation["LUT"] = {"used": counts["LUT"], "available": lc_cap}
     utilisation.setdefault("FF", {"used": counts["FF"], "available": lc_cap})
     utilisation["carry"] = {"used": counts["carry"], "available": None}
-    return PnrResult(
-        device=device, top=top, clock_hz=clock_hz, seed=seed, harness=use_harness, port_bits=port_bits,
-        harness_ffs=harness_ffs, fmax_mhz=round(fmax, 3), utilisation=utilisation, synth_cells=cells,
-        nextpnr_utilisation={k: v for k, v in sorted(util.items()) if v.get("used")},
-        critical_path=_critical_path(report, next(iter(clocks))),
-        seconds={"yosys": syn["seconds"], "nextpnr": pnr_s})
+    return utilisation
 
 
 def _critical_path(report: dict, net: str) -> dict:

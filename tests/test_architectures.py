@@ -136,3 +136,27 @@ def test_the_fitter_prices_structures_by_the_cost_model(small_robot, small_plan)
     model = Counting()
     plan = fit_robot(small_robot, cost_model=model).plan
     assert len(model.calls) > 10 and plan.dumps() == small_plan.dumps()
+
+
+def test_rating_and_building_a_core_schedule_it_once(small_plan, robot):
+    """The rate, the multiplier count and the built core share one schedule per plan object."""
+    from ikseries.fit.plan import Plan
+    mod = Modulo(4, "ecp5")
+    sch = mod.build(small_plan, build_target(robot)).evaluator.schedule
+    assert mod.evaluator(small_plan).schedule is sch and mod.multiplier_units(small_plan) == sch.units
+    fold = Folded(2, "ice40")
+    assert fold.build(small_plan, build_target(robot)).evaluator.program is fold.program(small_plan)
+    twin = Plan.from_json(small_plan.to_json())
+    assert mod.evaluator(twin).schedule == sch and mod.evaluator(twin).schedule is not sch
+
+
+def test_every_core_rate_is_its_timings(small_plan, robot):
+    """The robot core's and the manifest's refresh rates are those of the architecture's timing."""
+    from ikseries.hdl.export import core_timing
+    target = build_target(robot)
+    for arch in POLYNOMIAL:
+        t, core = arch.timing(small_plan), arch.build(small_plan, target)
+        assert core_timing(core) == t
+        assert core_timing(core).refresh_hz(target.clock_hz) == target.clock_hz / (arch.legs * t.initiation_interval)
+    shared = Shared(3, 1, "ecp5").build(small_plan, target)
+    assert shared.refresh_hz == Shared(3, 1, "ecp5").timing(small_plan).refresh_hz(target.clock_hz)

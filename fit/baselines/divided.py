@@ -402,6 +402,47 @@ def path_report(geometry: PlanarArm, case: PathCase, *, pu_per_degree: float = 2
             raise ValueError(f"{name} must be an integer >= {lo}, not {v!r}")
     g = dataclasses.replace(geometry, phi=float(case.phi))
     pu = float(pu_per_degree)
+    path = _sample_path(g, case, samples)
+    joints, dd_angles, mm_angles = {}, [], []
+    for k, servo in enumerate(g.servos):
+        joints[servo], dd, mm = _joint_report(g, case, path, k, pu, tolerance_pu, grid, max_degree)
+        dd_angles.append(dd)
+        mm_angles.append(mm)
+    xn, yn = path.nodes
+    return {
+        "case": case.name, "phi_deg": float(case.phi), "path": case.line,
+        "direction": list(path.direction), "incidence_weights": {"x": path.interps[0].wx, "y": path.interps[0].wy},
+        "nodes": {"x": xn.tolist(), "y": yn.tolist(), "t": path.tn.tolist()},
+        "check_samples": int(len(path.tc)), "pu_per_degree": pu,
+        "joints": joints,
+        "fk": _fk_errors(g, path, dd_angles, mm_angles),
+    }
+
+
+@dataclass(frozen=True)
+class _SampledPath:
+    """One case's path sampled for :func:`path_report`: the nodes (points and parameter ``tn``)
+    and the per-joint interpolants through their angles, the fit samples ``t`` and the check
+    samples ``tc`` (points ``x``, ``y``) with the exact angles (``raw``: as the IK gives them;
+    ``exact``: on the continuous branch nearest ``refs``, the angles at the middle) and rates."""
+    nodes: tuple
+    tn: np.ndarray
+    direction: tuple
+    t: np.ndarray
+    tc: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    raw: tuple
+    refs: list
+    exact: list
+    node_angles: list
+    interps: list
+    exact_rates: tuple
+    fit_exact: list
+
+
+def _sample_path(g: PlanarArm, case: PathCase, samples: int) -> _SampledPath:
+    """``case``'s path for ``g`` with ``samples`` fit samples between its extreme nodes."""
     xn, yn = case.node_points()
     tn = case.parameter(xn, yn)
     ux, uy = case.direction()
@@ -414,49 +455,52 @@ def path_report(geometry: PlanarArm, case: PathCase, *, pu_per_degree: float = 2
     exact = [_branch(a, r, f"case {case.name}: joint {s} along the path") for a, r, s in zip(raw, refs, g.servos)]
     node_angles = [nearest_turn(a, r) for a, r in zip(g.ik(xn, yn), refs)]
     interps = [path_interpolant(xn, yn, a) for a in node_angles]
-    ex_vel, ex_acc = g.rates(*exact, ux, uy)
+    ex_rates = g.rates(*exact, ux, uy)
     fit_exact = [nearest_turn(a, r) for a, r in zip(g.ik(*case.points(t)), refs)]
+    return _SampledPath((xn, yn), tn, (ux, uy), t, tc, x, y, raw, refs, exact, node_angles, interps, ex_rates,
+                        fit_exact)
 
-    joints, dd_angles, mm_angles = {}, [], []
-    for k, servo in enumerate(g.servos):
-        ip = interps[k]
-        val, vel, acc = ip.along(x, y, ux, uy)
-        dd_angles.append(val)
-        err = np.abs(val - exact[k])
-        i = int(np.argmax(err))
-        mm_angles.append(_minimax_1d(t, fit_exact[k], tc, len(tn) - 1))
-        mm_err = np.abs(mm_angles[k] - exact[k])
-        j = int(np.argmax(mm_err))
-        nv = ip(xn, yn)
-        px, py = ip.power()
-        joints[servo] = {
-            "node_angles_deg": [float(v) for v in node_angles[k]],
-            "node_residual_deg": float(np.max(np.abs(nv - node_angles[k]))),
-            "wraps_0_360": bool(np.any(np.abs(np.diff(raw[k])) > 180.0)),
-            "newton_x": list(ip.cx), "newton_y": list(ip.cy), "power_x": px, "power_y": py,
-            "power_t": [float(c) for c in newton_to_power(tn, divided_differences(tn, node_angles[k]))],
-            "max_error_deg": float(err[i]), "max_error_pu": float(err[i] * pu), "at": _at(i, tc, x, y),
-            "rates": _rates(ip, (tc, x, y), (xn, yn), (ux, uy), (vel, acc), (ex_vel[k], ex_acc[k])),
-            "minimax_path": {"max_error_deg": float(mm_err[j]), "max_error_pu": float(mm_err[j] * pu),
-                             "at": _at(j, tc, x, y)},
-            "workspace": _workspace(g, case, interps, refs, k, pu, tolerance_pu, grid, max_degree),
-        }
 
+def _joint_report(g, case, path: _SampledPath, k, pu, tolerance_pu, grid, max_degree) -> tuple:
+    """Joint ``k``'s record for :func:`path_report`, its divided-differences angles along the
+    check samples and those of its minimax cubic along the path."""
+    (xn, yn), (ux, uy), tc, x, y = path.nodes, path.direction, path.tc, path.x, path.y
+    ip = path.interps[k]
+    val, vel, acc = ip.along(x, y, ux, uy)
+    err = np.abs(val - path.exact[k])
+    i = int(np.argmax(err))
+    mm = _minimax_1d(path.t, path.fit_exact[k], tc, len(path.tn) - 1)
+    mm_err = np.abs(mm - path.exact[k])
+    j = int(np.argmax(mm_err))
+    nv = ip(xn, yn)
+    px, py = ip.power()
+    ex_vel, ex_acc = path.exact_rates
+    record = {
+        "node_angles_deg": [float(v) for v in path.node_angles[k]],
+        "node_residual_deg": float(np.max(np.abs(nv - path.node_angles[k]))),
+        "wraps_0_360": bool(np.any(np.abs(np.diff(path.raw[k])) > 180.0)),
+        "newton_x": list(ip.cx), "newton_y": list(ip.cy), "power_x": px, "power_y": py,
+        "power_t": [float(c) for c in newton_to_power(path.tn, divided_differences(path.tn, path.node_angles[k]))],
+        "max_error_deg": float(err[i]), "max_error_pu": float(err[i] * pu), "at": _at(i, tc, x, y),
+        "rates": _rates(ip, (tc, x, y), (xn, yn), (ux, uy), (vel, acc), (ex_vel[k], ex_acc[k])),
+        "minimax_path": {"max_error_deg": float(mm_err[j]), "max_error_pu": float(mm_err[j] * pu),
+                         "at": _at(j, tc, x, y)},
+        "workspace": _workspace(g, case, path.interps, path.refs, k, pu, tolerance_pu, grid, max_degree),
+    }
+    return record, val, mm
+
+
+def _fk_errors(g, path: _SampledPath, dd_angles, mm_angles) -> dict:
+    """Tip position error along the path of the divided-differences and minimax angles."""
+    tc, x, y = path.tc, path.x, path.y
     fx, fy = g.fk(*dd_angles)
     pos = np.hypot(fx - x, fy - y)
     i = int(np.argmax(pos))
     mx, my = g.fk(*mm_angles)
     mpos = np.hypot(mx - x, my - y)
     j = int(np.argmax(mpos))
-    return {
-        "case": case.name, "phi_deg": float(case.phi), "path": case.line,
-        "direction": [ux, uy], "incidence_weights": {"x": interps[0].wx, "y": interps[0].wy},
-        "nodes": {"x": xn.tolist(), "y": yn.tolist(), "t": tn.tolist()},
-        "check_samples": int(len(tc)), "pu_per_degree": pu,
-        "joints": joints,
-        "fk": {"max_position_error": float(pos[i]), "at": _at(i, tc, x, y),
-               "minimax_path_max_position_error": float(mpos[j]), "minimax_path_at": _at(j, tc, x, y)},
-    }
+    return {"max_position_error": float(pos[i]), "at": _at(i, tc, x, y),
+            "minimax_path_max_position_error": float(mpos[j]), "minimax_path_at": _at(j, tc, x, y)}
 
 
 def run_divided_differences(geometry: PlanarArm, cases=DEFAULT_CASES, *, pu_per_degree: float = 20.0,

@@ -36,10 +36,10 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass
-from importlib.metadata import entry_points
 from typing import ClassVar
 
 from ...fit.cost import DEFAULT_COST_MODEL, CostModel
+from ...plugins import load_registered, registered
 
 __all__ = ["STREAM_RULES", "ENTRY_POINT_GROUP", "Timing", "BuildTarget", "Architecture", "architecture_names",
            "architecture_class"]
@@ -141,18 +141,11 @@ class Architecture(abc.ABC):
         return hash((type(self), tuple(sorted(self.record().items()))))
 
 
-def _registered() -> dict:
-    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
-
-
 def architecture_names() -> list[str]:
     """Names of the registered architectures, sorted."""
-    return sorted(_registered())
+    return list(registered(ENTRY_POINT_GROUP))
 
 
 def architecture_class(name: str) -> type[Architecture]:
     """The registered :class:`Architecture` subclass called ``name``."""
-    eps = _registered()
-    if name not in eps:
-        raise ValueError(f"architecture must be one of {', '.join(sorted(eps))}, not {name!r}")
-    return eps[name].load()
+    return load_registered(ENTRY_POINT_GROUP, name, "architecture")

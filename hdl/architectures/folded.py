@@ -1,9 +1,8 @@
 """Folded evaluator: the whole plan as microcode on a few multipliers, one target at a time."""
 from __future__ import annotations
 
-from ..folded import FoldedEvaluator
+from ..folded import FoldedEvaluator, folded_program
 from ..leg import LegCore
-from ..schedule import compile_program
 from . import Architecture, BuildTarget, Timing
 from .options import dsp_label, dsp_size, positive_int
 
@@ -32,7 +31,7 @@ class Folded(Architecture):
 
     def program(self, plan):
         """The compiled program (pure data: steps, unit schedule, memories)."""
-        return compile_program(plan, self.multipliers, dsp_size(self.dsp))
+        return folded_program(plan, self.multipliers, dsp_size(self.dsp))
 
     def timing(self, plan) -> Timing:
         steps = self.program(plan).steps
