@@ -96,7 +96,9 @@ def test_every_architecture_offers_the_multiplier_count():
     """The fit's cache key does not name the cost model (see ikseries.fit.cost): an architecture
     offering another model must first add it to Robot.fit_record, then change this test."""
     from ikseries.fit.cost import DEFAULT_COST_MODEL, MultiplierCount
-    for arch in [*POLYNOMIAL, CordicPipelined(), CordicIterative()]:
+    for name in architecture_names():
+        assert architecture_class(name).cost_model is Architecture.cost_model, name
+    for arch in POLYNOMIAL:
         assert arch.cost_model() == DEFAULT_COST_MODEL == MultiplierCount()
 
 
@@ -120,22 +122,31 @@ def test_cost_model_of_a_robot_is_its_candidates(robot, monkeypatch):
         cost_model(fastest)
 
 
-def test_the_fitter_prices_structures_by_the_cost_model(small_robot, small_plan):
-    """The fit asks the cost model it is given for every structure it weighs; with the default
-    model's prices it finds the default plan."""
+def test_the_fitter_prices_structures_by_the_cost_model(small_robot, monkeypatch):
+    """fit_robot hands its cost model to the fit context, and the structure search prices a
+    candidate structure by it (the trial plan of the one servo, named "cost")."""
+    import ikseries.fit.fitter as fitter
+    from ikseries.fit.context import FitContext
     from ikseries.fit.cost import MultiplierCount
-    from ikseries.fit.fitter import fit_robot
+    from ikseries.fit.lowering import structure_cost
+    from ikseries.fit.structure import feature_sets
 
     class Counting(MultiplierCount):
-        calls = []
+        def __init__(self):
+            self.priced = []
 
         def cost(self, plan, output):
-            c = super().cost(plan, output)
-            self.calls.append(c)
-            return c
+            self.priced.append(output)
+            return 1000 + super().cost(plan, output)
     model = Counting()
-    plan = fit_robot(small_robot, cost_model=model).plan
-    assert len(model.calls) > 10 and plan.dumps() == small_plan.dumps()
+    contexts = []
+    monkeypatch.setattr(fitter, "_fit_attempts", lambda ctx, progress, certified: contexts.append(ctx))
+    fitter.fit_robot(small_robot, cost_model=model)
+    assert [c.cost_model for c in contexts] == [model]
+    ctx = FitContext.for_robot(small_robot, 0.1, model)
+    fs = feature_sets(ctx, 0)[0]
+    terms = [(0,) * len(fs.names), (1,) + (0,) * (len(fs.names) - 1)]
+    assert structure_cost(ctx, fs, terms) >= 1000 and model.priced == ["cost"]
 
 
 def test_rating_and_building_a_core_schedule_it_once(small_plan, robot):

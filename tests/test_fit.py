@@ -124,8 +124,12 @@ def test_a_plan_that_fails_certification_is_refitted_then_refused(small_robot, m
     real = fitter.certify
     budgets = []
 
+    first = []
+
     def failing(robot, plan, **kw):
-        cert = real(robot, plan, **kw)
+        if not first:       # one real certification; the refits' plans differ only in s2
+            first.append(real(robot, plan, **kw))
+        cert = first[0]
         budgets.append(plan.meta["budget_pu"]["approximation"])
         s = dataclasses.replace(cert.servos[1], approximation_pu=robot.fit.tolerance_pu)   # s2 fails
         return dataclasses.replace(cert, servos=(cert.servos[0], s, *cert.servos[2:]))
@@ -257,9 +261,18 @@ def test_products_dsp_fit_every_product_into_one_dsp_block_and_stay_certified(ds
     assert all(c["total_pu"] <= robot.fit.tolerance_pu for c in plan.meta["certificate"]["servos"])
 
 
-def test_products_dsp_give_rounding_a_larger_share_when_the_usual_one_is_too_small(small_robot, monkeypatch):
+def _fitted_servos(monkeypatch, small_fitted):
+    """Every servo search returns the session's fits of the small robot: the tests using this
+    are about the formats after the search, which it would only repeat."""
+    from ikseries.fit import fitter
+    monkeypatch.setattr(fitter, "_fit_servos", lambda ctx, samples, fits, approx, progress: list(small_fitted[1]))
+
+
+def test_products_dsp_give_rounding_a_larger_share_when_the_usual_one_is_too_small(small_robot, small_fitted,
+                                                                                   monkeypatch):
     from ikseries.fit import fitter
     from ikseries.robot import with_fit, with_hardware
+    _fitted_servos(monkeypatch, small_fitted)
     seen, msgs = [], []
     real = fitter.choose_formats
 
@@ -280,9 +293,10 @@ def test_products_dsp_give_rounding_a_larger_share_when_the_usual_one_is_too_sma
     assert seen == pytest.approx([0.10])
 
 
-def test_products_dsp_say_why_when_no_rounding_share_is_enough(small_robot, monkeypatch):
+def test_products_dsp_say_why_when_no_rounding_share_is_enough(small_robot, small_fitted, monkeypatch):
     from ikseries.fit import fitter
     from ikseries.robot import with_fit, with_hardware
+    _fitted_servos(monkeypatch, small_fitted)
 
     def never(ctx, fits, progress):
         raise fitter.FormatError(f"no fixed-point format keeps the certified rounding error within "
