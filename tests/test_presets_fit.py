@@ -38,9 +38,15 @@ def test_preset_fits_within_tolerance_and_simulates_bit_exact(name):
     assert set(res.latencies.tolist()) == {core.latency}
 
 
-def test_planar_arm_builds_end_to_end(tmp_path):
-    """The whole `ikseries build` pipeline on a 2-input, 2-servo robot (no synthesis/cocotb)."""
+def test_planar_arm_builds_end_to_end(tmp_path, tmp_path_factory, monkeypatch):
+    """The whole `ikseries build` pipeline on a 2-input, 2-servo robot (no synthesis/cocotb),
+    from the run's fit of that robot (the build's own fit step is what the cylinder-leg builds
+    test)."""
+    import ikseries.steps
+    from helpers import shared_fit
     robot = load_preset("planar-arm")
+    fit = shared_fit(tmp_path_factory, "planar-arm", robot)
+    monkeypatch.setattr(ikseries.steps, "fit_robot", lambda r, progress, **options: fit)
     rep = build(robot, tmp_path / "arm", synth=False, cocotb=[], progress=lambda m: None)
     assert all(s["error_pu"]["total"] <= robot.fit.tolerance_pu for s in rep.record()["servos"])
     assert (tmp_path / "arm" / "planar_arm_core.v").read_text().count("pwm_s") >= 2
