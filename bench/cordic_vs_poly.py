@@ -10,13 +10,15 @@ For one robot (default: the cylinder-leg preset):
    (``ikseries.hdl.flat.FlatStreamTop``: evaluator / solver only, no PWM);
 4. Yosys resource counts for every family of the device registry (``ikseries.synth``), netlists
    kept in ``<out>/<design>/<target>/netlist.json`` for a place-and-route step;
-5. (hook) ``pnr_step``: add Fmax from ``ikseries.pnr`` when it exists (see ``STEPS``).
+5. with ``--pnr DEVICES``: Fmax and placed utilisation from Yosys + nextpnr (``ikseries.pnr``)
+   on each device, at the robot's clock.
 
 Prints a table and writes JSON (default ``docs/results/cordic_vs_poly.json``; Verilog and netlists
 under ``--out``).
 
     python bench/cordic_vs_poly.py [--robot FILE] [--margins 0,0.075] [--design JSON] [--no-poly]
-                                   [--targets ice40,ecp5,xc7] [--jobs N] [--out DIR] [--json FILE]
+                                   [--targets ice40,ecp5,xc7] [--pnr DEVICES] [--jobs N] [--out DIR]
+                                   [--json FILE]
 
 One CORDIC design per sizing margin: margin 0 meets the tolerance exactly on the verification
 points (it may exceed it slightly elsewhere: see the fresh-point figures), 0.075 pu is the
@@ -45,7 +47,7 @@ from ikseries.hdl.cordic import CordicLegSolver
 from ikseries.hdl.evaluator import PlanEvaluator
 from ikseries.hdl.flat import stream_verilog
 from ikseries.robot import load_preset, load_robot
-from ikseries.constraints.devices import FAMILIES as TARGETS
+from ikseries.constraints.devices import FAMILIES as TARGETS, PNR_DEVICES
 from ikseries.synth import synth_counts
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
@@ -127,13 +129,23 @@ def synth_step(ctx: dict) -> None:
 
 
 def pnr_step(ctx: dict) -> None:
-    """Fmax per target from place and route, when ``ikseries.pnr`` is available (not yet)."""
-    try:
-        from ikseries import pnr  # noqa: F401
-    except ImportError:
-        ctx["notes"].append("place and route skipped: ikseries.pnr is not available")
+    """Fmax and placed utilisation per ``--pnr`` device (``ikseries.pnr``, nextpnr seed 1) at
+    the robot's clock; a design that does not fit the device is recorded as such."""
+    devices = ctx["pnr_devices"]
+    if not devices:
+        ctx["notes"].append("place and route not run (--pnr DEVICES runs it)")
         return
-    ctx["notes"].append("place and route: ikseries.pnr exists but this bench does not call it yet")
+    from ikseries.pnr import DoesNotFitError, place_and_route
+    clock = ctx["robot"].hardware.clock_hz
+    for name, d in ctx["designs"].items():
+        d["record"]["pnr"] = {}
+        for dev in devices:
+            say(f"place and route of {name} on {dev} ...")
+            try:
+                res = place_and_route(d["verilog"].read_text(), d["top"], dev, clock, ctx["out"] / name / f"pnr-{dev}")
+                d["record"]["pnr"][dev] = res.to_json()
+            except DoesNotFitError as e:
+                d["record"]["pnr"][dev] = {"fits": False, "overflow": {k: list(v) for k, v in e.overflow.items()}}
 
 
 STEPS = [polynomial_step, cordic_step, export_step, synth_step, pnr_step]
@@ -161,6 +173,9 @@ def _table(ctx: dict) -> str:
     for t in ctx["targets"]:
         for c in ("LUT", "FF", "carry", "DSP"):
             row(f"{t} {c}", lambda r, t=t, c=c: r["synth"][t]["counts"][c])
+    for dev in ctx["pnr_devices"]:
+        row(f"{dev} Fmax (MHz)", lambda r, dev=dev: (f"{r['pnr'][dev]['fmax_mhz']:.1f}" if r["pnr"][dev]["fits"]
+                                                      else "does not fit"))
     return "\n".join(rows)
 
 
@@ -173,6 +188,7 @@ def main(argv=None):
                          "the verification points, 0.075 = the polynomial fitter's 15 %% margin")
     ap.add_argument("--no-poly", action="store_true", help="skip the polynomial design")
     ap.add_argument("--targets", default=",".join(TARGETS))
+    ap.add_argument("--pnr", default="", help="place-and-route devices, comma-separated (default: none)")
     ap.add_argument("--jobs", type=int, default=1, help="parallel Yosys processes")
     ap.add_argument("--out", default="build/cordic_vs_poly")
     ap.add_argument("--json", default=FACTS["default_json"]("cordic_vs_poly"), help="output JSON")
@@ -184,6 +200,10 @@ def main(argv=None):
             sys.exit(f"--targets must name targets among {', '.join(TARGETS)}, not {t!r}")
     if args.jobs < 1:
         sys.exit(f"--jobs must be >= 1, not {args.jobs}")
+    pnr_devices = [v for v in args.pnr.split(",") if v]
+    for v in pnr_devices:
+        if v not in PNR_DEVICES:
+            sys.exit(f"--pnr must name devices among {', '.join(PNR_DEVICES)}, not {v!r}")
     try:
         margins = [float(v) for v in args.margins.split(",") if v]
     except ValueError:
@@ -192,7 +212,7 @@ def main(argv=None):
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     ctx = {"args": args, "robot": robot, "targets": targets, "out": out, "designs": {}, "notes": [],
-           "margins": margins,
+           "margins": margins, "pnr_devices": pnr_devices,
            "points": verification_points(robot)}
     t0 = time.perf_counter()
     for step in STEPS:
