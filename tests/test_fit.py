@@ -1,6 +1,7 @@
 """The fitted plan of the default robot: accuracy, structure, certified bounds, determinism."""
 import dataclasses
 import itertools
+import json
 
 import numpy as np
 import pytest
@@ -89,8 +90,12 @@ def test_verification_points_are_every_point_of_a_small_workspace(small_robot):
 
 
 def test_fit_is_deterministic(small_robot, small_plan):
-    again, _ = fit_robot(small_robot)
-    assert again.dumps() == small_plan.dumps()
+    """A second fit gives the same plan (the certificate's determinism is pinned by test_cli's
+    byte-identical builds)."""
+    again = json.loads(fit_robot(small_robot, certified=False).plan.dumps())
+    first = json.loads(small_plan.dumps())
+    first["meta"].pop("certificate")
+    assert again == first
 
 
 def test_tolerance_below_output_rounding_is_refused(robot):
@@ -117,13 +122,14 @@ def test_no_node_of_the_real_plan_leaves_its_interval(plan):
             assert n.width <= 62
 
 
-def test_a_plan_that_fails_certification_is_refitted_then_refused(small_robot, monkeypatch):
+def test_a_plan_that_fails_certification_is_refitted_then_refused(small_robot, small_fitted, monkeypatch):
     """The fitter tightens the failing servo's budget and refits; if the certified bound still
-    exceeds the tolerance, the fit is refused with the certifier's message."""
+    exceeds the tolerance, the fit is refused with the certifier's message. (The servo search
+    returns the run's fits of the small leg: what is under test is the loop around it.)"""
     import ikseries.fit.fitter as fitter
     real = fitter.certify
     budgets = []
-
+    stored = {sf.name: sf for sf in small_fitted[1]}
     first = []
 
     def failing(robot, plan, **kw):
@@ -135,10 +141,8 @@ def test_a_plan_that_fails_certification_is_refitted_then_refused(small_robot, m
         return dataclasses.replace(cert, servos=(cert.servos[0], s, *cert.servos[2:]))
 
     refits = []
-    orig_fit = fitter.fit_servo
     monkeypatch.setattr(fitter, "certify", failing)
-    monkeypatch.setattr(fitter, "fit_servo",
-                        lambda *a: refits.append((a[1], a[5])) or orig_fit(*a))
+    monkeypatch.setattr(fitter, "fit_servo", lambda *a: refits.append((a[1], a[5])) or stored[a[1]])
     with pytest.raises(FitError, match=r"^fit refused: servo s2: certified error [0-9.]+ pu exceeds "
                                        r"the tolerance 4 pu"):
         fit_robot(small_robot)

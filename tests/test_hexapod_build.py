@@ -72,13 +72,18 @@ def test_hexapod_core_rate_matches_a_rebuilt_core(hexapod):
         rep["latency_cycles"], rep["initiation_interval"], rep["refresh_hz"])
 
 
-def test_single_leg_folded_build_from_the_command_line(tmp_path, capsys):
+def test_single_leg_folded_build_from_the_command_line(tmp_path, capsys, monkeypatch, small_fitted):
+    """A folded leg from the command line, from the run's fit of the small leg (the same fit
+    record: only the name differs); cocotb of folded Verilog is in test_cocotb.py, the build's
+    cocotb step on a folded (shared) core in the hexapod build."""
+    import ikseries.steps
+    monkeypatch.setattr(ikseries.steps, "fit_robot", lambda robot, progress, **options: small_fitted)
     toml = tmp_path / "small-leg.toml"
     toml.write_text(preset_text("cylinder-leg").replace('name = "cylinder-leg"', 'name = "small-leg"')
                     .replace("tolerance_pu = 0.5 ", "tolerance_pu = 4.0 "))
     out = tmp_path / "out"
     assert main(["build", str(toml), "--architecture", "folded", "--multipliers", "2", "--dsp", "none",
-                 "--no-synth", "--cocotb", "icarus", "-q", "-o", str(out)]) == 0
+                 "--no-synth", "--cocotb", "none", "-q", "-o", str(out)]) == 0
     assert "2 multipliers (full-width)" in capsys.readouterr().out
     rep = json.loads((out / "report.json").read_text())
     a = rep["architecture"]
@@ -86,10 +91,8 @@ def test_single_leg_folded_build_from_the_command_line(tmp_path, capsys):
     assert a["reason"].startswith("hardware.architecture = folded")
     ii = rep["initiation_interval"]
     assert ii > 1 and rep["simulation"]["initiation_interval_measured"] == ii
-    assert rep["refresh_hz"] == 48e6 / ii and rep["cocotb_note"] is None
-    c = rep["cocotb"]["icarus"]
-    assert c["passed"] and c["initiation_interval"] == ii and c["latency_cycles_measured"] == rep["latency_cycles"]
-    assert "cocotb_icarus.log" in {p.name for p in out.iterdir()}
+    assert rep["refresh_hz"] == 48e6 / ii and rep["cocotb"] == {} and rep["cocotb_note"] is None
+    assert rep["simulation"]["latency_cycles_measured"] == rep["latency_cycles"]
     ports = _ports((out / "small_leg_core.v").read_text(), "small_leg_core")
     assert {"pwm_s1", "pwm_s2", "pwm_s3", "i_r", "o_s1"} <= set(ports) and "i_leg" not in ports
 
