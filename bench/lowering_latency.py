@@ -72,7 +72,7 @@ def measure(robot, plan, fits, extras, guards=()) -> dict:
     out = {}
     for name, (p, splits) in schemes.items():
         bounds, st, mults = p.rounding_bounds(), p.stages(), output_multipliers(p)
-        out[name] = {"latency": p.latency, "multipliers": p.count("mul"), "servos": [
+        out[name] = {"latency": p.depth, "multipliers": p.count("mul"), "servos": [
             {"servo": o.name, "split": splits[o.name], "stage": st[o.node], "multipliers": mults[o.name],
              "rounding_bound_pu": bounds[o.preround] / robot.ticks_per_pu,
              "bound_vs_horner": bounds[o.preround] / href[o.name]} for o in p.outputs]}
