@@ -79,7 +79,7 @@ def fit(robot, progress) -> Fitted:
     if worst[1]["total"] > robot.fit.tolerance_pu:
         raise StepError(f"servo {worst[0]} misses the tolerance: {worst[1]['total']:.4f} pu > "
                         f"{robot.fit.tolerance_pu:g} pu at {worst[1]['at']}")
-    return Fitted(plan, tuple(servos or ()), acc, fit_s, accuracy_s)
+    return Fitted(plan, tuple(servos), acc, fit_s, accuracy_s)
 
 
 # -- core ---------------------------------------------------------------------------------
@@ -255,15 +255,16 @@ def _output_to(log: Path):
 
 
 def _simulators(simulators, progress) -> tuple[list[str], str | None]:
-    """The simulators to run ("auto": every installed one) and the note on those skipped."""
+    """The simulators to run ("auto": every installed one) and the note on those "auto"
+    skipped; a simulator named explicitly that is not installed is refused."""
     from .sim.runner import SIMULATORS, simulator_available
-    if simulators != "auto":
-        return list(simulators), None
     chosen, skipped = [], []
-    for s in SIMULATORS:
+    for s in (SIMULATORS if simulators == "auto" else simulators):
         ok, why = simulator_available(s)
         if ok:
             chosen.append(s)
+        elif simulators != "auto":
+            raise StepError(f"cannot run cocotb on {s}: {why}")
         else:
             skipped.append(f"{s} ({why})")
             progress(f"cocotb on {s}: skipped ({why})")
@@ -279,15 +280,12 @@ def cocotb(plan_file: Path, period: int, simulators, workdir: Path, logdir: Path
     export (None: the pipelined ``LegCore``); ``manifest_file``: the build's manifest, which
     the bench reads the design from (None: the runner writes one).
     """
-    from .sim.runner import default_n_random, run, simulator_available
+    from .sim.runner import default_n_random, run
     t0 = time.perf_counter()
     chosen, note = _simulators(simulators, progress)
     n_random = default_n_random(1 if core is None else core.initiation_interval, COCOTB_N_RANDOM)
     runs = []
     for sim in chosen:
-        ok, why = simulator_available(sim)
-        if not ok:
-            raise StepError(f"cannot run cocotb on {sim}: {why}")
         progress(f"cocotb on {sim}: building and simulating the exported Verilog")
         log = logdir / f"cocotb_{sim}.log"
         with _output_to(log):

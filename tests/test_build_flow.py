@@ -122,7 +122,7 @@ from ikseries.cli import main
 from ikseries.fit.plan import Plan
 import json
 plan = Plan.from_json(json.loads(Path(sys.argv[1]).read_text()))
-steps.fit_robot = lambda robot, progress, **options: (plan, None)
+steps.fit_robot = lambda robot, progress, **options: (plan, [])
 
 def slow_simulation(core, plan, progress, vcd=None):
     Path(vcd).write_text("partial waveform")      # a half-written output in the temporary directory
