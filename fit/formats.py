@@ -9,7 +9,7 @@ import numpy as np
 
 from .context import FormatError
 from .lowering import build_plan
-from .polyfit import fit_least_squares, vander
+from .polyfit import fit_least_squares
 from .structure import ServoFit
 
 __all__ = ["round_and_refit", "requantize", "choose_formats"]
@@ -27,8 +27,9 @@ def round_and_refit(sf: ServoFit, frac: int):
     terms = sorted(sf.poly, key=lambda e: (-sum(e), e))
     grid = 2.0 ** frac
     coefs, worst = [], 0.0
-    for orig, (xp, xt, w), (cpts, ctarget) in zip(data.coef(sf.poly, terms), states, data.check):
-        a = vander(xp, terms)
+    for orig, work, check in zip(data.coef(sf.poly, terms), states, data.check):
+        a, xt, w = work.matrix(terms), work.target, work.w
+        ctarget = check.t
         coef = orig.copy()
         fixed = np.zeros(len(terms), dtype=bool)
         for k in range(len(terms)):
@@ -38,7 +39,7 @@ def round_and_refit(sf: ServoFit, frac: int):
             if free.any():
                 rhs = xt - a[:, fixed] @ coef[fixed]
                 coef[free] = fit_least_squares(a[:, free], rhs, w)
-        ca = vander(cpts, terms)
+        ca = check.matrix(terms)
         err = float(np.max(np.abs(ca @ coef - ctarget)))
         naive = np.round(orig * grid) / grid
         naive_err = float(np.max(np.abs(ca @ naive - ctarget)))

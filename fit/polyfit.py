@@ -9,7 +9,7 @@ import itertools
 
 import numpy as np
 
-__all__ = ["total_degree_terms", "vander", "evaluate", "fit_lawson", "lawson", "fit_least_squares"]
+__all__ = ["total_degree_terms", "vander", "Basis", "evaluate", "fit_lawson", "lawson", "fit_least_squares"]
 
 
 def total_degree_terms(degree: int, allowed: list) -> list[tuple[int, ...]]:
@@ -28,12 +28,46 @@ def total_degree_terms(degree: int, allowed: list) -> list[tuple[int, ...]]:
 
 def vander(points: np.ndarray, terms: list[tuple[int, ...]]) -> np.ndarray:
     """Design matrix: column t is prod(points[:, k] ** terms[t][k])."""
-    points = np.asarray(points, dtype=np.float64)
-    n, nv = points.shape
-    maxe = [max((t[k] for t in terms), default=0) for k in range(nv)]
-    pw = [np.stack([points[:, k] ** e for e in range(maxe[k] + 1)], 1) for k in range(nv)]
-    cols = [np.prod([pw[k][:, t[k]] for k in range(nv)], axis=0) for t in terms]
-    return np.stack(cols, 1) if cols else np.zeros((n, 0))
+    return Basis(points).matrix(terms)
+
+
+class Basis:
+    """The monomial columns of one point set, each computed once.
+
+    A structure search builds design matrices of many overlapping term lists over the same
+    points (degrees rising, terms pruned one at a time); with the columns kept, each matrix
+    is a gather of columns instead of a product per entry. The columns are exactly those of
+    :func:`vander`. The cache is not pickled (it is rebuilt on use).
+    """
+
+    def __init__(self, points: np.ndarray):
+        self.points = np.asarray(points, dtype=np.float64)
+        self._powers: dict = {}
+        self._columns: dict = {}
+
+    def __getstate__(self):
+        return {"points": self.points}
+
+    def __setstate__(self, state):
+        self.__init__(state["points"])
+
+    def _power(self, k: int, e: int) -> np.ndarray:
+        key = (k, e)
+        if key not in self._powers:
+            self._powers[key] = self.points[:, k] ** e
+        return self._powers[key]
+
+    def column(self, term: tuple[int, ...]) -> np.ndarray:
+        col = self._columns.get(term)
+        if col is None:
+            col = np.prod([self._power(k, e) for k, e in enumerate(term)], axis=0)
+            self._columns[term] = col
+        return col
+
+    def matrix(self, terms: list[tuple[int, ...]]) -> np.ndarray:
+        if not terms:
+            return np.zeros((len(self.points), 0))
+        return np.stack([self.column(tuple(t)) for t in terms], 1)
 
 
 def evaluate(poly: dict, points: np.ndarray) -> np.ndarray:

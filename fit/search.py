@@ -13,48 +13,90 @@ import numpy as np
 
 from .context import FitError
 from .lowering import structure_cost
-from .polyfit import fit_least_squares, lawson, vander
+from .polyfit import Basis, fit_least_squares, lawson
 from .structure import FeatureSet, ServoFit
 
-__all__ = ["Cells", "fit_terms", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "PRUNE_REJECTS"]
+__all__ = ["Cells", "Rows", "Working", "fit_terms", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "PRUNE_REJECTS"]
 
 MAX_DEGREE = 12
 PRUNE_REJECTS = 3
 CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
 
 
-def fit_terms(terms, fit_set, check_set, budget_ticks, rounds: int = 4, warm=None, iterations: int = 30):
+class Rows:
+    """Points (features, shape (N, n)) and target ticks of a fit or check set, with the
+    points' monomial columns kept (:class:`~.polyfit.Basis`)."""
+
+    __slots__ = ("x", "t", "basis")
+
+    def __init__(self, x: np.ndarray, t: np.ndarray):
+        self.x, self.t, self.basis = x, t, Basis(x)
+
+    def __getstate__(self):
+        return (self.x, self.t)
+
+    def __setstate__(self, state):
+        self.__init__(*state)
+
+    def __iter__(self):           # unpacks as (x, t), like the (features, target) pairs it holds
+        return iter((self.x, self.t))
+
+    def matrix(self, terms) -> np.ndarray:
+        return self.basis.matrix(terms)
+
+
+class Working:
+    """The rows a Lawson fit works on: the fit set and the check rows ``extra`` added by
+    exchange rounds (in the order added), with the final Lawson weights ``w``."""
+
+    __slots__ = ("fit", "check", "extra", "w")
+
+    def __init__(self, fit: Rows, check: Rows, extra: np.ndarray, w):
+        self.fit, self.check, self.extra, self.w = fit, check, extra, w
+
+    def matrix(self, terms) -> np.ndarray:
+        if not len(self.extra):
+            return self.fit.matrix(terms)
+        return np.concatenate([self.fit.matrix(terms), self.check.matrix(terms)[self.extra]])
+
+    @property
+    def target(self) -> np.ndarray:
+        return np.concatenate([self.fit.t, self.check.t[self.extra]])
+
+
+def fit_terms(terms, fit_set: Rows, check_set: Rows, budget_ticks, rounds: int = 4, warm: Working | None = None,
+              iterations: int = 30):
     """Lawson near-minimax on the fit set, then exchange rounds adding the worst check
-    points. Returns (coefficients, max error over fit and check sets, state); ``state``
-    (working rows and Lawson weights) warm-starts a fit of a subset of the terms."""
-    cpts, ctarget = check_set
-    ca = vander(cpts, terms)
+    points. Returns (coefficients, max error over fit and check sets, :class:`Working`)
+    (the working rows and Lawson weights warm-start a fit of a subset of the terms)."""
+    ca = check_set.matrix(terms)
     if warm is None:
-        xp, xt, w = fit_set[0], fit_set[1], None
+        work = Working(fit_set, check_set, np.zeros(0, dtype=np.intp), None)
     else:
-        xp, xt, w = warm
+        work = warm
+    w = work.w
     for _ in range(rounds):
-        c, err, w = lawson(vander(xp, terms), xt, iterations, w)
-        cerr = np.abs(ca @ c - ctarget)
+        c, err, w = lawson(work.matrix(terms), work.target, iterations, w)
+        cerr = np.abs(ca @ c - check_set.t)
         err = max(err, float(cerr.max()))
         if err <= budget_ticks:
             break
         worst = np.argsort(cerr)[-500:]
-        xp, xt = np.concatenate([xp, cpts[worst]]), np.concatenate([xt, ctarget[worst]])
+        work = Working(fit_set, check_set, np.concatenate([work.extra, worst]), None)
         w = None if warm is None else np.concatenate([w, np.full(len(worst), w.max())])
-    return c, err, (xp, xt, w)
+    return c, err, Working(fit_set, check_set, work.extra, w)
 
 
 @dataclass
 class Cells:
     """Fit and check sets of one servo polynomial, per cell of a piecewise fit (a single cell
-    otherwise); each set is (features (N, n), target ticks)."""
+    otherwise); each set is a :class:`Rows` of features (N, n) and target ticks."""
     fit: list
     check: list
 
     @classmethod
     def whole(cls, fit_set, check_set) -> "Cells":
-        return cls([fit_set], [check_set])
+        return cls([Rows(*fit_set)], [Rows(*check_set)])
 
     @classmethod
     def cut(cls, fs: FeatureSet, port, fit_set, check_set, raw) -> "Cells":
@@ -66,7 +108,7 @@ class Cells:
                 sel, off = fs.cut.rows(port, v, c)
                 xc = x[sel].copy()
                 xc[:, fs.cut.var] = off
-                dst.append((xc, t[sel]))
+                dst.append(Rows(xc, t[sel]))
         return out
 
     def poly(self, terms, coef: np.ndarray) -> dict:
@@ -81,9 +123,9 @@ class Cells:
 
     def lsq_error(self, terms) -> float:
         err = 0.0
-        for x, t in self.fit:
-            a = vander(x, terms)
-            err = max(err, float(np.max(np.abs(a @ fit_least_squares(a, t) - t))))
+        for rows in self.fit:
+            a = rows.matrix(terms)
+            err = max(err, float(np.max(np.abs(a @ fit_least_squares(a, rows.t) - rows.t))))
         return err
 
     def fit_terms(self, terms, budget_ticks, rounds: int = 4, warm=None, iterations: int = 30):
@@ -95,6 +137,11 @@ class Cells:
             coefs.append(cf)
             err, states = max(err, e), states + [st]
         return np.array(coefs), err, states
+
+    def forget_columns(self) -> None:
+        """Drop the kept monomial columns (they can take hundreds of MB per servo)."""
+        for rows in self.fit + self.check:
+            rows.basis = Basis(rows.x)
 
 
 def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> ServoFit:
@@ -159,7 +206,7 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
     rejected: set = set()
     misses = 0
     while misses < PRUNE_REJECTS:
-        scale = np.max([np.abs(vander(x, terms)).max(axis=0) for x, _ in data.check], axis=0)
+        scale = np.max([np.abs(rows.matrix(terms)).max(axis=0) for rows in data.check], axis=0)
         order = np.argsort(np.max(np.abs(coef), axis=0) * scale, kind="stable")
         pick = None
         for i in order:
@@ -183,4 +230,5 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
             misses += 1
     progress(f"  {sf.name}: pruned to {len(terms)} terms, {cost} multipliers, "
              f"max fit error {sf.fit_error_ticks:.4g} ticks")
+    data.forget_columns()
     return dataclasses.replace(sf, refit=(data, state, budget_ticks))
