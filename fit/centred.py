@@ -36,7 +36,7 @@ import numpy as np
 
 from . import interval as ia
 
-__all__ = ["Centred", "variables", "clamp", "ldexp", "MATH"]
+__all__ = ["Centred", "centres", "variables", "clamp", "ldexp", "MATH"]
 
 
 def _down(x):
@@ -229,6 +229,13 @@ def ldexp(x, k: int):
     return Centred(ia.ldexp(x.c, k), ia.ldexp(x.x, k), x.h, tighten=False)
 
 
+def centres(lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (N, n) of cells ``[lo, hi]`` (the midpoint rounded into the cell) and their
+    half-widths (n, N), rounded up."""
+    c = np.minimum(np.maximum(0.5 * (lo + hi), lo), hi)
+    return c, _up(np.maximum(_up(c - lo), _up(hi - c))).T
+
+
 def variables(lo, hi) -> list[Centred]:
     """The n input variables over cells ``[lo, hi]`` (arrays of shape (N, n)) in centred form.
 
@@ -236,10 +243,9 @@ def variables(lo, hi) -> list[Centred]:
     """
     lo, hi = np.atleast_2d(np.asarray(lo, dtype=np.float64)), np.atleast_2d(np.asarray(hi, dtype=np.float64))
     cells = ia.variables(lo, hi, order=2)           # validates the shapes and lo <= hi
-    c = np.minimum(np.maximum(0.5 * (lo + hi), lo), hi)
-    h = _up(np.maximum(_up(c - lo), _up(hi - c))).T
-    centres = ia.variables(c, c, order=1)
-    return [Centred(pc, px, h, tighten=False) for pc, px in zip(centres, cells)]
+    c, h = centres(lo, hi)
+    points = ia.variables(c, c, order=1)
+    return [Centred(pc, px, h, tighten=False) for pc, px in zip(points, cells)]
 
 
 #: Centred namespace with the names of ``ikseries.kinematics.NUMPY_MATH``.

@@ -20,7 +20,11 @@ whole real input box, not only at sample points:
   forms apply;
 - cells whose bound exceeds the target are bisected along the input contributing most to the
   bound, until every cell meets the target or the cell budget is spent (the bound is then
-  still certified, only above the target).
+  still certified, only above the target). A half first gets the Taylor form with its
+  parent's enclosure of the second derivatives (an enclosure of the supremum over the parent is
+  one over the half), which needs ``e`` and its gradient at the centre only: a point
+  evaluation, without second derivatives; only where that misses the target are the
+  derivatives enclosed over the half itself (every second split, see ``FULL_AGE``).
 
 A piecewise plan cuts inputs into table cells (``index``, ``mask``) and looks its
 coefficients up per cell (``lut``): the initial cells are aligned to the table edges of every
@@ -219,40 +223,118 @@ def _sum_up(rows):
     return total
 
 
-def _cell_bounds(err, names, lo, hi):
-    """Bound of |e| on cells [lo, hi] (shape (N, n)): the least of the plain enclosure, the
-    mean-value form and the second-order Taylor form.
+def _taylor(e_c: ia.Interval, hmag: np.ndarray, h: np.ndarray):
+    """The second-order Taylor form |e(c)| + sum_k |de/dx_k(c)| h_k + 1/2 sum_jk H_jk h_j h_k
+    with ``hmag`` (m, N) >= sup |d2e/dx_j dx_k| over the cell; returns it and the per-input
+    contributions (n, N) (each Hessian term attributed half to each of its two inputs)."""
+    n = h.shape[0]
+    j, k = ia.hessian_pairs(n)
+    weight = np.where(j == k, 0.5, 1.0)[:, None]                          # off-diagonal twice
+    q = ia._up(ia._up(hmag * ia._up(h[j] * h[k])) * weight)
+    lin = ia._up(e_c.dmag(n) * h)
+    c2 = lin.copy()
+    for p in range(len(j)):                                                # attribute to axes
+        c2[j[p]] = ia._up(c2[j[p]] + 0.5 * q[p])
+        c2[k[p]] = ia._up(c2[k[p]] + 0.5 * q[p])
+    return ia._up(ia._up(e_c.mag + _sum_up(lin)) + _sum_up(q)), c2
 
-    Returns (bound, per-input contributions (N, n) of the form used, e(c) enclosure, f enclosure).
-    """
+
+class _Bounds:
+    """Per cell: the bound of |e|, the per-input contributions (N, n) of the form used, the
+    enclosure of |e(c)|, the range of f, and sup |d2e| and sup |d2f| (m, N) over the cell
+    (NaN where not twice differentiable), which every sub-cell inherits, and ``age``: 0 where
+    those were enclosed over this cell itself, else the number of splits since."""
+
+    __slots__ = ("bound", "contrib", "centre", "f_lo", "f_hi", "he", "hf", "age")
+
+    def __init__(self, bound, contrib, centre, f_lo, f_hi, he, hf, age):
+        self.bound, self.contrib, self.centre = bound, contrib, centre
+        self.f_lo, self.f_hi, self.he, self.hf, self.age = f_lo, f_hi, he, hf, age
+
+    @classmethod
+    def empty(cls, size: int, n: int, inherited: "_Bounds | None") -> "_Bounds":
+        m = n * (n + 1) // 2
+        if inherited is None:
+            inherited = cls(None, None, None, np.full(size, -np.inf), np.full(size, np.inf),
+                            np.full((m, size), np.nan), np.full((m, size), np.nan), None)
+        return cls(np.full(size, np.inf), np.full((size, n), np.inf), np.zeros(size), inherited.f_lo.copy(),
+                   inherited.f_hi.copy(), inherited.he.copy(), inherited.hf.copy(),
+                   np.full(size, np.iinfo(np.int64).max // 2) if inherited.age is None else inherited.age.copy())
+
+    def put(self, rows, other: "_Bounds") -> None:
+        """Take ``other``'s figures for ``rows`` where they are better (every one is valid)."""
+        better = other.bound <= self.bound[rows]
+        self.bound[rows] = np.fmin(self.bound[rows], other.bound)
+        self.contrib[rows] = np.where(better[:, None], other.contrib, self.contrib[rows])
+        self.centre[rows] = np.fmax(self.centre[rows], other.centre)
+        self.f_lo[rows] = np.fmax(self.f_lo[rows], other.f_lo)
+        self.f_hi[rows] = np.fmin(self.f_hi[rows], other.f_hi)
+        if other.he is not None:   # both enclose the sup over the cell: keep the smaller
+            self.he[:, rows] = np.fmin(self.he[:, rows], other.he)
+            self.hf[:, rows] = np.fmin(self.hf[:, rows], other.hf)
+            self.age[rows] = 0
+
+    def subset(self, rows) -> "_Bounds":
+        return _Bounds(self.bound[rows], self.contrib[rows], self.centre[rows], self.f_lo[rows],
+                       self.f_hi[rows], self.he[:, rows], self.hf[:, rows], self.age[rows])
+
+    def twice(self) -> "_Bounds":
+        """The figures of each cell for both of its halves (in :func:`_split`'s order)."""
+        rows = [np.concatenate([x, x]) for x in (self.bound, self.contrib, self.centre, self.f_lo, self.f_hi)]
+        return _Bounds(*rows, *(np.concatenate([x, x], axis=1) for x in (self.he, self.hf)),
+                       np.concatenate([self.age, self.age]) + 1)
+
+
+def _finite(x):
+    return np.where(np.isfinite(x), x, np.inf)
+
+
+def _check_centres(e_c, names, lo, hi):
+    bad = np.isnan(e_c.lo) | np.isnan(e_c.hi)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ia.IntervalDomainError(f"the plan and the reference must be defined at every cell "
+                                     f"centre, not at {dict(zip(names, (0.5 * (lo[i] + hi[i])).tolist()))}")
+
+
+def _cell_bounds(err, names, lo, hi) -> _Bounds:
+    """Bounds of |e| on cells [lo, hi] (shape (N, n)): the least of the plain enclosure, the
+    mean-value form and the second-order Taylor form, from a centred evaluation over each cell."""
     n = len(names)
     cvars = cn.variables(lo, hi)
     h = cvars[0].h                                                        # (n, N) half-widths
     with ia.lenient():   # a cell too coarse for an enclosure gets NaN: it is split, not fatal
         e, f = err(dict(zip(names, cvars)))
     e_c, e_cell, f_cell = e.c, e.x, f.x
-    bad = np.isnan(e_c.lo) | np.isnan(e_c.hi)
-    if np.any(bad):
-        i = int(np.flatnonzero(bad)[0])
-        raise ia.IntervalDomainError(f"the plan and the reference must be defined at every cell "
-                                     f"centre, not at {dict(zip(names, (0.5 * (lo[i] + hi[i])).tolist()))}")
+    _check_centres(e_c, names, lo, hi)
     # mean-value form: |e(c)| + sum_k sup|de/dx_k| h_k
     c1 = ia._up(e_cell.dmag(n) * h)
     b1 = ia._up(e_c.mag + _sum_up(c1))
-    # Taylor form: |e(c)| + sum_k |de/dx_k(c)| h_k + 1/2 sum_jk sup|d2e/dx_j dx_k| h_j h_k
-    j, k = ia.hessian_pairs(n)
-    weight = np.where(j == k, 0.5, 1.0)[:, None]                          # off-diagonal twice
-    q = ia._up(ia._up(e_cell.hmag(n) * ia._up(h[j] * h[k])) * weight)
-    c2 = ia._up(e_c.dmag(n) * h)
-    for p in range(len(j)):                                                # attribute to axes
-        c2[j[p]] = ia._up(c2[j[p]] + 0.5 * q[p])
-        c2[k[p]] = ia._up(c2[k[p]] + 0.5 * q[p])
-    b2 = ia._up(ia._up(e_c.mag + _sum_up(ia._up(e_c.dmag(n) * h))) + _sum_up(q))
-    bound = np.fmin(e_cell.mag, np.fmin(b1, b2))
-    bound = np.where(np.isfinite(bound), bound, np.inf)
-    contrib = np.where(np.isfinite(b2) & (b2 <= b1), c2, c1)
-    contrib = np.where(np.isfinite(contrib), contrib, np.inf).T
-    return bound, contrib, e_c, f_cell
+    he = e_cell.hmag(n)
+    b2, c2 = _taylor(e_c, he, h)
+    bound = _finite(np.fmin(e_cell.mag, np.fmin(b1, b2)))
+    contrib = _finite(np.where(np.isfinite(b2) & (b2 <= b1), c2, c1)).T
+    size = len(lo)
+    return _Bounds(bound, contrib, np.broadcast_to(e_c.mag, (size,)), np.broadcast_to(f_cell.lo, (size,)),
+                   np.broadcast_to(f_cell.hi, (size,)), np.array(he), np.array(f_cell.hmag(n)), None)
+
+
+def _centre_bounds(err, names, lo, hi, parent: _Bounds) -> _Bounds:
+    """Bounds of |e| on cells [lo, hi] from e and its gradient at the cell centre alone and the
+    second derivatives ``parent.he`` of a cell containing each one: the Taylor form with the
+    parent's Hessian enclosure (valid, as the sub-cell's supremum is at most the parent's),
+    without the Hessians of every intermediate value that :func:`_cell_bounds` carries. The
+    range of f is the parent's, intersected with f's own Taylor form."""
+    c, h = cn.centres(lo, hi)
+    with ia.lenient():
+        e_c, f_c = err(dict(zip(names, ia.variables(c, c, order=1))))
+    _check_centres(e_c, names, lo, hi)
+    bound, c2 = _taylor(e_c, parent.he, h)
+    size = len(lo)
+    f_rad, _ = _taylor(ia.Interval(np.zeros(size), np.zeros(size), f_c.d, order=1), parent.hf, h)
+    f_lo = np.fmax(parent.f_lo, np.broadcast_to(ia._down(f_c.lo - f_rad), (size,)))
+    f_hi = np.fmin(parent.f_hi, np.broadcast_to(ia._up(f_c.hi + f_rad), (size,)))
+    return _Bounds(_finite(bound), _finite(c2).T, np.broadcast_to(e_c.mag, (size,)), f_lo, f_hi, None, None, None)
 
 
 def _table_edges(plan: Plan, cone, names, box_lo, box_hi):
@@ -350,55 +432,84 @@ def _throttled(progress, seconds: float):
     return say
 
 
+class _Cover:
+    """The final cells of a refinement: their number, the worst one, the largest |e(c)| seen
+    and the range of f over them."""
+
+    def __init__(self):
+        self.cells, self.sampled = 0, 0.0
+        self.best = {"bound": -np.inf, "lo": None, "hi": None}
+        self.f_lo, self.f_hi = np.inf, -np.inf
+
+    def add(self, b: _Bounds, rows, lo, hi) -> None:
+        """Cells ``rows`` of ``b`` (bounds of the cells [lo, hi]) as final."""
+        self.cells += len(rows)
+        if not len(rows):
+            return
+        j = rows[int(np.argmax(b.bound[rows]))]
+        if b.bound[j] > self.best["bound"]:
+            self.best.update(bound=float(b.bound[j]), lo=lo[j].copy(), hi=hi[j].copy())
+        self.f_lo, self.f_hi = min(self.f_lo, float(b.f_lo[rows].min())), max(self.f_hi, float(b.f_hi[rows].max()))
+
+
+#: a cell whose centre form misses the target, with second derivatives enclosed over an
+#: ancestor fewer than ``FULL_AGE`` splits up, is split at once (an enclosure over the cell
+#: itself would rarely be enough); else it is enclosed over itself first
+FULL_AGE = 2
+
+
+def _evaluate(err, names, lo, hi, inherited: _Bounds | None, target, say) -> _Bounds:
+    """Bounds of cells [lo, hi]: where a cell inherits finite second derivatives, the centre
+    form (:func:`_centre_bounds`); where that does not apply, or misses ``target`` with
+    derivatives from ``FULL_AGE`` or more splits up, the centred evaluation over the cell
+    (:func:`_cell_bounds`)."""
+    out = _Bounds.empty(len(lo), len(names), inherited)
+    cheap = np.zeros(len(lo), dtype=bool)
+    if inherited is not None:
+        cheap = np.all(np.isfinite(inherited.he), axis=0)
+        rows = np.flatnonzero(cheap)
+        for s in range(0, len(rows), _CHUNK):
+            part = rows[s:s + _CHUNK]
+            out.put(part, _centre_bounds(err, names, lo[part], hi[part], inherited.subset(part)))
+    fresh = cheap & (inherited.age < FULL_AGE) if inherited is not None else cheap
+    rows = np.flatnonzero((out.bound > target) & ~fresh)
+    for s in range(0, len(rows), _CHUNK):
+        part = rows[s:s + _CHUNK]
+        out.put(part, _cell_bounds(err, names, lo[part], hi[part]))
+        say(f"{np.count_nonzero(cheap)} centre forms, {s + len(part)} of {len(rows)} cell enclosures, "
+            f"max bound so far {float(np.max(out.bound[rows[:s + len(part)]])):.4g} ticks")
+    return out
+
+
 def _refine(err, names, box_lo, box_hi, target, per_axis, max_cells, progress, label, edges=None, cut=None):
     """Adaptive cover of the box; returns the summary of the final cells."""
     lo, hi = _initial_cells(box_lo, box_hi, per_axis, edges, cut)
-    evaluated, cells = 0, 0
-    best = {"bound": -np.inf, "lo": None, "hi": None}
-    sampled = 0.0
-    f_lo, f_hi = np.inf, -np.inf
-
-    def leaf(b, l, h, fl, fh):
-        nonlocal cells, f_lo, f_hi
-        cells += len(b)
-        if len(b):
-            j = int(np.argmax(b))
-            if b[j] > best["bound"]:
-                best.update(bound=float(b[j]), lo=l[j].copy(), hi=h[j].copy())
-            f_lo, f_hi = min(f_lo, float(fl.min())), max(f_hi, float(fh.max()))
-
-    rnd = 0
+    inherited, cover = None, _Cover()
+    evaluated, rnd = 0, 0
     say = _throttled(progress, PROGRESS_SECONDS)
     while len(lo):
-        parts = []
-        for s in range(0, len(lo), _CHUNK):
-            parts.append(_cell_bounds(err, names, lo[s:s + _CHUNK], hi[s:s + _CHUNK]))
-            say(f"  {label}: round {rnd + 1}: {evaluated + s + len(parts[-1][0])} cells evaluated, "
-                f"round max bound so far {max(float(np.max(p[0])) for p in parts):.4g} ticks")
-        bound = np.concatenate([p[0] for p in parts])
-        contrib = np.concatenate([p[1] for p in parts])
-        sampled = max(sampled, max(float(np.max(p[2].mag)) for p in parts))
-        flo = np.concatenate([p[3].lo * np.ones(len(p[0])) for p in parts])
-        fhi = np.concatenate([p[3].hi * np.ones(len(p[0])) for p in parts])
+        b = _evaluate(err, names, lo, hi, inherited, target, lambda msg: say(f"  {label}: round {rnd + 1}: {msg}"))
+        cover.sampled = max(cover.sampled, float(b.centre.max()))
         evaluated += len(lo)
         rnd += 1
-        done = bound <= target
-        leaf(bound[done], lo[done], hi[done], flo[done], fhi[done])
+        done = b.bound <= target
+        cover.add(b, np.flatnonzero(done), lo, hi)
         todo = np.flatnonzero(~done)
         room = max(0, (max_cells - evaluated) // 2)
         if len(todo) > room:                      # split the worst cells the budget allows
-            order = todo[np.argsort(bound[todo])[::-1]]
-            keep, todo = order[room:], order[:room]
-            leaf(bound[keep], lo[keep], hi[keep], flo[keep], fhi[keep])
-        say(f"  {label}: round {rnd}: {len(lo)} cells, {evaluated} evaluated, max bound {bound.max():.4g} "
+            order = todo[np.argsort(b.bound[todo])[::-1]]
+            cover.add(b, order[room:], lo, hi)
+            todo = order[:room]
+        say(f"  {label}: round {rnd}: {len(lo)} cells, {evaluated} evaluated, max bound {b.bound.max():.4g} "
             f"ticks (target {target:.4g}), {len(todo)} to split")
         if not len(todo):
             break
-        sel_lo, sel_hi = lo[todo], hi[todo]
-        lo, hi, stuck = _split(sel_lo, sel_hi, _split_axis(contrib[todo], sel_lo, sel_hi, box_hi - box_lo))
-        t = todo[stuck]
-        leaf(bound[t], sel_lo[stuck], sel_hi[stuck], flo[t], fhi[t])
-    return best, sampled, cells, evaluated, (f_lo, f_hi)
+        new_lo, new_hi, stuck = _split(lo[todo], hi[todo], _split_axis(b.contrib[todo], lo[todo], hi[todo],
+                                                                       box_hi - box_lo))
+        cover.add(b, todo[stuck], lo, hi)         # too narrow to split: final as they are
+        inherited = b.subset(todo[~stuck]).twice()
+        lo, hi = new_lo, new_hi
+    return cover.best, cover.sampled, cover.cells, evaluated, (cover.f_lo, cover.f_hi)
 
 
 def _error_function(plan: Plan, robot, k: int):
@@ -488,7 +599,8 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
 
 
 METHOD = ("per cell the least of the plain interval enclosure, the mean-value form |e(c)| + "
-          "sum_k sup|de/dx_k| h_k and the second-order Taylor form, on adaptively bisected cells; "
+          "sum_k sup|de/dx_k| h_k and the second-order Taylor form, on adaptively bisected cells "
+          "(a half first with its parent's enclosure of the second derivatives); "
           "interval arithmetic with outward rounding and forward-mode first and second derivatives "
           "of the plan's ideal function and of the reference IK, every intermediate value in "
           "centred (mean-value / Taylor about the cell centre) form; box = plan input ranges "

@@ -67,12 +67,23 @@ _ETA = 2.0 ** -1073    # >= the spacing of subnormals
 
 def _down(x):
     """A float <= the float below ``x`` (the exact result of the operation that rounded to x)."""
-    return x - (np.abs(x) * _PHI + _ETA)
+    t = np.abs(x)
+    if type(t) is np.ndarray and t.dtype == np.float64:   # in place: one temporary, not three
+        t *= _PHI
+        t += _ETA
+        return np.subtract(x, t, out=t)
+    return x - (t * _PHI + _ETA)
 
 
 def _up(x):
     """A float >= the float above ``x``."""
-    return x + (np.abs(x) * _PHI + _ETA)
+    t = np.abs(x)
+    if type(t) is np.ndarray and t.dtype == np.float64:
+        t *= _PHI
+        t += _ETA
+        t += x
+        return t
+    return x + (t * _PHI + _ETA)
 
 
 def _widen(lo, hi, ulps):
@@ -84,8 +95,12 @@ def _widen(lo, hi, ulps):
 def _mul_bounds(alo, ahi, blo, bhi):
     """Outward-rounded enclosure of the product of intervals (broadcasting)."""
     p1, p2, p3, p4 = alo * blo, alo * bhi, ahi * blo, ahi * bhi
-    lo = np.minimum(np.minimum(p1, p2), np.minimum(p3, p4))
-    hi = np.maximum(np.maximum(p1, p2), np.maximum(p3, p4))
+    lo, hi = np.minimum(p1, p2), np.maximum(p1, p2)
+    if all(type(p) is np.ndarray and p.shape == lo.shape for p in (lo, p1, p2, p3, p4)):   # in place
+        np.minimum(lo, np.minimum(p3, p4, out=p1), out=lo)
+        np.maximum(hi, np.maximum(p3, p4, out=p2), out=hi)
+    else:
+        lo, hi = np.minimum(lo, np.minimum(p3, p4)), np.maximum(hi, np.maximum(p3, p4))
     return _down(lo), _up(hi)
 
 
