@@ -28,9 +28,9 @@ def frame_layout(max_payload: int) -> data.StructLayout:
     return data.StructLayout({"command": 8, "length": range(max_payload + 1)})
 
 
-def counters_layout() -> data.StructLayout:
+def counters_layout(bits: int = P.COUNTER_BITS) -> data.StructLayout:
     """The receiver's error counters (:data:`~ikseries.hdl.protocol.RECEIVER_COUNTERS`)."""
-    return data.StructLayout({name: P.COUNTER_BITS for name in P.RECEIVER_COUNTERS})
+    return data.StructLayout({name: bits for name in P.RECEIVER_COUNTERS})
 
 
 def _saturating_increment(m, counter, event):
@@ -52,6 +52,9 @@ class FrameReceiver(wiring.Component):
     ----------
     shape : ikseries.hdl.protocol.Shape
         The robot the request lengths are for.
+    counter_bits : int
+        Width of each error counter (default and most the status answer carries:
+        :data:`~ikseries.hdl.protocol.COUNTER_BITS`).
 
     Attributes
     ----------
@@ -65,8 +68,8 @@ class FrameReceiver(wiring.Component):
         Payload byte index of the frame on ``o``.
     rd_data : Out(8)
         That byte, one cycle after ``rd_addr`` (a block RAM read). Valid while ``o.valid``.
-    counters : Out(counters_layout())
-        Saturating :data:`~ikseries.hdl.protocol.COUNTER_BITS`-bit counts: ``crc``, ``bad_length``,
+    counters : Out(counters_layout(counter_bits))
+        Saturating counts: ``crc``, ``bad_length``,
         ``unknown_command``, ``dropped`` (a good frame completed while ``o`` was still held),
         ``framing`` and ``overrun`` (pulses of the inputs); zero from reset.
 
@@ -79,9 +82,11 @@ class FrameReceiver(wiring.Component):
     One byte per cycle, except the cycle after each frame's last byte.
     """
 
-    def __init__(self, shape: P.Shape):
+    def __init__(self, shape: P.Shape, counter_bits: int = P.COUNTER_BITS):
         if not isinstance(shape, P.Shape):
             raise TypeError(f"shape must be an ikseries.hdl.protocol.Shape, not {shape!r}")
+        if not isinstance(counter_bits, int) or isinstance(counter_bits, bool) or not 1 <= counter_bits <= P.COUNTER_BITS:
+            raise ValueError(f"counter_bits must be an integer in [1, {P.COUNTER_BITS}], not {counter_bits!r}")
         self._shape = shape
         self._lengths = {c.code: sorted(P.request_lengths(c, shape)) for c in P.COMMANDS}
         self._max = P.max_request_payload(shape)
@@ -90,7 +95,7 @@ class FrameReceiver(wiring.Component):
             "i": In(stream.Signature(8)), "framing_error": In(1), "overrun": In(1),
             "o": Out(stream.Signature(frame_layout(self._max))),
             "rd_addr": In(self._addr_bits), "rd_data": Out(8),
-            "counters": Out(counters_layout()),
+            "counters": Out(counters_layout(counter_bits)),
         })
 
     @property
@@ -295,6 +300,8 @@ class Link(wiring.Component):
         The robot (request lengths).
     divisor : int
         Clock cycles per bit (:func:`ikseries.hdl.uart.uart_divisor`).
+    counter_bits : int
+        The receiver's counter width.
 
     Attributes
     ----------
@@ -317,14 +324,14 @@ class Link(wiring.Component):
     The line rate both ways (one byte per 10 bit times); answers wait while the UART sends.
     """
 
-    def __init__(self, shape: P.Shape, divisor: int):
+    def __init__(self, shape: P.Shape, divisor: int, counter_bits: int = P.COUNTER_BITS):
         self._rx, self._tx = UARTRx(divisor), UARTTx(divisor)
-        self._receiver, self._transmitter = FrameReceiver(shape), FrameTransmitter()
+        self._receiver, self._transmitter = FrameReceiver(shape, counter_bits), FrameTransmitter()
         r, t = self._receiver, self._transmitter
         super().__init__({
             "rx": In(1, init=1), "tx": Out(1, init=1),
             "request": Out(stream.Signature(frame_layout(r.max_payload))), "rd_addr": In(r.addr_bits), "rd_data": Out(8),
-            "counters": Out(counters_layout()),
+            "counters": Out(counters_layout(counter_bits)),
             "answer": In(stream.Signature(frame_layout(t.max_payload))), "answer_data": In(stream.Signature(8)),
             "answer_index": Out(range(t.max_payload)),
         })

@@ -14,7 +14,7 @@ from typing import Iterable, Mapping
 
 from ..hdl import protocol as P
 
-__all__ = ["CRCTable", "crc", "frame", "encode", "encode_answer", "decode_request", "decode_answer",
+__all__ = ["CRCTable", "crc", "frame", "field_bounds", "encode", "encode_answer", "decode_request", "decode_answer",
            "Message", "FrameParser", "request_parser", "Decoder"]
 
 
@@ -82,8 +82,9 @@ def frame(code: int, payload: bytes) -> bytes:
 
 # ---- field values ---------------------------------------------------------------------------
 
-def _bounds(f: P.Field, shape: P.Shape | None) -> tuple[int, int, str]:
-    """The integer range of ``f`` and how to say it when a value is outside."""
+def field_bounds(f: P.Field, shape: P.Shape | None) -> tuple[int, int, str]:
+    """The integer range of ``f`` (for a robot of ``shape``; None: the kind's range) and how to
+    say it when a value is outside."""
     nbytes, signed = P.KINDS[f.kind]
     lo, hi = (-(1 << (8 * nbytes - 1)), (1 << (8 * nbytes - 1)) - 1) if signed else (0, (1 << (8 * nbytes)) - 1)
     rule = f.values if shape is not None else None
@@ -106,7 +107,7 @@ def _int(f: P.Field, v, shape, where: str) -> int:
         if v not in names:
             raise ValueError(f"{where} must be one of {', '.join(names)} (or 0..{len(names) - 1}), not {v!r}")
         v = names.index(v)
-    lo, hi, said = _bounds(f, shape)
+    lo, hi, said = field_bounds(f, shape)
     if not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi:
         raise ValueError(f"{where} must be {said}, not {hex(v) if 'mask' in said and isinstance(v, int) else repr(v)}")
     return v
