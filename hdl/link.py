@@ -106,6 +106,9 @@ class FrameReceiver(wiring.Component):
     def addr_bits(self) -> int:
         return self._addr_bits
 
+    #: cycles from taking a frame's last byte to ``o.valid``
+    latency = 2
+
     def _length_check(self, m, code, length):
         """(known, length_ok) of command byte ``code`` with payload length ``length``."""
         known, ok = Signal(), Signal()
@@ -316,8 +319,8 @@ class Link(wiring.Component):
 
     Latency
     -------
-    ``request.valid`` rises the UART receiver's latency plus 3 cycles after the start edge of
-    the frame's last byte on ``rx``.
+    ``request.valid`` rises ``latency`` cycles (the UART receiver's plus the frame receiver's)
+    after the start edge of the frame's last byte on ``rx``.
 
     Throughput
     ----------
@@ -343,6 +346,10 @@ class Link(wiring.Component):
     @property
     def transmitter(self) -> FrameTransmitter:
         return self._transmitter
+
+    @property
+    def latency(self) -> int:
+        return self._rx.latency + self._receiver.latency
 
     def elaborate(self, platform):
         m = Module()

@@ -450,7 +450,11 @@ def test_link_answers_a_request_end_to_end():
             await ctx.tick()
 
     async def controller(ctx):
-        await ctx.tick().until(dut.request.valid)
+        cycle = 0
+        while not ctx.get(dut.request.valid):
+            await ctx.tick()
+            cycle += 1
+        got["cycle"] = cycle
         length = ctx.get(dut.request.payload.length)
         payload = bytearray()
         for a in range(length):
@@ -476,6 +480,7 @@ def test_link_answers_a_request_end_to_end():
     sim.add_testbench(controller)
     sim.run()
     assert got["request"] == (0x11, request[3:-2])
+    assert got["cycle"] == 6 + 10 * d * (len(request) - 1) + dut.latency    # from the last byte's start edge
     rx_levels = [v for v in tx]
     received, _ = _run_rx(d, rx_levels)     # the tx line through a receiver of the same rate
     assert bytes(received) == answer
