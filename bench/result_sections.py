@@ -221,6 +221,25 @@ def pareto(res: dict) -> list[str]:
     return lines + ["```", ""]
 
 
+def link_fuzz(res: dict) -> list[str]:
+    """Lines of the ``bench/link_fuzz.py`` section from its JSON ``res``."""
+    f, s = res["fuzz"], res["shape"]
+    lines = [f"Shape {s['legs']} legs × {s['coords']} coordinates, {s['channels']} channels; seed {res['seed']}, "
+             f"chunks of {res['chunk']:,} bytes. Every good frame and every counter of the simulated "
+             "`FrameReceiver` compared with the host parser (`ikseries.host.protocol.FrameParser`).", "",
+             *table(("bytes", "good frames", "mismatching chunks", "simulation s", "bytes/s", "cycles/s"),
+                    [(f"{f['bytes']:,}", f"{f['frames']:,}", f["mismatches"], num(f["seconds"], ".1f"),
+                      f"{f['bytes_per_s']:,}", f"{f['cycles_per_s']:,}")]),
+             *table(tuple(f["counters"]), [tuple(f"{v:,}" for v in f["counters"].values())])]
+    if res["area_ice40"]:
+        lines += [f"Yosys `synth_ice40` counts, {res['clock_hz'] / 1e6:g} MHz clock at {res['baud'] / 1e6:g} Mbaud "
+                  "(logic cells ≈ LUTs: an iCE40 logic cell holds one LUT4, its carry and one flip-flop).", "",
+                  *table(("design", "LUT", "FF", "carry", "BRAM"),
+                         [(r["design"], r["counts"]["LUT"], r["counts"]["FF"], r["counts"]["carry"],
+                           r["counts"]["BRAM"]) for r in res["area_ice40"]])]
+    return lines
+
+
 SECTIONS = {
     "fit_benchmark": ("Fits of every preset", "Per preset and servo: what the fit costs and achieves.",
                       fit_benchmark),
@@ -243,4 +262,6 @@ SECTIONS = {
                              "every output compared bit for bit with the golden model.", verilator_throughput),
     "pareto": ("Every core placed and routed", "Place and route of the polynomial cores, the CORDIC "
                "baseline and the hexapod core on iCE40UP5K and ECP5-25F.", pareto),
+    "link_fuzz": ("Host link: receiver fuzz and area", "The frame receiver against the protocol model on a "
+                  "long seeded mix of good, corrupted and garbage bytes; Yosys counts of the link.", link_fuzz),
 }

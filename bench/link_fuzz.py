@@ -1,0 +1,111 @@
+"""The frame receiver against the protocol model on a long seeded mix, and the link's area.
+
+Feeds ``--bytes`` of valid, corrupted (flipped bit, truncated, other length, unknown command)
+and garbage request traffic (``ikseries.linkcheck.mixed_stream``) to the simulated
+``FrameReceiver`` of the hexapod shape, in chunks of ``--chunk`` bytes (one simulation each,
+seeded per chunk), and compares every frame and counter with the host parser's verdict. Then
+synthesises ``Link`` (and its parts) for iCE40 with Yosys. Prints a table and writes JSON.
+
+    python bench/link_fuzz.py [--bytes 100000] [--chunk 5000] [--seed 1] [--no-synth] [--out docs/results/link_fuzz.json]
+"""
+from __future__ import annotations
+
+from ikseries.threads import single_threaded_blas
+
+single_threaded_blas()   # before anything loads numpy's BLAS
+
+import argparse
+import random
+import runpy
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from amaranth.back import verilog
+
+from ikseries.hdl import protocol as P
+from ikseries.hdl.link import FrameReceiver, FrameTransmitter, Link
+from ikseries.hdl.uart import UARTRx, UARTTx, uart_divisor
+from ikseries.linkcheck import mixed_stream, model_receiver, simulate_receiver
+from ikseries.synth import synth_counts
+
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
+SHAPE = P.Shape(legs=6, coords=3, channels=18)
+CLOCK_HZ, BAUD = 48e6, 1e6
+
+
+def fuzz(nbytes: int, chunk: int, seed: int) -> dict:
+    totals = {"bytes": 0, "cycles": 0, "frames": 0, "mismatches": 0,
+              "counters": dict.fromkeys(P.RECEIVER_COUNTERS, 0)}
+    t0 = time.perf_counter()
+    for k in range(-(-nbytes // chunk)):
+        data = mixed_stream(random.Random(f"{seed}/{k}"), SHAPE, min(chunk, nbytes - k * chunk))
+        frames, counters = model_receiver(SHAPE, data)
+        got = simulate_receiver(SHAPE, data)
+        expect = {**counters, "framing": 0, "overrun": 0, "dropped": 0}
+        bad = (got["frames"] != frames) + (got["counters"] != expect)
+        totals["mismatches"] += bad
+        totals["bytes"] += len(data)
+        totals["cycles"] += got["cycles"]
+        totals["frames"] += len(frames)
+        for name, v in got["counters"].items():
+            totals["counters"][name] += v
+        print(f"chunk {k}: {len(data)} bytes, {len(frames)} frames, {'ok' if not bad else 'MISMATCH'}", flush=True)
+    seconds = time.perf_counter() - t0
+    return {**totals, "seconds": round(seconds, 1), "bytes_per_s": round(totals["bytes"] / seconds),
+            "cycles_per_s": round(totals["cycles"] / seconds)}
+
+
+def area(workdir: Path) -> list[dict]:
+    divisor = uart_divisor(CLOCK_HZ, BAUD)
+    designs = {"Link": Link(SHAPE, divisor), "UARTRx": UARTRx(divisor), "UARTTx": UARTTx(divisor),
+               "FrameReceiver": FrameReceiver(SHAPE), "FrameTransmitter": FrameTransmitter(),
+               "Link, 8-bit counters": Link(SHAPE, divisor, counter_bits=8)}
+    rows = []
+    for k, (name, design) in enumerate(designs.items()):
+        d = workdir / f"d{k}"
+        d.mkdir(parents=True)
+        (d / "top.v").write_text(verilog.convert(design, name="top", emit_src=False))
+        r = synth_counts(d / "top.v", "top", ["ice40"], workdir=d / "synth")["ice40"]
+        rows.append({"design": name, "counts": r["counts"], "seconds": r["seconds"]})
+        print(rows[-1], flush=True)
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--bytes", type=int, default=100_000)
+    ap.add_argument("--chunk", type=int, default=5_000)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--no-synth", action="store_true")
+    ap.add_argument("--out", default=FACTS["default_json"]("link_fuzz"))
+    args = ap.parse_args(argv)
+    for name in ("bytes", "chunk"):
+        if getattr(args, name) < 1:
+            ap.error(f"--{name} must be a positive integer, not {getattr(args, name)}")
+    run = FACTS["run_facts"]("link_fuzz", argv)
+    result = fuzz(args.bytes, args.chunk, args.seed)
+    rows = []
+    if not args.no_synth:
+        with tempfile.TemporaryDirectory() as tmp:
+            rows = area(Path(tmp))
+    print()
+    print(f"{result['bytes']} bytes, {result['frames']} good frames, {result['mismatches']} mismatching chunks, "
+          f"{result['seconds']} s ({result['bytes_per_s']} bytes/s, {result['cycles_per_s']} cycles/s simulated)")
+    print("counters: " + ", ".join(f"{k} {v}" for k, v in result["counters"].items()))
+    if rows:
+        print(f"\n{'design':24} {'LUT':>5} {'FF':>5} {'carry':>5} {'BRAM':>5}")
+        for r in rows:
+            c = r["counts"]
+            print(f"{r['design']:24} {c['LUT']:5} {c['FF']:5} {c['carry']:5} {c['BRAM']:5}")
+    payload = {"shape": {"legs": SHAPE.legs, "coords": SHAPE.coords, "channels": SHAPE.channels},
+               "seed": args.seed, "chunk": args.chunk, "fuzz": result, "clock_hz": CLOCK_HZ, "baud": BAUD,
+               "area_ice40": rows}
+    out = FACTS["write_result"](args.out, payload, run)
+    print(f"wrote {out}")
+    return 1 if result["mismatches"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

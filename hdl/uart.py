@@ -1,0 +1,192 @@
+"""8N1 UART receiver and transmitter with an integer clock divisor (cycles per bit)."""
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Module, Signal
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+__all__ = ["UARTRx", "UARTTx", "uart_divisor", "MIN_DIVISOR", "BAUD_TOLERANCE"]
+
+#: fewest clock cycles per bit: the receiver samples mid-bit, (divisor - 1) // 2 cycles after the start edge
+MIN_DIVISOR = 4
+#: largest relative rate error :func:`uart_divisor` accepts; with the receiver's sampling point
+#: a frame of 10 bits then drifts less than 0.2 bit, leaving room for the sender's own error
+BAUD_TOLERANCE = 0.02
+
+
+def _check_divisor(divisor):
+    if not isinstance(divisor, int) or isinstance(divisor, bool) or divisor < MIN_DIVISOR:
+        raise ValueError(f"divisor must be an integer >= {MIN_DIVISOR} clock cycles per bit, not {divisor!r}")
+
+
+def uart_divisor(clock_hz: float, baud: float) -> int:
+    """Clock cycles per bit for ``baud`` at ``clock_hz``, refused when the rate it gives is more
+    than :data:`BAUD_TOLERANCE` off ``baud`` or the divisor is below :data:`MIN_DIVISOR`."""
+    for name, v in (("clock_hz", clock_hz), ("baud", baud)):
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not v > 0:
+            raise ValueError(f"{name} must be a positive number, not {v!r}")
+    divisor = max(1, round(clock_hz / baud))
+    if divisor < MIN_DIVISOR:
+        raise ValueError(f"baud must be at most clock_hz / {MIN_DIVISOR} = {clock_hz / MIN_DIVISOR:g}, not {baud!r}")
+    error = abs(clock_hz / divisor - baud) / baud
+    if error > BAUD_TOLERANCE:
+        raise ValueError(f"baud {baud:g} is {100 * error:.2f} % off at a {clock_hz:g} Hz clock (divisor {divisor} "
+                         f"gives {clock_hz / divisor:g}); the limit is {100 * BAUD_TOLERANCE:g} %")
+    return divisor
+
+
+class UARTRx(wiring.Component):
+    """8N1 UART receiver.
+
+    The pin goes through a two-flip-flop synchroniser. A low level starts a byte; the start bit
+    is checked (a glitch shorter than half a bit is ignored) and every bit is sampled once, in
+    its middle, ``(divisor - 1) // 2`` cycles after the start edge and then every ``divisor``
+    cycles. A low stop bit drops the byte and pulses ``framing_error``; the receiver then waits
+    for the line to go high (a break counts once). Right after the stop bit's middle it looks
+    for the next start edge, which leaves half a bit for a sender that is up to
+    :data:`BAUD_TOLERANCE` fast or slow.
+
+    Parameters
+    ----------
+    divisor : int
+        Clock cycles per bit (>= :data:`MIN_DIVISOR`); see :func:`uart_divisor`.
+
+    Attributes
+    ----------
+    rx : In(1)
+        The serial input (idle high).
+    o : Out(stream.Signature(8))
+        Received bytes. A byte stays valid until taken; a byte completed while the previous one
+        is still not taken is lost and pulses ``overrun``.
+    framing_error, overrun : Out(1)
+        One-cycle pulses, registered.
+
+    Latency
+    -------
+    ``o.valid`` rises ``(divisor - 1) // 2 + 9 * divisor + 3`` cycles after the start edge on
+    the pin (two synchroniser cycles, the stop bit's middle, one output register).
+
+    Throughput
+    ----------
+    One byte per 10 bit times of the sender (back-to-back bytes at up to
+    :data:`BAUD_TOLERANCE` rate error).
+    """
+
+    def __init__(self, divisor: int):
+        _check_divisor(divisor)
+        self._divisor = divisor
+        super().__init__({"rx": In(1, init=1), "o": Out(stream.Signature(8)),
+                          "framing_error": Out(1), "overrun": Out(1)})
+
+    @property
+    def divisor(self) -> int:
+        return self._divisor
+
+    @property
+    def latency(self) -> int:
+        return (self._divisor - 1) // 2 + 9 * self._divisor + 3
+
+    def elaborate(self, platform):
+        m = Module()
+        d = self._divisor
+        pins = Signal(2, init=0b11)     # the synchroniser: idle high from reset
+        m.d.sync += pins.eq(Cat(self.rx, pins[0]))
+        line = pins[1]
+        timer = Signal(range(d))
+        bit = Signal(range(8))
+        shift = Signal(8)
+        m.d.sync += [self.framing_error.eq(0), self.overrun.eq(0)]
+        with m.If(self.o.valid & self.o.ready):
+            m.d.sync += self.o.valid.eq(0)
+        with m.FSM():
+            with m.State("idle"):
+                with m.If(~line):
+                    m.d.sync += timer.eq((d - 1) // 2 - 1)
+                    m.next = "start"
+            with m.State("start"):
+                m.d.sync += timer.eq(timer - 1)
+                with m.If(timer == 0):
+                    m.d.sync += [timer.eq(d - 1), bit.eq(0)]
+                    m.next = "data"
+                    with m.If(line):        # the start bit did not last half a bit: a glitch
+                        m.next = "idle"
+            with m.State("data"):
+                m.d.sync += timer.eq(timer - 1)
+                with m.If(timer == 0):
+                    m.d.sync += [timer.eq(d - 1), shift.eq(Cat(shift[1:], line)), bit.eq(bit + 1)]
+                    with m.If(bit == 7):
+                        m.next = "stop"
+            with m.State("stop"):
+                m.d.sync += timer.eq(timer - 1)
+                with m.If(timer == 0):
+                    with m.If(~line):
+                        m.d.sync += self.framing_error.eq(1)
+                        m.next = "break"
+                    with m.Elif(self.o.valid & ~self.o.ready):
+                        m.d.sync += self.overrun.eq(1)
+                        m.next = "idle"
+                    with m.Else():
+                        m.d.sync += [self.o.valid.eq(1), self.o.payload.eq(shift)]
+                        m.next = "idle"
+            with m.State("break"):
+                with m.If(line):
+                    m.next = "idle"
+        return m
+
+
+class UARTTx(wiring.Component):
+    """8N1 UART transmitter.
+
+    Parameters
+    ----------
+    divisor : int
+        Clock cycles per bit (>= :data:`MIN_DIVISOR`).
+
+    Attributes
+    ----------
+    i : In(stream.Signature(8))
+        Bytes to send; ready when idle and in the last cycle of a stop bit.
+    tx : Out(1)
+        The serial output, registered; high (idle) from reset.
+
+    Latency
+    -------
+    The start bit begins one cycle after a byte is taken.
+
+    Throughput
+    ----------
+    One byte per ``10 * divisor`` cycles when offered back to back.
+    """
+
+    def __init__(self, divisor: int):
+        _check_divisor(divisor)
+        self._divisor = divisor
+        super().__init__({"i": In(stream.Signature(8)), "tx": Out(1, init=1)})
+
+    @property
+    def divisor(self) -> int:
+        return self._divisor
+
+    def elaborate(self, platform):
+        m = Module()
+        d = self._divisor
+        busy = Signal()
+        timer = Signal(range(d))
+        left = Signal(range(10))        # bits after the one on the line
+        shift = Signal(9)               # data bits, then the stop bit
+        tick = timer == 0
+        done = busy & tick & (left == 0)
+        # taking the next byte in the stop bit's last cycle keeps back-to-back bytes 10 bits apart
+        m.d.comb += self.i.ready.eq(~busy | done)
+        with m.If(busy):
+            m.d.sync += timer.eq(timer - 1)
+            with m.If(tick):
+                m.d.sync += timer.eq(d - 1)
+                with m.If(left == 0):
+                    m.d.sync += busy.eq(0)
+                with m.Else():
+                    m.d.sync += [self.tx.eq(shift[0]), shift.eq(shift >> 1), left.eq(left - 1)]
+        with m.If(self.i.valid & self.i.ready):
+            m.d.sync += [busy.eq(1), timer.eq(d - 1), left.eq(9), self.tx.eq(0),
+                         shift.eq(Cat(self.i.payload, 1))]
+        return m
