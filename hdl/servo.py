@@ -2,7 +2,7 @@
 atomic group moves, failsafe, between the IK widths and a :class:`ServoPWMBank`."""
 from __future__ import annotations
 
-from amaranth.hdl import Module, Signal
+from amaranth.hdl import Module, Shape, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -26,7 +26,7 @@ def _ik_servos(ik_layout, width_bits) -> list[str]:
                          f"not {ik_layout!r}")
     names = list(ik_layout.members["widths"].members)
     for n, shape in ik_layout.members["widths"].members.items():
-        s = shape if hasattr(shape, "signed") else shape.as_shape()
+        s = Shape.cast(shape)
         if s.width - s.signed > width_bits:
             raise ValueError(f"ik_layout widths.{n} must fit width_bits={width_bits}, not {s!r}")
     return names
