@@ -417,7 +417,6 @@ class ServoEngine(wiring.Component):
         return step, stop
 
     def _writeback(self, m, r, put):
-        w = self._w
         values = {Word.ENABLE: r.en, Word.TARGET: r.x, Word.POS: r.p, Word.VEL: Cat(r.u, r.down),
                   Word.STOP: r.s, Word.ACT_ACCEL: r.a, Word.TIMED: r.n}
         with m.Switch(r.wk):
