@@ -354,6 +354,7 @@ class ServoEngine(wiring.Component):
                 m.d.sync += rest + [r.n.eq(0), r.p.eq(r.x)]
                 m.next = "WB"
             with m.Elif(r.n != 0):
+                m.d.sync += r.down.eq(r.x < r.p)
                 m.next = "DIV"
             with m.Else():
                 with m.If(r.u == 0):
@@ -377,18 +378,25 @@ class ServoEngine(wiring.Component):
                     m.next = "TIMED_STEP"
                 with m.Else():
                     m.next = "PROFILE"
-        with m.State("TIMED_STEP"):
-            m.d.sync += rest + [r.n.eq(r.n - 1), r.p.eq(Mux(r.x < r.p, r.p - r.dn, r.p + r.dn))]
-            m.next = "WB"
+        # one adder moves the pulse for every kind of step, one subtractor gives the distance
+        # along the motion: p - s = ~(~p + s), p - x = ~p - ~x
+        flip = r.down.replicate(w)
+        mv_step, p_next = Signal(w), Signal(w)
+        m.d.comb += p_next.eq(((r.p ^ flip) + mv_step)[:w] ^ flip)
         remaining = Signal(signed(w + 2))
-        m.d.comb += remaining.eq(Mux(r.down, r.p - r.x, r.x - r.p))
+        m.d.comb += remaining.eq((r.x ^ flip) - (r.p ^ flip))
+        with m.State("TIMED_STEP"):
+            m.d.comb += mv_step.eq(r.dn)
+            m.d.sync += rest + [r.n.eq(r.n - 1), r.p.eq(p_next)]
+            m.next = "WB"
         with m.State("UNLIMITED"):
-            step = Mux((r.sm != 0) & (remaining > r.sm), r.sm, remaining[:w])
-            m.d.sync += rest + [r.p.eq(Mux(r.down, r.p - step, r.p + step))]
+            m.d.comb += mv_step.eq(Mux((r.sm != 0) & (remaining > r.sm), r.sm, remaining[:w]))
+            m.d.sync += rest + [r.p.eq(p_next)]
             m.next = "WB"
         with m.State("PROFILE"):
             step, stop = self._profile(m, r, remaining)
-            m.d.sync += [r.u.eq(step), r.s.eq(stop), r.p.eq(Mux(r.down, r.p - step, r.p + step))]
+            m.d.comb += mv_step.eq(step)
+            m.d.sync += [r.u.eq(step), r.s.eq(stop), r.p.eq(p_next)]
             m.next = "WB"
 
     def _profile(self, m, r, remaining):
