@@ -62,7 +62,7 @@ class ServoEngine(wiring.Component):
     Latency
     -------
     ``16 * channels + 1`` cycles of initialisation after reset; a pass starts at most
-    ``servos + 6`` cycles after ``period_start`` and takes ``channels * (35 + W)`` cycles
+    ``servos + 7`` cycles after ``period_start`` and takes ``channels * (28 + W)`` cycles
     at most (``pass_cycles`` in all).
 
     Throughput
