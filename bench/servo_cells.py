@@ -1,0 +1,48 @@
+"""Yosys iCE40 counts of the servo controller for a hexapod (18 channels), with and without
+its PWM bank (the bank replaces the robot core's own, which is then left unconnected).
+
+    python bench/servo_cells.py [--channels 18] [--width-bits 16] [--period 240000] [--workdir DIR]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+from amaranth.back import verilog
+from amaranth.lib import data
+
+from ikseries.hdl.pwmbank import ServoPWMBank
+from ikseries.hdl.servo import ServoController
+from ikseries.synth import synth_counts
+
+
+def counts(core, name, workdir: Path) -> dict:
+    d = workdir / name
+    d.mkdir(parents=True, exist_ok=True)
+    (d / "top.v").write_text(verilog.convert(core, name="top", emit_src=False))
+    return synth_counts(d / "top.v", "top", ["ice40"], workdir=d)["ice40"]["counts"]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--channels", type=int, default=18)
+    ap.add_argument("--servos", type=int, default=3, help="servos per leg on the ik stream")
+    ap.add_argument("--width-bits", type=int, default=16)
+    ap.add_argument("--period", type=int, default=240000, help="20 ms at 12 MHz")
+    ap.add_argument("--workdir", type=Path)
+    a = ap.parse_args(argv)
+    ik = data.StructLayout({"leg": range(a.channels // a.servos),
+                            "widths": data.StructLayout({f"s{j}": a.width_bits for j in range(a.servos)})})
+    with tempfile.TemporaryDirectory() as tmp:
+        wd = a.workdir or Path(tmp)
+        ctl = counts(ServoController(a.channels, a.width_bits, a.period, ik_layout=ik), "controller", wd)
+        bank = counts(ServoPWMBank(a.period, a.width_bits, a.channels, 1), "bank", wd)
+    print(json.dumps({"controller": ctl, "pwm_bank": bank,
+                      "controller_without_bank": {k: ctl.get(k, 0) - bank.get(k, 0) for k in ctl}},
+                     indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,233 @@
+"""Per-channel servo controller: trims, limits, speed and acceleration profiles, timed and
+atomic group moves, failsafe, between the IK widths and a :class:`ServoPWMBank`."""
+from __future__ import annotations
+
+from amaranth.hdl import Module, Shape, Signal
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from .pwmbank import ServoPWMBank
+from .servo_engine import ServoEngine, WORDS_PER_CHANNEL
+from .servo_fields import ChannelField, FailsafeAction
+
+__all__ = ["ServoController", "ChannelField", "FailsafeAction"]
+
+
+def _int(name, v, least):
+    if not isinstance(v, int) or isinstance(v, bool) or v < least:
+        raise ValueError(f"{name} must be an integer >= {least}, not {v!r}")
+
+
+def _ik_servos(ik_layout, width_bits) -> list[str]:
+    """The servo names of a robot core's output layout (``leg`` and ``widths.<servo>``)."""
+    if not isinstance(ik_layout, data.StructLayout) or set(ik_layout.members) != {"leg", "widths"} \
+            or not isinstance(ik_layout.members["widths"], data.StructLayout):
+        raise ValueError(f"ik_layout must be a StructLayout of 'leg' and 'widths' (a StructLayout), "
+                         f"not {ik_layout!r}")
+    names = list(ik_layout.members["widths"].members)
+    for n, shape in ik_layout.members["widths"].members.items():
+        s = Shape.cast(shape)
+        if s.width - s.signed > width_bits:
+            raise ValueError(f"ik_layout widths.{n} must fit width_bits={width_bits}, not {s!r}")
+    return names
+
+
+class ServoController(wiring.Component):
+    """What a Pololu Maestro or SSC-32 does between host and pulse, for ``channels`` servos.
+
+    Parameters, staging and motion state of every channel live in one block RAM
+    (``16 * channels`` words, see :class:`~ikseries.hdl.servo_engine.Word`); a sequential
+    engine (:class:`~ikseries.hdl.servo_engine.ServoEngine`) updates every channel once per
+    PWM period and loads the width of each into a :class:`ServoPWMBank` (one group per
+    channel), so every channel's new width appears at the same period start: a pulse is
+    never cut or stretched and channels committed together change in the same period.
+    All units are clock ticks and PWM periods; ``W = width_bits``.
+
+    Rules, per channel and pass (``sim/servo_model.py`` is their bit-exact model):
+
+    * Commit: a staged target ``t`` becomes the target ``min(max(t + trim, MIN), MAX)``
+      (``MAX`` wins when ``MIN > MAX``); ``clamped`` pulses once when that differs from
+      ``t + trim``. Its move time (0 = untimed) replaces a timed move in progress.
+    * Failsafe (the timeout expired this pass): HOLD stops at once (target := current
+      pulse); RELAX clears enable; HOME makes the home pulse the (untimed) target.
+    * Relaxed: no pulse, nothing moves. Current pulse 0 (no pulse has placed the servo, as
+      after reset without ``home_at_reset``): the current pulse jumps to the target
+      (unlimited, like a Maestro's first target). The first move after enable otherwise
+      starts at the current pulse and is limited like any other.
+    * Timed move with ``n`` periods left: step ``floor(|target - current| / n)`` toward the
+      target, then ``n -= 1``; it arrives exactly after the move's time ``T`` with steps
+      ``floor(d / T)`` or ``ceil(d / T)``. A timed move is not speed or acceleration limited.
+    * Acceleration 0: step ``min(distance, SPEED)`` (``SPEED`` 0 = unlimited).
+    * Otherwise the trapezoid of :func:`~ikseries.sim.servo_model.profile_step`: candidate
+      steps land, up, hold, down; ``|step| <= SPEED`` (when set), ``|Δstep| <= ACCEL``, no
+      overshoot and exact arrival for a target that stays put (proved exhaustively at small
+      sizes by the tests). ``SPEED`` applies at once; ``ACCEL`` at the channel's next
+      start from rest; a new target mid-move decelerates along the profile first.
+
+    Parameters
+    ----------
+    channels : int
+        Number of servo channels.
+    width_bits : int
+        Bits of a pulse width, limit, home pulse, speed and acceleration (``W``).
+    period : int
+        PWM period in clock cycles; at least ``16 * channels + pass_cycles + 2``.
+    time_bits : int
+        Bits of a move time (periods), default 16.
+    home_at_reset : list of int, optional
+        Per-channel home pulses: from reset every channel is enabled there (target and current
+        pulse). Without it every channel is relaxed (no pulse) until enabled.
+    ik_layout : data.StructLayout, optional
+        The robot core's ``o`` payload layout (``robot_output_layout``); adds the ``ik`` stream.
+    ik_legs : int, optional
+        Legs on ``ik`` (default ``channels // servos``); leg ``l`` servo ``j`` is channel
+        ``l * servos + j``.
+
+    Attributes
+    ----------
+    write : In(stream.Signature(StructLayout({"channel": range(channels), "field": 4, "value": signed(W + 1)})))
+        A :class:`ChannelField` write. A value out of its field's range (negative for an
+        unsigned field, enable > 1, an unknown action or field code) changes nothing and
+        pulses ``bad_write``.
+    target : In(stream.Signature(StructLayout({"channel", "pulse": W, "time": time_bits})))
+        Stages a target pulse (before trim and clamp) with a move time in periods (0 = untimed).
+    commit : In(1)
+        Strobe: every staged target is applied at the next pass (sticky until then; targets
+        staged after the strobe and before that pass are applied too).
+    ik : In(stream.Signature(ik_layout))
+        Stages one leg's widths (untimed) and commits (present with ``ik_layout``); a leg out of
+        range is dropped and pulses ``bad_write``.
+    read : In(stream.Signature(range(channels)))
+        Status request for a channel.
+    status : Out(stream.Signature(StructLayout({"target": W, "current": W, "moving": 1, "enabled": 1})))
+        The answer (``moving``: current pulse != target or the profile has a nonzero step).
+    keepalive : In(1)
+        Strobe: restarts the failsafe timeout (the link pulses it on every valid frame).
+    failsafe : Out(1)
+        Set when the timeout expires, cleared by the next accepted ``write``, ``target`` or ``ik``.
+    clamped, bad_write : Out(1)
+        One-cycle strobes (count them): a committed target changed by the clamp; a write refused.
+    pwm : Out(channels)
+        The servo signals, registered; low for a relaxed channel.
+    period_start : Out(1)
+        High for one cycle when a PWM period starts; the engine pass starts then.
+    busy : Out(1)
+        The engine is initialising or in a pass (the host streams wait).
+
+    Latency
+    -------
+    A write, target or commit accepted before a pass is applied by that pass and shows on the
+    pins at the next period start (one to two periods). After reset the engine initialises
+    the memory for ``16 * channels`` cycles. A status answer is valid 6 cycles after its request.
+
+    Throughput
+    ----------
+    While the engine is idle: one ``write`` per cycle, one ``target`` per 2 cycles, one ``ik``
+    leg per ``servos`` cycles, one ``read`` per 6 cycles (less while ``status`` is not taken).
+    The engine takes at most ``pass_cycles`` cycles from a period start.
+    """
+
+    def __init__(self, channels: int, width_bits: int, period: int, *, time_bits: int = 16,
+                 home_at_reset: list[int] | None = None, ik_layout=None, ik_legs: int | None = None):
+        _int("channels", channels, 1)
+        _int("width_bits", width_bits, 2)
+        _int("period", period, 2)
+        _int("time_bits", time_bits, 1)
+        full = (1 << width_bits) - 1
+        if home_at_reset is not None:
+            home_at_reset = list(home_at_reset)
+            if len(home_at_reset) != channels or not all(
+                    isinstance(h, int) and not isinstance(h, bool) and 0 <= h <= full for h in home_at_reset):
+                raise ValueError(f"home_at_reset must be {channels} integers in [0, {full}], "
+                                 f"not {home_at_reset!r}")
+        self._servos = [] if ik_layout is None else _ik_servos(ik_layout, width_bits)
+        if ik_layout is None and ik_legs is not None:
+            raise ValueError(f"ik_legs needs an ik_layout, not ik_legs={ik_legs!r} alone")
+        if ik_layout is not None:
+            legs = channels // len(self._servos) if ik_legs is None else ik_legs
+            _int("ik_legs", legs, 1)
+            if legs * len(self._servos) > channels:
+                raise ValueError(f"ik_legs * servos must be <= channels={channels}, not "
+                                 f"{legs} * {len(self._servos)}")
+            self._ik_legs = legs
+        self._channels, self._w, self._tb, self._period = channels, width_bits, time_bits, period
+        self._home = home_at_reset
+        self._engine = ServoEngine(channels, width_bits, time_bits, home_at_reset,
+                                   max(len(self._servos), 1))
+        # the first pass follows the memory initialisation within the first period
+        least = WORDS_PER_CHANNEL * channels + self._engine.pass_cycles + 2
+        if period < least:
+            raise ValueError(f"period must be >= {least} cycles for {channels} channels of "
+                             f"{width_bits} bits, not {period!r}")
+        self._bank = ServoPWMBank(period, width_bits, channels, 1, home_at_reset)
+        sig = {
+            "write": In(stream.Signature(self._engine.write_layout)),
+            "target": In(stream.Signature(self._engine.target_layout)),
+            "commit": In(1),
+            "read": In(stream.Signature(range(channels))),
+            "status": Out(stream.Signature(self._engine.status_layout)),
+            "keepalive": In(1),
+            "failsafe": Out(1), "clamped": Out(1), "bad_write": Out(1), "busy": Out(1),
+            "pwm": Out(channels), "period_start": Out(1),
+        }
+        if ik_layout is not None:
+            sig["ik"] = In(stream.Signature(ik_layout))
+        super().__init__(sig)
+
+    @property
+    def channels(self) -> int:
+        return self._channels
+
+    @property
+    def period(self) -> int:
+        return self._period
+
+    @property
+    def servos(self) -> list[str]:
+        return list(self._servos)
+
+    @property
+    def pass_cycles(self) -> int:
+        """Most cycles from a period start to the end of its engine pass."""
+        return self._engine.pass_cycles
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.engine = eng = self._engine
+        m.submodules.bank = bank = self._bank
+        wiring.connect(m, wiring.flipped(self.write), eng.write)
+        wiring.connect(m, wiring.flipped(self.target), eng.target)
+        wiring.connect(m, wiring.flipped(self.read), eng.read)
+        wiring.connect(m, eng.status, wiring.flipped(self.status))
+        m.d.comb += [eng.commit.eq(self.commit), eng.keepalive.eq(self.keepalive),
+                     eng.period_start.eq(bank.period_start),
+                     self.failsafe.eq(eng.failsafe), self.clamped.eq(eng.clamped),
+                     self.bad_write.eq(eng.bad_write), self.busy.eq(eng.busy),
+                     bank.i.valid.eq(eng.load.valid), bank.i.payload.group.eq(eng.load.payload.channel),
+                     bank.i.payload.widths[0].eq(eng.load.payload.width), eng.load.ready.eq(1),
+                     self.pwm.eq(bank.pwm), self.period_start.eq(bank.period_start)]
+        if self._servos:
+            self._wire_ik(m, eng)
+        return m
+
+    def _wire_ik(self, m, eng):
+        """Present one servo of the ``ik`` leg at a time to the engine's staging port."""
+        k = len(self._servos)
+        j = Signal(range(k))
+        leg = self.ik.payload.leg
+        ok = leg < self._ik_legs
+        m.d.comb += [eng.ik.valid.eq(self.ik.valid & ok),
+                     eng.ik.payload.channel.eq(leg * k + j),
+                     eng.ik.payload.last.eq(j == k - 1)]
+        with m.Switch(j):
+            for i, name in enumerate(self._servos):
+                with m.Case(i):
+                    m.d.comb += eng.ik.payload.pulse.eq(self.ik.payload.widths[name])
+        with m.If(self.ik.valid & ~ok & ~eng.busy):
+            m.d.comb += [self.ik.ready.eq(1), self.bad_write.eq(1)]
+        with m.If(eng.ik.valid & eng.ik.ready):
+            m.d.sync += j.eq(0)
+            with m.If(j != k - 1):
+                m.d.sync += j.eq(j + 1)
+            with m.Else():
+                m.d.comb += self.ik.ready.eq(1)
