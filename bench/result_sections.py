@@ -240,6 +240,16 @@ def link_fuzz(res: dict) -> list[str]:
     return lines
 
 
+def servo_cells(res: dict) -> list[str]:
+    """Lines of the ``bench/servo_cells.py`` section from its JSON ``res``."""
+    rows = [(name, *(res[key].get(k, 0) for k in ("LUT", "FF", "carry", "BRAM")))
+            for name, key in (("ServoController (with its PWM bank)", "controller"),
+                              ("ServoPWMBank alone", "pwm_bank"), ("controller without the bank", "controller_without_bank"))]
+    return [f"{res['channels']} channels, {res['width_bits']}-bit widths, period {res['period']:,} cycles; "
+            "Yosys `synth_ice40 -dsp` counts.", "",
+            *table(("design", "LUT", "FF", "carry", "BRAM"), rows)]
+
+
 SECTIONS = {
     "fit_benchmark": ("Fits of every preset", "Per preset and servo: what the fit costs and achieves.",
                       fit_benchmark),
@@ -264,4 +274,6 @@ SECTIONS = {
                "baseline and the hexapod core on iCE40UP5K and ECP5-25F.", pareto),
     "link_fuzz": ("Host link: receiver fuzz and area", "The frame receiver against the protocol model on a "
                   "long seeded mix of good, corrupted and garbage bytes; Yosys counts of the link.", link_fuzz),
+    "servo_cells": ("Servo controller area", "Yosys iCE40 counts of the per-channel servo controller "
+                    "(speed, acceleration, timed moves, failsafe) for a hexapod.", servo_cells),
 }

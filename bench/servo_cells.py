@@ -2,11 +2,13 @@
 its PWM bank (the bank replaces the robot core's own, which is then left unconnected).
 
     python bench/servo_cells.py [--channels 18] [--width-bits 16] [--period 240000] [--workdir DIR]
+                                [--json docs/results/servo_cells.json]
 """
 from __future__ import annotations
 
 import argparse
 import json
+import runpy
 import tempfile
 from pathlib import Path
 
@@ -16,6 +18,8 @@ from amaranth.lib import data
 from ikseries.hdl.pwmbank import ServoPWMBank
 from ikseries.hdl.servo import ServoController
 from ikseries.synth import synth_counts
+
+FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
 
 def counts(core, name, workdir: Path) -> dict:
@@ -32,16 +36,20 @@ def main(argv=None):
     ap.add_argument("--width-bits", type=int, default=16)
     ap.add_argument("--period", type=int, default=240000, help="20 ms at 12 MHz")
     ap.add_argument("--workdir", type=Path)
+    ap.add_argument("--json", default=FACTS["default_json"]("servo_cells"))
     a = ap.parse_args(argv)
+    run = FACTS["run_facts"]("servo_cells", argv)
     ik = data.StructLayout({"leg": range(a.channels // a.servos),
                             "widths": data.StructLayout({f"s{j}": a.width_bits for j in range(a.servos)})})
     with tempfile.TemporaryDirectory() as tmp:
         wd = a.workdir or Path(tmp)
         ctl = counts(ServoController(a.channels, a.width_bits, a.period, ik_layout=ik), "controller", wd)
         bank = counts(ServoPWMBank(a.period, a.width_bits, a.channels, 1), "bank", wd)
-    print(json.dumps({"controller": ctl, "pwm_bank": bank,
-                      "controller_without_bank": {k: ctl.get(k, 0) - bank.get(k, 0) for k in ctl}},
-                     indent=1))
+    payload = {"channels": a.channels, "width_bits": a.width_bits, "period": a.period,
+               "controller": ctl, "pwm_bank": bank,
+               "controller_without_bank": {k: ctl.get(k, 0) - bank.get(k, 0) for k in ctl}}
+    print(json.dumps(payload, indent=1))
+    print(f"wrote {FACTS['write_result'](a.json, payload, run)}")
 
 
 if __name__ == "__main__":
