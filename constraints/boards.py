@@ -4,7 +4,8 @@ A :class:`Board` names its FPGA (family of :mod:`~ikseries.constraints.devices`,
 device, package), the oscillator pin and frequency, the UART pins, a status LED, the pins
 servos may use in their default order and the ``openFPGALoader -b`` name of its programmer.
 
-Boards of ``amaranth-boards`` (:data:`BOARDS`) take every pin and the oscillator frequency from
+Boards of ``amaranth-boards`` (``BOARDS``: registry name -> Board, read on first use;
+:data:`BOARD_NAMES` their names) take every pin and the oscillator frequency from
 their platform class (:func:`board_from_platform`); only the choice of resources, the servo
 pins' order and the programmer are written here. Servo pins of such boards are named as
 Amaranth names connector pins, ``<connector>_<number>:<pin>`` (``pmod_0:1`` is pin 1 of the
@@ -39,7 +40,7 @@ from pathlib import Path
 
 from .devices import PARTS, lookup
 
-__all__ = ["Board", "BoardError", "BOARDS", "BOARD_FILE_KEYS", "IO_STANDARDS", "IO_ATTRIBUTE", "BITSTREAM_SUFFIX",
+__all__ = ["Board", "BoardError", "BOARD_NAMES", "BOARD_FILE_KEYS", "IO_STANDARDS", "IO_ATTRIBUTE", "BITSTREAM_SUFFIX",
            "board", "board_from_platform", "load_board_file", "parse_board"]
 
 #: single-ended I/O standards a board file may give, per family (the first is the default of
@@ -201,22 +202,30 @@ _ICEBREAKER_SERVOS = _pmod(0) + _pmod(1) + _pmod(2)
 _ULX3S_SERVOS = tuple(f"gpio_0:{k}+" for k in range(28)) + tuple(f"gpio_0:{k}-" for k in range(28))
 
 
-def _registry() -> dict[str, Board]:
-    # iCEBreaker: green user LED (pin 37); ULX3S: LED 0. openFPGALoader calls the iCEBreaker's
-    # FT2232H programmer "ice40_generic".
-    boards = [
-        board_from_platform("icebreaker", "amaranth_boards.icebreaker:ICEBreakerPlatform", clock="clk12",
-                            uart="uart", led="led_g", servo_pins=_ICEBREAKER_SERVOS, programmer="ice40_generic"),
-        board_from_platform("ulx3s-25f", "amaranth_boards.ulx3s:ULX3S_25F_Platform", clock="clk25",
-                            uart="uart", led="led", servo_pins=_ULX3S_SERVOS, programmer="ulx3s"),
-        board_from_platform("ulx3s-85f", "amaranth_boards.ulx3s:ULX3S_85F_Platform", clock="clk25",
-                            uart="uart", led="led", servo_pins=_ULX3S_SERVOS, programmer="ulx3s"),
-    ]
-    return {b.name: b for b in boards}
+# iCEBreaker: green user LED (pin 37); ULX3S: LED 0. openFPGALoader calls the iCEBreaker's
+# FT2232H programmer "ice40_generic".
+_SPECS = {
+    "icebreaker": dict(platform="amaranth_boards.icebreaker:ICEBreakerPlatform", clock="clk12", uart="uart",
+                       led="led_g", servo_pins=_ICEBREAKER_SERVOS, programmer="ice40_generic"),
+    "ulx3s-25f": dict(platform="amaranth_boards.ulx3s:ULX3S_25F_Platform", clock="clk25", uart="uart", led="led",
+                      servo_pins=_ULX3S_SERVOS, programmer="ulx3s"),
+    "ulx3s-85f": dict(platform="amaranth_boards.ulx3s:ULX3S_85F_Platform", clock="clk25", uart="uart", led="led",
+                      servo_pins=_ULX3S_SERVOS, programmer="ulx3s"),
+}
+
+#: the registry's board names, in order (known without importing amaranth-boards)
+BOARD_NAMES = tuple(_SPECS)
+_boards: dict[str, Board] = {}
 
 
-#: registry name -> :class:`Board` (the boards of amaranth-boards)
-BOARDS: dict[str, Board] = _registry()
+def __getattr__(name):
+    # BOARDS (registry name -> Board) reads the amaranth-boards platforms on first use only, so
+    # that importing this module (e.g. for the command line's help) stays cheap
+    if name == "BOARDS":
+        if not _boards:
+            _boards.update((n, board_from_platform(n, **spec)) for n, spec in _SPECS.items())
+        return _boards
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def board(name_or_file) -> Board:
@@ -224,9 +233,9 @@ def board(name_or_file) -> Board:
     if isinstance(name_or_file, (str, Path)) and str(name_or_file).endswith(".toml"):
         return load_board_file(name_or_file)
     try:
-        return lookup(BOARDS, "board", name_or_file)
+        return lookup(__getattr__("BOARDS"), "board", name_or_file)
     except ValueError:
-        raise BoardError(f"board must be one of {', '.join(BOARDS)} or a board file (.toml), "
+        raise BoardError(f"board must be one of {', '.join(BOARD_NAMES)} or a board file (.toml), "
                          f"not {name_or_file!r}") from None
 
 
