@@ -41,7 +41,7 @@ from pathlib import Path
 from .devices import PARTS, lookup
 
 __all__ = ["Board", "BoardError", "BOARD_NAMES", "BOARD_FILE_KEYS", "IO_STANDARDS", "IO_ATTRIBUTE", "BITSTREAM_SUFFIX",
-           "board", "board_from_platform", "load_board_file", "parse_board"]
+           "board", "board_file_text", "board_from_platform", "load_board_file", "parse_board"]
 
 #: single-ended I/O standards a board file may give, per family (the first is the default of
 #: amaranth-boards' boards of that family)
@@ -331,6 +331,26 @@ def parse_board(table: dict, where: str = "") -> Board:
         led_active_low=table.get("led_active_low", False),
         servo_pins=tuple((p, p) for p in table["servo_pins"]), io_standard=table["io_standard"],
         programmer=table["programmer"], source=where.rstrip(": "))
+
+
+def board_file_text(board: Board) -> str:
+    """The board file describing ``board`` (servo pins as package pins): a template for a
+    board of one's own, and what :func:`parse_board` reads back to the same facts."""
+    def val(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, int):
+            return str(v)
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    table = {"name": board.name, "family": board.family, "device": board.device, "package": board.package,
+             **({"speed": board.speed} if board.family == "ecp5" else {}),
+             "io_standard": board.io_standard, "programmer": board.programmer, "clock_pin": board.clock_pin,
+             "clock_hz": board.clock_hz, "uart_rx": board.uart_rx, "uart_tx": board.uart_tx,
+             "led_pin": board.led, "led_active_low": board.led_active_low,
+             "servo_pins": [p for _, p in board.servo_pins]}
+    return "".join(f"{k} = {val(v)}\n" for k, v in table.items())
 
 
 def load_board_file(path) -> Board:

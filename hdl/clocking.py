@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 from amaranth.hdl import ClockDomain, ClockSignal, Const, Elaboratable, Instance, Module, Signal
+from amaranth.lib import io
 from amaranth.lib.cdc import ResetSynchronizer
 
 from ..constraints.boards import Board
@@ -18,7 +19,7 @@ from ..constraints.pll import ClockPlan
 
 __all__ = ["ICE40_POWER_ON_HOLD_S", "BoardClocking"]
 
-#: iCE40 block RAMs read as zeroes for ~3 us after configuration (no erratum, seen on hardware;
+#: iCE40 block RAMs read as zeroes for ~3 us after configuration (no erratum; icestorm issue 76;
 #: Amaranth's own iCE40 reset waits the same 5x margin), so the core stays in reset that long
 ICE40_POWER_ON_HOLD_S = 15e-6
 
@@ -45,8 +46,13 @@ class BoardClocking(Elaboratable):
     plan : ClockPlan
         Made for ``board`` (:func:`ikseries.constraints.pll.clock_plan`).
 
+    The top defines :attr:`domain` (Amaranth 0.6 wants a domain defined where its users can see
+    it); this module drives its clock and reset.
+
     Attributes
     ----------
+    domain : ClockDomain
+        The ``sync`` domain.
     clk : Signal
         The core clock (``sync``'s clock). nextpnr derives its constraint from the oscillator
         pin's and the PLL's parameters (a constraint on the signal itself would name a net the
@@ -74,11 +80,18 @@ class BoardClocking(Elaboratable):
         if (plan.board, plan.family, plan.oscillator_hz) != (board.name, board.family, board.clock_hz):
             raise ValueError(f"plan must be a clock plan for board {board.name}, not for {plan.board}")
         self.board, self.plan = board, plan
-        self._domain = ClockDomain("sync")
-        self.clk = self._domain.clk
+        self.domain = ClockDomain("sync")
+        self.clk = self.domain.clk
         self.locked = Signal()
         hold = ICE40_POWER_ON_HOLD_S if board.family == "ice40" else 0
         self.hold_cycles = math.ceil(hold * plan.achieved_hz)
+
+    @staticmethod
+    def _input(m, platform, name: str, number: int):
+        """The oscillator through the platform's input buffer (a global one where the pin's
+        attributes ask for it)."""
+        m.submodules.osc_buffer = buf = io.Buffer("i", platform.request(name, number, dir="-"))
+        return buf.i
 
     def _pll(self, m, platform, name: str, number: int):
         p, plan = self.plan.params, self.plan
@@ -89,13 +102,13 @@ class BoardClocking(Elaboratable):
                 p_FILTER_RANGE=p["FILTER_RANGE"], io_PACKAGEPIN=pad.io, i_RESETB=Const(1), i_BYPASS=Const(0),
                 o_PLLOUTGLOBAL=self.clk, o_LOCK=self.locked)
         elif plan.primitive == "SB_PLL40_CORE":
-            ref = platform.request(name, number).i
+            ref = self._input(m, platform, name, number)
             m.submodules.pll = Instance(
                 "SB_PLL40_CORE", p_FEEDBACK_PATH="SIMPLE", p_DIVR=p["DIVR"], p_DIVF=p["DIVF"], p_DIVQ=p["DIVQ"],
                 p_FILTER_RANGE=p["FILTER_RANGE"], i_REFERENCECLK=ref, i_RESETB=Const(1), i_BYPASS=Const(0),
                 o_PLLOUTGLOBAL=self.clk, o_LOCK=self.locked)
         else:
-            ref, feedback = platform.request(name, number).i, Signal(name="pll_feedback")
+            ref, feedback = self._input(m, platform, name, number), Signal(name="pll_feedback")
             secondary = p["OUTPUT"] == "CLKOS"
             out = dict(o_CLKOP=feedback, o_CLKOS=self.clk, p_CLKOS_ENABLE="ENABLED", p_CLKOS_DIV=p["CLKOS_DIV"],
                        p_CLKOS_CPHASE=p["CLKOS_CPHASE"], p_CLKOS_FPHASE=0,
@@ -113,10 +126,9 @@ class BoardClocking(Elaboratable):
         m = Module()
         name, number = self.board.resource("clock")
         if self.plan.primitive is None:
-            m.d.comb += [self.clk.eq(platform.request(name, number).i), self.locked.eq(1)]
+            m.d.comb += [self.clk.eq(self._input(m, platform, name, number)), self.locked.eq(1)]
         else:
             self._pll(m, platform, name, number)
-        m.domains.sync = self._domain
         # the hold counter runs on the core clock without a reset of its own: bitstream zero,
         # restarted whenever the PLL loses lock
         m.domains.hold = ClockDomain("hold", reset_less=True, local=True)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from amaranth.build import Attrs, Pins, Resource
 from amaranth.hdl import Elaboratable, Module, Shape, Signal
-from amaranth.lib import wiring
+from amaranth.lib import io, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
@@ -127,18 +127,27 @@ class BoardTop(Elaboratable):
             raise ValueError(f"platform must be for {board.device} {board.package} ({board.name}), "
                              f"not {platform.device} {platform.package}")
         m = Module()
+        m.domains.sync = self.clocking.domain
         m.submodules.clocking = self.clocking
         m.submodules.design = design = self.design
         attrs = Attrs(**{IO_ATTRIBUTE[board.family]: board.io_standard})
         platform.add_resources([Resource(SERVO_RESOURCE, k, Pins(pin, dir="o"), attrs) for _, pin, k in self.pins])
-        uart = platform.request(*board.resource("uart"))
-        m.submodules.rx_sync = FFSynchronizer(uart.rx.i, design.rx, init=1)
+        uart = platform.request(*board.resource("uart"), dir="-")
+        m.submodules.rx_buffer = rx = io.Buffer("i", uart.rx)
+        m.submodules.rx_sync = FFSynchronizer(rx.i, design.rx, init=1)
         tx = Signal(init=1)
         m.d.sync += tx.eq(design.tx)
-        m.d.comb += uart.tx.o.eq(tx)
+        m.d.comb += self._output(m, platform, "tx", uart.tx).eq(tx)
         pwm = Signal.like(design.pwm)
         m.d.sync += pwm.eq(design.pwm)
         for _, _, k in self.pins:
-            m.d.comb += platform.request(SERVO_RESOURCE, k).o.eq(pwm[k])
-        self._heartbeat(m, platform.request(*board.resource("led")).o)
+            m.d.comb += self._output(m, platform, f"servo{k}", platform.request(SERVO_RESOURCE, k, dir="-")).eq(pwm[k])
+        self._heartbeat(m, self._output(m, platform, "led", platform.request(*board.resource("led"), dir="-")))
         return m
+
+    @staticmethod
+    def _output(m, platform, name, port):
+        """The ``o`` of a plain output buffer on ``port`` (the registers are in the fabric, with
+        the domain's reset value)."""
+        m.submodules[f"{name}_buffer"] = buf = io.Buffer("o", port)
+        return buf.o
