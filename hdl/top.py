@@ -71,7 +71,8 @@ class BoardTop(Elaboratable):
     board : Board
     design : wiring.Component
         Signature with ``rx: In(1)`` (from the host), ``tx: Out(1)`` and ``pwm: Out(n)``; clocked
-        by ``sync``.
+        by ``sync``. Its ``tx`` should reset to 1 (``Out(1, init=1)``), the line's idle level: the
+        top shows it on the pin from the first cycle out of reset.
     clock_plan : ClockPlan
         How the board makes the core clock (:func:`ikseries.constraints.pll.clock_plan`).
     servo_pins : list of str, optional

@@ -16,7 +16,7 @@ from fractions import Fraction
 
 import pytest
 from amaranth.build import Pins, Resource
-from amaranth.hdl import Module, Signal
+from amaranth.hdl import Elaboratable, Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -41,7 +41,7 @@ class EchoServos(wiring.Component):
 
     def __init__(self, n=4, period=1000, rx_width=1):
         self.n, self.period = n, period
-        super().__init__({"rx": In(rx_width), "tx": Out(1), "pwm": Out(n)})
+        super().__init__({"rx": In(rx_width), "tx": Out(1, init=1), "pwm": Out(n)})
 
     def elaborate(self, platform):
         m = Module()
@@ -497,3 +497,75 @@ def test_program_without_a_board_fails_in_one_line(tmp_path, capsys, monkeypatch
     assert main(["program", str(bit), "--board", "nano"]) == 2
     assert capsys.readouterr().err == ("ikseries: error: board must be one of icebreaker, ulx3s-25f, ulx3s-85f or "
                                        "a board file (.toml), not 'nano'\n")
+
+
+# -- the board top in simulation (no PLL: the core clock is the oscillator pin) ----------------------
+
+class _SimPlatform:
+    """Resources as simulation ports, for elaborating a BoardTop in Amaranth's simulator."""
+
+    def __init__(self, board):
+        self.device, self.package, self.board = board.device, board.package, board
+        self.ports = {}
+
+    def add_resources(self, resources):
+        pass
+
+    def request(self, name, number=0, *, dir=None):
+        from types import SimpleNamespace
+        from amaranth.lib.io import SimulationPort
+        if (name, number) == self.board.resource("uart"):
+            port = SimpleNamespace(rx=SimulationPort("i", 1), tx=SimulationPort("o", 1))
+        else:
+            port = SimulationPort("i" if (name, number) == self.board.resource("clock") else "o", 1)
+        self.ports[name, number] = port
+        return port
+
+
+class _Elaborated(Elaboratable):
+    """A top elaborated for a given platform (the simulator elaborates with none)."""
+
+    def __init__(self, top, platform):
+        self.top, self.platform = top, platform
+
+    def elaborate(self, platform):
+        from amaranth.hdl import Fragment
+        return Fragment.get(self.top, self.platform)
+
+
+@pytest.mark.parametrize("table, hold", [(ECP5_GOOD, 0), (GOOD, 1)])
+def test_board_top_reset_heartbeat_and_latency(table, hold):
+    from amaranth.sim import Simulator
+    b = parse_board({**table, "clock_hz": 20})        # 20 Hz: the LED toggles every 10 cycles
+    top = BoardTop(b, EchoServos(2, period=4), clock_plan(b, 20))
+    assert top.clocking.hold_cycles == hold          # iCE40: 15 us (here one cycle) more in reset
+    plat = _SimPlatform(b)
+    sim = Simulator(_Elaborated(top, plat))
+    trace = []
+
+    async def bench(ctx):
+        osc, uart, led = plat.ports[b.resource("clock")], plat.ports[b.resource("uart")], plat.ports[b.resource("led")]
+        servo0 = plat.ports["ikseries_servo", 0]
+        ctx.set(uart.rx.i, 1)
+        for cycle in range(60):
+            if cycle == 30:
+                ctx.set(uart.rx.i, 0)          # a start bit from the host
+            ctx.set(osc.i, 1)
+            await ctx.delay(1e-6)
+            ctx.set(osc.i, 0)
+            await ctx.delay(1e-6)
+            trace.append((ctx.get(led.o), ctx.get(uart.tx.o), ctx.get(servo0.o)))
+    sim.add_testbench(bench)
+    sim.run()
+    leds, txs, _ = zip(*trace)
+    # reset: two synchroniser cycles after configuration, tx idle high and the LED dark meanwhile
+    assert txs[:2] == (1, 1) and leds[:2] == (0, 0)
+    first = leds.index(1)
+    assert leds[first:first + 10] == (1,) * 10 and leds[first + 10:first + 20] == (0,) * 10
+    # trace[k] follows clock edge k: edges 0 .. hold + 1 are in reset (the hold, then the
+    # synchroniser's two stages), the 10th edge out of reset lights the LED
+    assert first == hold + 2 + 10 - 1
+    # rx, low from edge 30 on -> 2 synchroniser registers -> the design's -> the top's tx
+    # register: low after the 4th of those edges
+    assert txs.index(0) == 30 + 4 - 1 and set(txs[:33]) == {1}
+    assert any(s for _, _, s in trace[2:]) and not any(s for _, _, s in trace[:hold + 2])
