@@ -28,7 +28,6 @@ VCO nearest 600 MHz, then the smallest dividers.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -193,31 +192,45 @@ def _ice40_candidates(f_in: int, target: int):
 
 
 def _ecp5_candidates(f_in: int, target: int):
-    """The same for the ECP5: every legal CLKOP setting (feedback output = core clock) and, for
-    each, the legal CLKOS_DIV nearest the target (the error grows monotonically away from it)."""
+    """The same for the ECP5: the legal CLKOP settings (feedback output = core clock) and, for
+    each, the legal CLKOS_DIV nearest the target (the error grows monotonically away from it).
+    Errors are screened in integers (numerator, denominator) and only settings at least as close
+    as the closest so far are yielded: the minimum is the same, without a Fraction per setting."""
     lim = ECP5_PLL
+    (plo, phi), (olo, ohi), (vlo, vhi) = lim.f_pfd, lim.f_out, lim.f_vco
+    best = [None, 1]                  # closest error so far, as numerator / denominator
+
+    def close(num: int, den: int) -> bool:
+        if best[0] is None or num * best[1] <= best[0] * den:
+            best[:] = [num, den]
+            return True
+        return False
     for ref in lim.divider_range("CLKI_DIV"):
-        pfd = Fraction(f_in, ref)
-        if not _within(pfd, lim.f_pfd):
+        if not plo * ref <= f_in <= phi * ref:
             continue
+        pfd = Fraction(f_in, ref)
         for fb in lim.divider_range("CLKFB_DIV"):
-            op = pfd * fb
-            if not _within(op, lim.f_out):
+            op_ref = f_in * fb                 # f_CLKOP * ref
+            if not olo * ref <= op_ref <= ohi * ref:
                 continue
             for opd in lim.divider_range("CLKOP_DIV"):
-                vco = op * opd
-                if vco > lim.f_vco[1]:
+                vco_ref = op_ref * opd         # f_VCO * ref
+                if vco_ref > vhi * ref:
                     break
-                if vco < lim.f_vco[0]:
+                if vco_ref < vlo * ref:
                     continue
-                common = (("CLKI_DIV", ref), ("CLKFB_DIV", fb), ("CLKOP_DIV", opd))
-                yield abs(op - target), (0, abs(vco - 600 * _MHZ), ref, fb, opd, 0), op, common, vco, pfd
+                vco, common = Fraction(vco_ref, ref), (("CLKI_DIV", ref), ("CLKFB_DIV", fb), ("CLKOP_DIV", opd))
+                if close(abs(op_ref - target * ref), ref):
+                    yield abs(pfd * fb - target), (0, abs(vco - 600 * _MHZ), ref, fb, opd, 0), pfd * fb, \
+                        common, vco, pfd
                 legal = lim.divider_range("CLKOS_DIV")
-                lo, hi = max(legal.start, math.ceil(vco / lim.f_out[1])), min(legal.stop - 1, int(vco / lim.f_out[0]))
-                ideal = int(vco / target)
+                lo = max(legal.start, -(-vco_ref // (ohi * ref)))
+                hi = min(legal.stop - 1, vco_ref // (olo * ref))
+                ideal = vco_ref // (target * ref)
                 for osd in {min(max(ideal, lo), hi), min(max(ideal + 1, lo), hi)} if lo <= hi else ():
-                    out = vco / osd
-                    yield abs(out - target), (1, abs(vco - 600 * _MHZ), ref, fb, opd, osd), out, \
+                    if close(abs(vco_ref - target * ref * osd), ref * osd):
+                        out = vco / osd
+                        yield abs(out - target), (1, abs(vco - 600 * _MHZ), ref, fb, opd, osd), out, \
                             common + (("CLKOS_DIV", osd),), vco, pfd
 
 

@@ -569,3 +569,30 @@ def test_board_top_reset_heartbeat_and_latency(table, hold):
     # register: low after the 4th of those edges
     assert txs.index(0) == 30 + 4 - 1 and set(txs[:33]) == {1}
     assert any(s for _, _, s in trace[2:]) and not any(s for _, _, s in trace[:hold + 2])
+
+
+def test_ecp5_search_finds_the_closest_of_every_setting():
+    """Brute force over every (CLKI_DIV, CLKFB_DIV, CLKOP_DIV, CLKOS_DIV) in range (numpy, in
+    floats): no legal setting is closer to the target than the search's."""
+    import numpy as np
+    f_in, target = 25_000_000, 33_333_333
+    lim = PLL_FAMILIES["ecp5"]
+    (plo, phi), (olo, ohi), (vlo, vhi) = ([float(x) for x in r] for r in (lim.f_pfd, lim.f_out, lim.f_vco))
+    opd = np.arange(1, 129, dtype=float)[:, None]
+    osd = np.arange(1, 129, dtype=float)[None, :]
+    best = np.inf
+    for ref in range(1, 129):
+        for fb in range(1, 81):
+            op = f_in * fb / ref
+            if not (plo <= f_in / ref <= phi and olo <= op <= ohi):
+                continue
+            vco = op * opd
+            legal_vco = (vlo <= vco) & (vco <= vhi)
+            if legal_vco.any():
+                best = min(best, abs(op - target))
+            out = vco / osd
+            legal = legal_vco & (olo <= out) & (out <= ohi)
+            if legal.any():
+                best = min(best, float(np.abs(out[legal] - target).min()))
+    achieved = search_pll("ecp5", f_in, target)[0]
+    assert float(abs(achieved - target)) <= best + 1e-6 and best < 1000     # float rounding: ~1e-8 Hz
