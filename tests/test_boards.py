@@ -596,3 +596,34 @@ def test_ecp5_search_finds_the_closest_of_every_setting():
                 best = min(best, float(np.abs(out[legal] - target).min()))
     achieved = search_pll("ecp5", f_in, target)[0]
     assert float(abs(achieved - target)) <= best + 1e-6 and best < 1000     # float rounding: ~1e-8 Hz
+
+
+def test_interrupted_tools_are_stopped_and_leave_nothing(tmp_path):
+    """SIGINT while Yosys runs: the tools' process group is killed, the output directory the
+    build created is gone."""
+    import signal
+    import sys
+    import time
+    out = tmp_path / "out"
+    script = (f"import sys; sys.path.insert(0, {os.path.dirname(__file__)!r})\n"
+              "from test_boards import EchoServos\n"
+              "from ikseries.bitstream import build_bitstream\n"
+              "from ikseries.constraints.boards import BOARDS\n"
+              "from ikseries.constraints.pll import clock_plan\n"
+              "b = BOARDS['icebreaker']\n"
+              f"build_bitstream(b, EchoServos(4), clock_plan(b, 48_000_000), None, {str(out)!r})\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while not list(out.glob(".ikseries-bitstream-*/build/top.rpt")):    # Yosys has started
+        assert proc.poll() is None and time.monotonic() < deadline
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=30) != 0 and b"KeyboardInterrupt" in proc.stderr.read()
+    assert not out.exists()
+    cwds = []
+    for pid in os.listdir("/proc"):
+        try:
+            cwds.append(os.readlink(f"/proc/{pid}/cwd"))
+        except OSError:
+            pass
+    assert not [c for c in cwds if c.startswith(str(out))]
