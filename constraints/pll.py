@@ -31,6 +31,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from fractions import Fraction
 
+from .boards import Board, board as find_board
+
 __all__ = ["CLOCK_TOLERANCE_PPM", "ICE40_PLL", "ECP5_PLL", "PLL_FAMILIES", "ICE40_PLL_PADS", "ClockPlan",
            "ClockPlanError", "clock_plan", "search_pll"]
 
@@ -264,11 +266,12 @@ def _ecp5_parameters(div: tuple) -> tuple:
 
 def clock_plan(board, clock_hz: int) -> ClockPlan:
     """The :class:`ClockPlan` making ``clock_hz`` on ``board`` (a
-    :class:`~ikseries.constraints.boards.Board`).
+    :class:`~ikseries.constraints.boards.Board`, a registry name or a board file's path).
 
     Raises :class:`ClockPlanError` (one line) when the PLL cannot reach ``clock_hz`` within
     :data:`CLOCK_TOLERANCE_PPM`, ``ValueError`` for a ``clock_hz`` that is not a positive integer.
     """
+    board = board if isinstance(board, Board) else find_board(board)
     if isinstance(clock_hz, bool) or not isinstance(clock_hz, int) or clock_hz <= 0:
         raise ValueError(f"clock_hz must be a positive integer (Hz), not {clock_hz!r}")
     osc = board.clock_hz

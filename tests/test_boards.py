@@ -317,6 +317,7 @@ def test_unreachable_and_bad_clocks_are_refused_in_one_line():
         assert str(e.value) == f"clock_hz must be a positive integer (Hz), not {bad!r}"
     direct = clock_plan(ulx, 25_000_000)
     assert (direct.primitive, direct.parameters, direct.exact) == (None, (), True)
+    assert clock_plan("ulx3s-25f", 25_000_000) == direct
     assert direct.describe() == ("ulx3s-25f: core clock 25 MHz (requested 25 MHz, +0.0 ppm) from the 25 MHz "
                                  "oscillator directly")
 
@@ -421,6 +422,18 @@ def test_real_bitstream(name, mhz, tmp_path):
     # nextpnr's constraint on the core clock is what it derives from the PLL: the plan's frequency
     assert float(nextpnr["fmax"][r.clock_net]["constraint"]) == pytest.approx(mhz, rel=1e-4)
     assert (out / "notes.txt").read_text() == "mine"
+
+
+def test_board_file_bitstream_through_the_core_pll(tmp_path):
+    """A board file whose oscillator is not on the UP5K's PLL pad: SB_PLL40_CORE behind the pin's
+    global buffer, placed and routed for real."""
+    b = parse_board({**GOOD, "clock_pin": "20"})
+    plan = clock_plan(b, 48_000_000)
+    assert plan.primitive == "SB_PLL40_CORE"
+    r = build_bitstream(b, EchoServos(4), plan, ["45", "4"] + ["2", "47"], tmp_path / "o", name="core-pll")
+    assert r.meets_clock and r.nextpnr_utilisation["ICESTORM_PLL"]["used"] == 1
+    assert r.pins == (("45", "45", 0), ("4", "4", 1), ("2", "2", 2), ("47", "47", 3))
+    assert sorted(os.listdir(tmp_path / "o")) == sorted([RECORD_NAME, *output_names(b, "core-pll").values()])
 
 
 def test_interrupted_bitstream_leaves_nothing(tmp_path, monkeypatch):
