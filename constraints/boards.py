@@ -202,8 +202,9 @@ _ICEBREAKER_SERVOS = _pmod(0) + _pmod(1) + _pmod(2)
 _ULX3S_SERVOS = tuple(f"gpio_0:{k}+" for k in range(28)) + tuple(f"gpio_0:{k}-" for k in range(28))
 
 
-# iCEBreaker: green user LED (pin 37); ULX3S: LED 0. openFPGALoader calls the iCEBreaker's
-# FT2232H programmer "ice40_generic".
+# The iCEBreaker's green user LED (the red one shares its pin with nothing but is the classic
+# "error" colour); the ULX3S's LED 0. openFPGALoader has no "icebreaker": the board's FT2232H
+# programmer is its generic iCE40 one.
 _SPECS = {
     "icebreaker": dict(platform="amaranth_boards.icebreaker:ICEBreakerPlatform", clock="clk12", uart="uart",
                        led="led_g", servo_pins=_ICEBREAKER_SERVOS, programmer="ice40_generic"),

