@@ -202,8 +202,7 @@ _ICEBREAKER_SERVOS = _pmod(0) + _pmod(1) + _pmod(2)
 _ULX3S_SERVOS = tuple(f"gpio_0:{k}+" for k in range(28)) + tuple(f"gpio_0:{k}-" for k in range(28))
 
 
-# The iCEBreaker's green user LED (the red one shares its pin with nothing but is the classic
-# "error" colour); the ULX3S's LED 0. openFPGALoader has no "icebreaker": the board's FT2232H
+# The iCEBreaker's green user LED (a blinking red one reads as an error); the ULX3S's LED 0. openFPGALoader has no "icebreaker": the board's FT2232H
 # programmer is its generic iCE40 one.
 _SPECS = {
     "icebreaker": dict(platform="amaranth_boards.icebreaker:ICEBreakerPlatform", clock="clk12", uart="uart",
