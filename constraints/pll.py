@@ -33,7 +33,7 @@ from fractions import Fraction
 
 from .boards import Board, board as find_board
 
-__all__ = ["CLOCK_TOLERANCE_PPM", "ICE40_PLL", "ECP5_PLL", "PLL_FAMILIES", "ICE40_PLL_PADS", "ClockPlan",
+__all__ = ["CLOCK_TOLERANCE_PPM", "POWER_ON_HOLD_S", "ICE40_PLL", "ECP5_PLL", "PLL_FAMILIES", "ICE40_PLL_PADS", "ClockPlan",
            "ClockPlanError", "clock_plan", "search_pll"]
 
 #: the largest accepted deviation of the achieved core clock from the requested one, in parts per
@@ -42,6 +42,11 @@ __all__ = ["CLOCK_TOLERANCE_PPM", "ICE40_PLL", "ECP5_PLL", "PLL_FAMILIES", "ICE4
 CLOCK_TOLERANCE_PPM = 1000
 
 _MHZ = 1_000_000
+
+#: seconds the core stays in reset after the PLL locks, by family: iCE40 block RAMs read as zeroes
+#: for ~3 us after configuration (no erratum; icestorm issue 76), and Amaranth's own iCE40 reset
+#: waits 5 times that
+POWER_ON_HOLD_S = {"ice40": 15e-6, "ecp5": 0.0}
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,8 @@
 :class:`BoardClocking` builds what a :class:`~ikseries.constraints.pll.ClockPlan` describes: the
 board's oscillator pin, the PLL primitive with the plan's parameters (none when the plan runs
 the core at the oscillator frequency) and the ``sync`` clock domain, held in reset until the PLL
-locks and, on the iCE40, for :data:`ICE40_POWER_ON_HOLD_S` more, then released through
-:class:`amaranth.lib.cdc.ResetSynchronizer`.
+locks and for the family's :data:`~ikseries.constraints.pll.POWER_ON_HOLD_S` more, then
+released through :class:`amaranth.lib.cdc.ResetSynchronizer`.
 """
 from __future__ import annotations
 
@@ -15,13 +15,9 @@ from amaranth.lib import io
 from amaranth.lib.cdc import ResetSynchronizer
 
 from ..constraints.boards import Board
-from ..constraints.pll import ClockPlan
+from ..constraints.pll import POWER_ON_HOLD_S, ClockPlan
 
-__all__ = ["ICE40_POWER_ON_HOLD_S", "BoardClocking"]
-
-#: iCE40 block RAMs read as zeroes for ~3 us after configuration (no erratum; icestorm issue 76;
-#: Amaranth's own iCE40 reset waits the same 5x margin), so the core stays in reset that long
-ICE40_POWER_ON_HOLD_S = 15e-6
+__all__ = ["BoardClocking"]
 
 # EHXPLLL settings ecppll writes besides the dividers (loop filter, unused dynamic phase inputs)
 _ECP5_FIXED = dict(
@@ -83,8 +79,7 @@ class BoardClocking(Elaboratable):
         self.domain = ClockDomain("sync")
         self.clk = self.domain.clk
         self.locked = Signal()
-        hold = ICE40_POWER_ON_HOLD_S if board.family == "ice40" else 0
-        self.hold_cycles = math.ceil(hold * plan.achieved_hz)
+        self.hold_cycles = math.ceil(POWER_ON_HOLD_S[board.family] * plan.achieved_hz)
 
     @staticmethod
     def _input(m, platform, name: str, number: int):
