@@ -33,8 +33,8 @@ from fractions import Fraction
 
 from .boards import Board, board as find_board
 
-__all__ = ["CLOCK_TOLERANCE_PPM", "POWER_ON_HOLD_S", "ICE40_PLL", "ECP5_PLL", "PLL_FAMILIES", "ICE40_PLL_PADS", "ClockPlan",
-           "ClockPlanError", "clock_plan", "search_pll"]
+__all__ = ["CLOCK_TOLERANCE_PPM", "POWER_ON_HOLD_S", "ICE40_PLL", "ECP5_PLL", "PLL_FAMILIES", "ICE40_PLL_PADS",
+           "ClockPlan", "ClockPlanError", "clock_plan", "search_pll"]
 
 #: the largest accepted deviation of the achieved core clock from the requested one, in parts per
 #: million (0.1 %: a UART's baud-rate divisor and the PWM period stay well within their own
@@ -83,7 +83,8 @@ PLL_FAMILIES = {p.family: p for p in (ICE40_PLL, ECP5_PLL)}
 
 #: (device, package) -> the pins that feed an iCE40 PLL directly (SB_PLL40_PAD); a clock on any
 #: other pin reaches the PLL through a global buffer (SB_PLL40_CORE). The UP5K's only PLL sits
-#: on pin 35's I/O pair in the SG48 package (iCE40 UltraPlus pinout, "PLL" column).
+#: on pin 35's I/O pair in the SG48 package: nextpnr finds no place for an SB_PLL40_CORE while
+#: pin 35 is in use as an input, and places SB_PLL40_PAD there.
 ICE40_PLL_PADS = {("iCE40UP5K", "SG48"): ("35",)}
 
 # TN1251 table 6: loop-filter setting by the PFD frequency (upper bounds, MHz, exclusive)
