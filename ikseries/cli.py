@@ -1,4 +1,4 @@
-"""Command-line interface: ``ikseries presets | build | fit | eval | report``."""
+"""Command-line interface: ``ikseries presets | build | fit | eval | report | program``."""
 from __future__ import annotations
 
 import argparse
@@ -202,6 +202,22 @@ def cmd_report(args):
     print(f"wrote {bdir / 'pnr.json'} and the place-and-route section of {bdir / 'report.md'}")
 
 
+def cmd_program(args):
+    from .constraints.boards import BoardError, board
+    from .program import ProgramError, program
+    try:
+        b = board(args.board)
+    except BoardError as e:
+        raise CliError(str(e)) from None
+    try:
+        program(b, args.bitstream, flash=args.flash)
+    except ProgramError as e:    # the board or the tool failed, not the command line: status 1
+        print(f"ikseries: error: {e}", file=sys.stderr)
+        return 1
+    print(f"loaded {args.bitstream} into the {b.name}'s {'flash' if args.flash else 'FPGA'}")
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     from . import __version__
     from .constraints.devices import FAMILIES, FIT_DEVICES, PNR_DEVICES, PRIMITIVES, PARTS
@@ -266,6 +282,12 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--preset", help="with no BUILD_DIR: this preset's default build directory")
     r.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
     r.add_argument("-q", "--quiet", action="store_true")
+    from .constraints.boards import BOARD_NAMES
+    g = sub.add_parser("program", help="load a bitstream into a board with openFPGALoader")
+    g.add_argument("bitstream", metavar="BITSTREAM", help="the .bin (iCE40) or .bit (ECP5) file")
+    g.add_argument("--board", required=True, help=f"{', '.join(BOARD_NAMES)} or a board file (.toml)")
+    g.add_argument("--flash", action="store_true", help="write the board's SPI flash (kept at power-off) "
+                   "instead of the FPGA's configuration memory")
     return p
 
 
@@ -310,15 +332,15 @@ def _dispatch(args) -> int:
     from .pnr import PnrError
     from .robot import RobotError
     try:
-        {"presets": cmd_presets, "build": cmd_build, "fit": cmd_fit, "eval": cmd_eval,
-         "report": cmd_report}[args.cmd](args)
+        status = {"presets": cmd_presets, "build": cmd_build, "fit": cmd_fit, "eval": cmd_eval,
+                  "report": cmd_report, "program": cmd_program}[args.cmd](args)
     except (CliError, RobotError) as exc:
         print(f"ikseries: error: {exc}", file=sys.stderr)
         return 2
     except (BuildError, PnrError) as exc:
         print(f"ikseries: error: {exc}", file=sys.stderr)
         return 1
-    return 0
+    return status or 0
 
 
 if __name__ == "__main__":
