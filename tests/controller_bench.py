@@ -24,6 +24,7 @@ class PinHost:
         self.dut, self.div = dut, dut.divisor
         self.answers, self.pulses = [], [[] for _ in range(len(dut.pwm))]
         self.cycle = 0
+        self.requests = 0       # frames sent through request(), each expecting an answer
         self.period_starts = []
         self._decoder = Decoder()
 
@@ -67,6 +68,7 @@ class PinHost:
     async def request(self, ctx, data: bytes, timeout: int = 20000):
         """Send a frame and wait for one answer; returns (answer, cycle the frame ended)."""
         before = len(self.answers)
+        self.requests += 1
         await self.send(ctx, data)
         sent = self.cycle
         for _ in range(timeout):

@@ -132,15 +132,14 @@ def test_bad_frames_nacks_status_and_clamped_targets(two_legs, small_plan):
     assert st["crc"] == 1 and st["clamped"] == 2
     assert all(st[n] == 0 for n in ("framing", "overrun", "bad_length", "unknown_command", "dropped"))
     assert st["enabled"] == 0b111 and st["moving"] == 0b111000
-    assert len(host.answers) == 11      # every good request answered once, the bad frame not
+    assert len(host.answers) == host.requests       # every good request answered once, the bad frame not
 
 
 def test_hexapod_move_legs_is_executed_faster_than_it_arrives_at_1_mbaud(small_plan):
     """The dispatcher's time for a full 6-leg move_legs (request offered to its answer), measured,
     against that frame's time on the wire at 1 Mbaud with the robot's clock."""
     clock, legs = 48_000_000, 6
-    channels = legs * len(small_plan.outputs)
-    dut = RobotController(small_plan, legs, 16 * channels + 800, clock, BAUD)
+    dut = RobotController(small_plan, legs, 2000, clock, BAUD)     # a short period: frequent passes to wait for
     shape = dut.shape
     targets = [T1, T2, T3, T1, T2, T3]
     frames = [encode("move_legs", shape, legs=(1 << legs) - 1, targets=targets[n:] + targets[:n]) for n in range(3)]
@@ -167,9 +166,11 @@ def test_hexapod_move_legs_is_executed_faster_than_it_arrives_at_1_mbaud(small_p
 
     run(dut, script, probes=[probe])
     line_cycles = len(frames[0]) * 10 * clock / 1e6
-    rate = clock / max(max(service[:3]), line_cycles)
+    # the measured times include some wait for the engine's pass; add a whole pass to be sure
+    worst = max(service[:3]) + dut.servo.pass_cycles
+    rate = clock / max(worst, line_cycles)
     assert len(service) == 4 and seen["status"].fields["dropped"] == 0
-    assert max(service[:3]) < line_cycles, (service, line_cycles)
+    assert worst < line_cycles, (service, line_cycles)
     assert rate >= 1000, rate
-    print(f"hexapod move_legs: {max(service[:3])} cycles in the dispatcher, {line_cycles:.0f} on the wire at "
+    print(f"hexapod move_legs: {service[:3]} cycles in the dispatcher (at most {worst}), {line_cycles:.0f} on the wire at "
           f"1 Mbaud: {rate:.0f} full updates a second at {clock / 1e6:g} MHz")
