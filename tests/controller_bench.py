@@ -104,3 +104,53 @@ def run(dut, script, probes=()):
     sim.add_testbench(bench)
     sim.run()
     return host
+
+
+class SimulatedPort:
+    """A serial port whose other end is a simulated RobotController: ``write`` queues bytes for
+    ``rx``, ``read`` runs the simulation until ``tx`` has given bytes (or ``cycles`` pass)."""
+
+    def __init__(self, dut, cycles: int = 50000):
+        self.dut, self.div, self.cycles = dut, dut.divisor, cycles
+        self._out, self._in = bytearray(), bytearray()
+        self._sim = Simulator(dut)
+        self._sim.add_clock(1e-6)
+        self._sim.add_testbench(self._drive, background=True)
+        self._sim.add_testbench(self._listen, background=True)
+        self._now = 0.0
+
+    async def _drive(self, ctx):
+        while True:
+            if not self._out:
+                await ctx.tick()
+                continue
+            byte = self._out.pop(0)
+            for bit in [0] + [byte >> k & 1 for k in range(8)] + [1]:
+                ctx.set(self.dut.rx, bit)
+                await ctx.tick().repeat(self.div)
+
+    async def _listen(self, ctx):
+        div = self.div
+        while True:
+            while ctx.get(self.dut.tx):
+                await ctx.tick()
+            await ctx.tick().repeat(div // 2 + div)
+            byte = 0
+            for k in range(8):
+                byte |= ctx.get(self.dut.tx) << k
+                await ctx.tick().repeat(div)
+            self._in.append(byte)
+
+    def write(self, data: bytes) -> int:
+        self._out += data
+        return len(data)
+
+    def read(self, n: int) -> bytes:
+        step = 200
+        for _ in range(0, self.cycles, step):
+            if self._in:
+                break
+            self._now += step * 1e-6
+            self._sim.run_until(self._now)
+        out, self._in = bytes(self._in[:n]), self._in[n:]
+        return out

@@ -174,3 +174,36 @@ def test_hexapod_move_legs_is_executed_faster_than_it_arrives_at_1_mbaud(small_p
     assert rate >= 1000, rate
     print(f"hexapod move_legs: {service[:3]} cycles in the dispatcher (at most {worst}), {line_cycles:.0f} on the wire at "
           f"1 Mbaud: {rate:.0f} full updates a second at {clock / 1e6:g} MHz")
+
+
+def test_host_controller_drives_the_simulated_controller(two_legs, small_plan):
+    from controller_bench import SimulatedPort
+    from ikseries.host.controller import AnswerTimeout, Controller, NackError
+    plan = small_plan
+    host = Controller(SimulatedPort(two_legs), timeout=60)
+    assert (host.shape, host.clock_hz, host.period, host.name, host.manifest) == (
+        two_legs.shape, CLOCK, PERIOD, "two-leg test", MANIFEST)
+    host.enable(range(6))
+    host.trim(1, -10.0)                                  # µs -> ticks with the controller's clock
+    host.move(0, T1)
+    assert host.channel_status(1)["commanded"] == golden_widths(plan, T1)[1] - round(10.0 * CLOCK / 1e6)
+    host.move_legs({1: T2})
+    assert host.channel_status(5)["commanded"] == golden_widths(plan, T2)[2]
+    host.set_pulse(3, 1500.0)
+    assert host.channel_status(3)["commanded_us"] == 1500.0
+    assert host.status()["enabled"] == 0b111111
+    with pytest.raises(NackError, match=r"^the controller refused set_limits: bad_value \("):
+        host.limits(0, 2000.0, 1000.0)
+    with pytest.raises(ValueError, match=r"^channel must be in \[0, 5\], not 40$"):
+        host.set_pulse(40, 1500.0)
+    with pytest.raises(ValueError, match=r"^pulse must be a number of µs, not 'x'$"):
+        host.set_pulse(0, "x")
+
+    class DeadLine:
+        def write(self, data):
+            return len(data)
+
+        def read(self, n):
+            return b""
+    with pytest.raises(AnswerTimeout, match=r"^no answer to identity within 0.05 s$"):
+        Controller(DeadLine(), timeout=0.05)
