@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import signal
 import sys
 import threading
@@ -112,11 +113,38 @@ def cmd_build(args):
         bad = [x for x in sims if x not in SIMULATORS]
         if bad:
             raise CliError(f"--cocotb must be auto, none or a list from {','.join(SIMULATORS)}, not {bad[0]!r}")
-    rep = build(robot, out, synth=not args.no_synth, vcd=args.vcd, cocotb=sims, progress=_progress(args.quiet))
+    board = _board_spec(robot, args)
+    rep = build(robot, out, synth=not args.no_synth, vcd=args.vcd, cocotb=sims, progress=_progress(args.quiet),
+                board=board)
     choice = rep.core.choice
     print(f"{robot.name}: max error {rep.worst_error_pu:.3f} pu (tolerance {robot.fit.tolerance_pu:g}), "
           f"latency {choice.core.latency} cycles, {choice.candidate.describe()}, "
           f"every leg refreshed {choice.refresh_hz:,.0f} times/s, output in {out}/")
+    if rep.board is not None:
+        bits = rep.board.bitstream
+        print(f"{bits.board}: bitstream {out}/bitstream/{bits.path.name}, Fmax {bits.fmax_mhz:g} MHz "
+              f"(clock {rep.board.spec.clock_hz / 1e6:g} MHz); load it with `ikseries program {out}`")
+
+
+def _board_spec(robot, args):
+    """The validated ``--board`` part of a build (None without it), before any fit."""
+    if args.board is None:
+        for opt, given in (("--servo-pins", args.servo_pins), ("--baud", args.baud)):
+            if given is not None:
+                raise CliError(f"{opt} needs --board (a board to put the controller on), not {given!r} alone")
+        return None
+    from .boardbuild import DEFAULT_BAUD, BoardBuildError, board_spec
+    pins = None if args.servo_pins is None else [p.strip() for p in args.servo_pins.split(",") if p.strip()]
+    baud = DEFAULT_BAUD
+    if args.baud is not None:
+        try:
+            baud = int(args.baud)
+        except ValueError:
+            raise CliError(f"--baud must be a positive integer (bits per second), not {args.baud!r}") from None
+    try:
+        return board_spec(robot, args.board, pins, baud)
+    except BoardBuildError as e:
+        raise CliError(str(e)) from None
 
 
 def _eval_plan(robot, args, say):
@@ -202,13 +230,36 @@ def cmd_report(args):
     print(f"wrote {bdir / 'pnr.json'} and the place-and-route section of {bdir / 'report.md'}")
 
 
+def _program_target(args) -> tuple[str, Path]:
+    """(board name or file, bitstream) of ``ikseries program``: as given, or from the manifest
+    of a build directory made with ``--board``."""
+    path = Path(args.bitstream)
+    if not path.is_dir():
+        if args.board is None:
+            raise CliError(f"--board is needed with a bitstream file ({args.bitstream}); a build directory "
+                           "made with --board names its board itself")
+        return args.board, path
+    try:
+        man = json.loads((path / "manifest.json").read_text())
+        board_rec = man["board"]
+    except (OSError, ValueError, KeyError):
+        raise CliError(f"{args.bitstream} must be a bitstream or a build directory made with --board "
+                       "(its manifest.json names the board), not a directory without one") from None
+    from .boardbuild import BITSTREAM_DIR
+    from .constraints.boards import board
+    suffix = board(args.board or board_rec["board"]).bitstream_suffix
+    return args.board or board_rec["board"], path / BITSTREAM_DIR / f"{man['module']}{suffix}"
+
+
 def cmd_program(args):
     from .constraints.boards import BoardError, board
     from .program import ProgramError, program
     try:
-        b = board(args.board)
+        name, bitstream = _program_target(args)
+        b = board(name)
     except BoardError as e:
         raise CliError(str(e)) from None
+    args.bitstream = str(bitstream)
     try:
         program(b, args.bitstream, flash=args.flash)
     except ProgramError as e:    # the board or the tool failed, not the command line: status 1
@@ -255,6 +306,13 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--products", metavar="MODE",
                    help="override fit.products: exact (default: every product as wide as it needs, split "
                         "into DSP-sized limbs in hardware) or dsp (operands narrowed to one --dsp block each)")
+    b.add_argument("--board", metavar="BOARD",
+                   help="also build the robot controller (host link, IK, servo controller) and its bitstream for "
+                        "this board: a name (icebreaker, ulx3s-25f, ulx3s-85f) or a board file (.toml)")
+    b.add_argument("--servo-pins", metavar="PINS",
+                   help="with --board: the servo pins of channels 0, 1, ... (comma-separated; default: the "
+                        "board's servo pins in order)")
+    b.add_argument("--baud", metavar="N", help="with --board: the host link's bit rate (default 1000000)")
     b.add_argument("-q", "--quiet", action="store_true")
     f = sub.add_parser("fit", help="fit only (no hardware) by one method, with a report")
     f.add_argument("robot", nargs="?", help="robot description (TOML); default: --preset cylinder-leg")
@@ -284,8 +342,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("-q", "--quiet", action="store_true")
     from .constraints.boards import BOARD_NAMES
     g = sub.add_parser("program", help="load a bitstream into a board with openFPGALoader")
-    g.add_argument("bitstream", metavar="BITSTREAM", help="the .bin (iCE40) or .bit (ECP5) file")
-    g.add_argument("--board", required=True, help=f"{', '.join(BOARD_NAMES)} or a board file (.toml)")
+    g.add_argument("bitstream", metavar="BITSTREAM", help="the .bin (iCE40) or .bit (ECP5) file, or a build "
+                   "directory made with --board")
+    g.add_argument("--board", help=f"{', '.join(BOARD_NAMES)} or a board file (.toml); default: the build "
+                   "directory's board")
     g.add_argument("--flash", action="store_true", help="write the board's SPI flash (kept at power-off) "
                    "instead of the FPGA's configuration memory")
     return p
