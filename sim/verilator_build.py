@@ -3,7 +3,7 @@ throughput bench (:mod:`ikseries.sim.verilator_bench`) and the served simulation
 (:mod:`ikseries.sim.serve`).
 
 The build writes ``<top>.v``, the C++ file and ``obj/`` in its work directory and nothing else.
-Verilator and the make and g++ it runs are one process group of their own, killed whole if the
+Verilator and the make and g++ it runs are one process group of their own, ended whole if the
 build is interrupted, so no compiler outlives it.
 """
 from __future__ import annotations
@@ -27,18 +27,34 @@ def check_identifier(name: str, what: str = "top") -> None:
         raise ValueError(f"{what} must be a plain Verilog identifier, not {name!r}")
 
 
+#: seconds an interrupted build's processes get to remove their own temporary files (g++ and
+#: make do on SIGTERM) before they are killed
+TERMINATE_GRACE_S = 5.0
+
+
+def _end_group(proc: subprocess.Popen) -> None:
+    """SIGTERM to ``proc``'s process group, SIGKILL to what is left after :data:`TERMINATE_GRACE_S`."""
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+        deadline = time.monotonic() + TERMINATE_GRACE_S
+        while time.monotonic() < deadline:
+            proc.poll()               # reaped, the leader no longer counts as a member
+            os.killpg(proc.pid, 0)
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:        # the group is gone
+        pass
+
+
 def _run_group(argv, cwd, env) -> subprocess.CompletedProcess:
     """``argv`` in a new process group, its output captured; any exception (an interrupt
-    included) kills the whole group before it propagates."""
+    included) ends the whole group before it propagates."""
     proc = subprocess.Popen(argv, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         out, err = proc.communicate()
     except BaseException:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+        _end_group(proc)
         proc.wait()
         raise
     return subprocess.CompletedProcess(argv, proc.returncode, out, err)
