@@ -219,13 +219,18 @@ def cmd_program(args):
 
 
 def cmd_serve(args):
-    from .servecmd import ServeError, parse_options, serve
+    from .servecmd import ServeError, ServeFailed, parse_options, serve
     try:
         opts = parse_options(args.verilog, args.top, args.channels, args.divisor, args.period, args.clock_hz,
                              args.workdir)
-        serve(opts, lambda line: print(line, flush=True), _progress(args.quiet))
     except ServeError as e:
         raise CliError(str(e)) from None
+    try:
+        serve(opts, lambda line: print(line, flush=True), _progress(args.quiet))
+    except ServeFailed as e:     # the simulator, not the command line: status 1
+        print(f"ikseries: error: {e}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -17,7 +17,7 @@ from .hdl.uart import MIN_DIVISOR
 from .sim.serve import MAX_CHANNELS, build_server, check_design_ports
 from .sim.verilator_build import check_identifier
 
-__all__ = ["ServeError", "ServeOptions", "parse_options", "format_report", "speed_line", "serve"]
+__all__ = ["ServeError", "ServeFailed", "ServeOptions", "parse_options", "format_report", "speed_line", "serve"]
 
 #: seconds between two speed lines on stderr, and before the first (the rate settles quickly)
 STATUS_EVERY_S = 10.0
@@ -25,7 +25,11 @@ FIRST_STATUS_S = 2.0
 
 
 class ServeError(RuntimeError):
-    """A bad option, a design the server cannot drive, or a failed Verilator build."""
+    """A bad option or a design the server cannot drive."""
+
+
+class ServeFailed(RuntimeError):
+    """No Verilator, a failed build, a server that could not start or ended."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,7 +132,7 @@ def serve(opts: ServeOptions, out, progress) -> None:
             progress(f"built in {server.build_s:g} s")
             session = server.start()
         except RuntimeError as e:     # no Verilator, a failed build, a server that could not start
-            raise ServeError(str(e)) from None
+            raise ServeFailed(str(e)) from None
         try:
             _run(session, opts, out, progress)
         finally:
@@ -154,4 +158,4 @@ def _run(session, opts: ServeOptions, out, progress) -> None:
                 progress(speed_line(session.status(), opts.clock_hz, opts.period))
                 next_status = time.monotonic() + STATUS_EVERY_S
         except (RuntimeError, TimeoutError) as e:     # the server ended or hangs
-            raise ServeError(str(e)) from None
+            raise ServeFailed(str(e)) from None

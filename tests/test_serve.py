@@ -286,3 +286,18 @@ def _cwd_under(proc_dir: Path, root: Path) -> bool:
         return str(Path(os.readlink(proc_dir / "cwd"))).startswith(str(root))
     except OSError:
         return False
+
+
+def test_cli_failed_build_is_status_1(built, tmp_path, capsys, monkeypatch):
+    """Verilog with the right ports that Verilator refuses: status 1, its temporary build removed."""
+    _, text, _ = built
+    bad = tmp_path / "bad.v"
+    bad.write_text(text.replace("  output tx;\n", "  output tx;\n  this is not verilog;\n", 1))
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    monkeypatch.setattr("tempfile.tempdir", None)     # read TMPDIR again
+    assert main([*_serve_args(bad), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("ikseries: error: Verilator build of echo_pwm failed (status ") and "%Error: echo_pwm.v:" in err
+    assert list(tmp.iterdir()) == []
