@@ -133,7 +133,7 @@ def test_stops_cleanly(built, how):
         assert not s.running     # stopped by the signal, not by stop()'s SIGTERM below
     final = s.stop()
     assert final["event"] == "stopped" and final["cycle"] >= st["cycle"] > 0
-    assert s._proc.returncode == 0 and _processes_running(server.binary) == []
+    assert s.returncode == 0 and _processes_running(server.binary) == []
     assert _snapshot(wd) == before
 
 
