@@ -109,7 +109,7 @@ def speed_line(status: dict, clock_hz: float, period: int) -> str:
     slow = clock_hz / rate
     pace = f"{slow:.1f} times slower than" if slow >= 1 else f"{1 / slow:.1f} times faster than"
     return (f"simulating {rate / 1e6:.2f} M cycles/s, {pace} the {clock_hz / 1e6:g} MHz board: one "
-            f"{period / clock_hz * 1e3:g} ms PWM period takes {period / rate * 1e3:.0f} ms"
+            f"{period / clock_hz * 1e3:g} ms PWM period takes {period / rate * 1e3:.3g} ms"
             + (f"; give host timeouts {slow:.1f} times their margin" if slow > 1 else ""))
 
 

@@ -23,6 +23,7 @@ from ikseries.hdl.pwmbank import ServoPWMBank
 from ikseries.hdl.top import design_channels
 from ikseries.hdl.uart import UARTRx, UARTTx
 from ikseries.sim.runner import verilator_tools
+from ikseries.servecmd import format_report, speed_line
 from ikseries.sim.serve import build_server, check_design_ports
 
 pytestmark = pytest.mark.skipif(not verilator_tools()[0], reason=verilator_tools()[1] or "verilator")
@@ -95,6 +96,15 @@ def test_bytes_echo_through_the_pty(built):
         st = s.status()
     assert got == bytes((b + 1) % 256 for b in sent)
     assert st["rx_bytes"] == st["tx_bytes"] == len(sent) and st["framing_errors"] == 0
+    assert s.slowdown(2 * st["cycles_per_second"], st) == 2
+
+
+def test_report_and_speed_lines():
+    assert format_report({"cycle": 1_500_000, "widths": [72_000, 0, None]}, 48e6) == \
+        "t=0.0312 s  pulse us: 1500.00 - high"
+    assert speed_line({"cycles_per_second": 4_000_000}, 48e6, 960_000) == (
+        "simulating 4.00 M cycles/s, 12.0 times slower than the 48 MHz board: one 20 ms PWM period "
+        "takes 240 ms; give host timeouts 12.0 times their margin")
 
 
 def test_reported_widths_are_what_the_design_was_told(built):
@@ -113,7 +123,9 @@ def test_reported_widths_are_what_the_design_was_told(built):
             os.close(fd)
         history = [r["widths"] for r in s.history]
     assert st["periods"] == [PERIOD, PERIOD, 0, PERIOD] and st["widths"] == [40, 800, 0, 400]
-    assert history[0] == [0, 0, 0, 0]      # reset widths: no pulse
+    # reset widths, no pulse: the first report (three periods in) comes at the first look at the
+    # pty, before any byte read there reaches the design
+    assert history[0] == [0, 0, 0, 0]
     allowed = [{0, SCALE * a, SCALE * b} for a, b in zip(first, second)]
     allowed[1].add(None)
     assert all(w in ok for ws in history for w, ok in zip(ws, allowed)), history
