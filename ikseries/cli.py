@@ -1,4 +1,4 @@
-"""Command-line interface: ``ikseries presets | build | fit | eval | report | program``."""
+"""Command-line interface: ``ikseries presets | build | fit | eval | report | program | serve``."""
 from __future__ import annotations
 
 import argparse
@@ -269,6 +269,21 @@ def cmd_program(args):
     return 0
 
 
+def cmd_serve(args):
+    from .servecmd import ServeError, ServeFailed, parse_options, serve
+    try:
+        opts = parse_options(args.verilog, args.top, args.channels, args.divisor, args.period, args.clock_hz,
+                             args.workdir)
+    except ServeError as e:
+        raise CliError(str(e)) from None
+    try:
+        serve(opts, lambda line: print(line, flush=True), _progress(args.quiet))
+    except ServeFailed as e:     # the simulator, not the command line: status 1
+        print(f"ikseries: error: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     from . import __version__
     from .constraints.devices import FAMILIES, FIT_DEVICES, PNR_DEVICES, PRIMITIVES, PARTS
@@ -348,6 +363,17 @@ def _parser() -> argparse.ArgumentParser:
                    "directory's board")
     g.add_argument("--flash", action="store_true", help="write the board's SPI flash (kept at power-off) "
                    "instead of the FPGA's configuration memory")
+    v = sub.add_parser("serve", help="simulate a board-level design behind a pseudo-terminal: drive it with the "
+                       "host tools before flashing, see its servo pulses")
+    v.add_argument("--verilog", required=True, help="the design's exported Verilog (rx, tx, pwm, clk, rst ports)")
+    v.add_argument("--top", required=True, help="its top module")
+    v.add_argument("--channels", required=True, help="servo channels: the width of its pwm port")
+    v.add_argument("--divisor", required=True, help="UART clock cycles per bit of the design")
+    v.add_argument("--period", required=True, help="PWM period in clock cycles")
+    v.add_argument("--clock-hz", required=True, help="the board's clock, for pulse widths in µs and the speed")
+    v.add_argument("--workdir", help="build the model here and keep it (a rerun rebuilds only what changed); "
+                   "default: a temporary directory removed at exit")
+    v.add_argument("-q", "--quiet", action="store_true", help="no build progress or speed lines on stderr")
     return p
 
 
@@ -393,7 +419,8 @@ def _dispatch(args) -> int:
     from .robot import RobotError
     try:
         status = {"presets": cmd_presets, "build": cmd_build, "fit": cmd_fit, "eval": cmd_eval,
-                  "report": cmd_report, "program": cmd_program}[args.cmd](args)
+                  "report": cmd_report, "program": cmd_program,
+                  "serve": cmd_serve}[args.cmd](args)
     except (CliError, RobotError) as exc:
         print(f"ikseries: error: {exc}", file=sys.stderr)
         return 2
