@@ -269,11 +269,38 @@ def cmd_program(args):
     return 0
 
 
+def _board_manifest(build_dir: str, command: str) -> dict:
+    """The manifest of a build directory made with ``--board`` (one line when it is not one)."""
+    try:
+        man = json.loads((Path(build_dir) / "manifest.json").read_text())
+        man["board"]["controller_module"]
+    except (OSError, ValueError, KeyError, TypeError):
+        raise CliError(f"{command} needs a build directory made with `ikseries build --board`, not {build_dir!r} "
+                       "(no manifest.json naming a board there)") from None
+    return man
+
+
+def _serve_arguments(args) -> list:
+    """verilog, top, channels, divisor, period, clock of ``ikseries serve``: from the build
+    directory's manifest, each replaced by its option where given."""
+    explicit = (args.verilog, args.top, args.channels, args.divisor, args.period, args.clock_hz)
+    if args.build is None:
+        missing = [o for o, v in zip(("--verilog", "--top", "--channels", "--divisor", "--period", "--clock-hz"),
+                                     explicit) if v is None]
+        if missing:
+            raise CliError(f"serve needs a build directory made with --board, or {', '.join(missing)}")
+        return list(explicit)
+    man = _board_manifest(args.build, "serve")
+    b = man["board"]
+    found = (str(Path(args.build) / f"{b['controller_module']}.v"), b["controller_module"], str(len(b["channels"])),
+             str(b["uart_divisor"]), str(man["pwm"][0]["period_cycles"]), str(b["clock"]["achieved_hz"]))
+    return [e if e is not None else f for e, f in zip(explicit, found)]
+
+
 def cmd_serve(args):
     from .servecmd import ServeError, ServeFailed, parse_options, serve
     try:
-        opts = parse_options(args.verilog, args.top, args.channels, args.divisor, args.period, args.clock_hz,
-                             args.workdir)
+        opts = parse_options(*_serve_arguments(args), args.workdir)
     except ServeError as e:
         raise CliError(str(e)) from None
     try:
@@ -282,6 +309,67 @@ def cmd_serve(args):
         print(f"ikseries: error: {e}", file=sys.stderr)
         return 1
     return 0
+
+
+def _host(args, need_build: bool):
+    """(controller, build info) of a host command; its errors one line."""
+    from .host.controller import ControllerError
+    from .hostcmd import HostCommandError, build_info, open_controller
+    if need_build and args.build is None:
+        raise CliError(f"{args.cmd} needs --build DIR (the build directory of the controller on the port: "
+                       "its inputs and units)")
+    try:
+        info = None if args.build is None else build_info(args.build)
+        for name, v in (("--baud", args.baud), ("--timeout", args.timeout)):
+            if not v > 0:
+                raise HostCommandError(f"{name} must be a positive number, not {v!r}")
+        return open_controller(args.port, args.baud, args.timeout, info), info
+    except (HostCommandError, ControllerError, ValueError) as e:
+        raise CliError(str(e)) from None
+    except OSError as e:      # pyserial's SerialException is an OSError
+        raise CliError(f"cannot open {args.port}: {e}") from None
+
+
+def _channel_list(ctl, channels: list[str]) -> list[int]:
+    for c in channels:
+        if not c.isdigit() or not int(c) < ctl.shape.channels:
+            raise CliError(f"a channel must be an integer in [0, {ctl.shape.channels - 1}], not {c!r}")
+    return [int(c) for c in channels] if channels else list(range(ctl.shape.channels))
+
+
+def cmd_host(args):
+    from .host.controller import ControllerError
+    from .hostcmd import HostCommandError, port_targets, status_lines
+    ctl, info = _host(args, need_build=args.cmd == "move")
+    try:
+        if args.cmd == "move":
+            if not 0 <= args.leg < ctl.shape.legs:
+                raise CliError(f"leg must be in [0, {ctl.shape.legs - 1}], not {args.leg}")
+            ctl.move(args.leg, port_targets(info, args.values))
+            print(f"leg {args.leg} moving to {' '.join(args.values)}")
+        elif args.cmd in ("enable", "relax"):
+            getattr(ctl, args.cmd)(_channel_list(ctl, args.channels))
+            print(f"{'enabled' if args.cmd == 'enable' else 'relaxed'} channels {' '.join(args.channels) or 'all'}")
+        else:
+            print("\n".join(status_lines(ctl, info)))
+    except (HostCommandError, ValueError) as e:
+        raise CliError(str(e)) from None
+    except ControllerError as e:     # the controller refused or did not answer: status 1
+        print(f"ikseries: error: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _host_parser(sub, name: str, help: str):
+    h = sub.add_parser(name, help=help)
+    h.add_argument("--port", required=True, help="the controller's serial port (a board's, or the pty of "
+                   "`ikseries serve`)")
+    h.add_argument("--build", metavar="DIR", help="the build directory of the controller (made with --board): "
+                   "inputs and units, and a check that the controller is this build's")
+    h.add_argument("--baud", type=float, default=1e6, help="line rate (default 1000000)")
+    h.add_argument("--timeout", type=float, default=1.0, help="seconds to wait for each answer (default 1; "
+                   "multiply by the slowdown `ikseries serve` reports)")
+    return h
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -365,15 +453,24 @@ def _parser() -> argparse.ArgumentParser:
                    "instead of the FPGA's configuration memory")
     v = sub.add_parser("serve", help="simulate a board-level design behind a pseudo-terminal: drive it with the "
                        "host tools before flashing, see its servo pulses")
-    v.add_argument("--verilog", required=True, help="the design's exported Verilog (rx, tx, pwm, clk, rst ports)")
-    v.add_argument("--top", required=True, help="its top module")
-    v.add_argument("--channels", required=True, help="servo channels: the width of its pwm port")
-    v.add_argument("--divisor", required=True, help="UART clock cycles per bit of the design")
-    v.add_argument("--period", required=True, help="PWM period in clock cycles")
-    v.add_argument("--clock-hz", required=True, help="the board's clock, for pulse widths in µs and the speed")
+    v.add_argument("build", nargs="?", metavar="BUILD_DIR", help="a build directory made with --board: its "
+                   "robot controller, channels, UART divisor, PWM period and clock (each option below replaces one)")
+    v.add_argument("--verilog", help="the design's exported Verilog (rx, tx, pwm, clk, rst ports)")
+    v.add_argument("--top", help="its top module")
+    v.add_argument("--channels", help="servo channels: the width of its pwm port")
+    v.add_argument("--divisor", help="UART clock cycles per bit of the design")
+    v.add_argument("--period", help="PWM period in clock cycles")
+    v.add_argument("--clock-hz", help="the board's clock, for pulse widths in µs and the speed")
     v.add_argument("--workdir", help="build the model here and keep it (a rerun rebuilds only what changed); "
                    "default: a temporary directory removed at exit")
     v.add_argument("-q", "--quiet", action="store_true", help="no build progress or speed lines on stderr")
+    m = _host_parser(sub, "move", "move one leg's tip to a target (values in the robot's units)")
+    m.add_argument("leg", type=int, help="leg index")
+    m.add_argument("values", nargs="+", metavar="VALUE", help="one value per robot input, in its unit")
+    _host_parser(sub, "status", "the controller's identity, error counters and every channel's pulses")
+    for name, what in (("enable", "start sending pulses"), ("relax", "stop sending pulses (servos go limp)")):
+        e = _host_parser(sub, name, f"{what} on channels")
+        e.add_argument("channels", nargs="*", metavar="CHANNEL", help="channel numbers (default: all)")
     return p
 
 
@@ -420,7 +517,8 @@ def _dispatch(args) -> int:
     try:
         status = {"presets": cmd_presets, "build": cmd_build, "fit": cmd_fit, "eval": cmd_eval,
                   "report": cmd_report, "program": cmd_program,
-                  "serve": cmd_serve}[args.cmd](args)
+                  "serve": cmd_serve, "move": cmd_host, "status": cmd_host, "enable": cmd_host,
+                  "relax": cmd_host}[args.cmd](args)
     except (CliError, RobotError) as exc:
         print(f"ikseries: error: {exc}", file=sys.stderr)
         return 2
