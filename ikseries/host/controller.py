@@ -8,7 +8,10 @@ from typing import Mapping
 from ..hdl import protocol as P
 from .protocol import Decoder, Message, encode
 
-__all__ = ["Controller", "ControllerError", "NackError", "AnswerTimeout"]
+__all__ = ["Controller", "ControllerError", "NackError", "AnswerTimeout", "READ_TIMEOUT_S"]
+
+#: longest wait of one read of a serial port
+READ_TIMEOUT_S = 0.02
 
 
 class ControllerError(RuntimeError):
@@ -31,7 +34,9 @@ class AnswerTimeout(ControllerError):
 def _open(port_or_stream, baud, timeout):
     if isinstance(port_or_stream, str):
         import serial       # only a real port needs pyserial
-        return serial.Serial(port_or_stream, baud, timeout=timeout)
+        # a short read timeout: read(n) returns what has arrived (an answer is shorter than n)
+        # and the exchange keeps its own deadline
+        return serial.Serial(port_or_stream, baud, timeout=min(timeout, READ_TIMEOUT_S))
     if not (callable(getattr(port_or_stream, "read", None)) and callable(getattr(port_or_stream, "write", None))):
         raise TypeError(f"port_or_stream must be a port name or an object with read and write, not {port_or_stream!r}")
     return port_or_stream
