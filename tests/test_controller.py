@@ -192,6 +192,12 @@ def test_host_controller_drives_the_simulated_controller(two_legs, small_plan):
     host.set_pulse(3, 1500.0)
     assert host.channel_status(3)["commanded_us"] == 1500.0
     assert host.status()["enabled"] == 0b111111
+    from ikseries.hostcmd import status_lines
+    lines = status_lines(host, None)
+    assert lines[0].startswith(f"two-leg test: 2 legs, 6 channels, clock {CLOCK / 1e6:g} MHz")
+    assert lines[1] == "errors: crc 0, framing 0, overrun 0, bad_length 0, unknown_command 0, dropped 0, clamped 0"
+    assert lines[2 + 3] == "channel 3: on, commanded 1500.00 µs, current " + lines[5].split("current ")[1]
+    assert len(lines) == 2 + 6
     with pytest.raises(NackError, match=r"^the controller refused set_limits: bad_value \("):
         host.limits(0, 2000.0, 1000.0)
     with pytest.raises(ValueError, match=r"^channel must be in \[0, 5\], not 40$"):
