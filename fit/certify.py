@@ -465,19 +465,27 @@ def _evaluate(err, names, lo, hi, inherited: _Bounds | None, target, say) -> _Bo
     (:func:`_cell_bounds`)."""
     out = _Bounds.empty(len(lo), len(names), inherited)
     cheap = np.zeros(len(lo), dtype=bool)
+    done = [0, 0]                                  # centre forms, cell enclosures
+
+    def report(rows):
+        say(f"{len(lo)} cells: {done[0]} centre forms, {done[1]} cell enclosures evaluated, max bound so far "
+            f"{float(np.max(out.bound[rows])):.4g} ticks")
+
     if inherited is not None:
         cheap = np.all(np.isfinite(inherited.he), axis=0)
         rows = np.flatnonzero(cheap)
         for s in range(0, len(rows), _CHUNK):
             part = rows[s:s + _CHUNK]
             out.put(part, _centre_bounds(err, names, lo[part], hi[part], inherited.subset(part)))
+            done[0] += len(part)
+            report(rows[:s + len(part)])
     fresh = cheap & (inherited.age < FULL_AGE) if inherited is not None else cheap
     rows = np.flatnonzero((out.bound > target) & ~fresh)
     for s in range(0, len(rows), _CHUNK):
         part = rows[s:s + _CHUNK]
         out.put(part, _cell_bounds(err, names, lo[part], hi[part]))
-        say(f"{np.count_nonzero(cheap)} centre forms, {s + len(part)} of {len(rows)} cell enclosures, "
-            f"max bound so far {float(np.max(out.bound[rows[:s + len(part)]])):.4g} ticks")
+        done[1] += len(part)
+        report(rows[:s + len(part)])
     return out
 
 

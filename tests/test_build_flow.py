@@ -187,7 +187,7 @@ def test_certification_reports_progress(monkeypatch, small_robot, small_plan):
     monkeypatch.setattr(certify_mod, "PROGRESS_SECONDS", 0.0)
     lines = []
     certify_mod.certify(small_robot, small_plan, max_cells=20_000, progress=lines.append)
-    inner = [l for l in lines if "cells evaluated, round max bound so far" in l]
+    inner = [l for l in lines if "cell enclosures evaluated, max bound so far" in l]
     assert inner and all(l.startswith("  s") for l in inner)
     assert any("to split" in l and "(target " in l for l in lines)
     monkeypatch.setattr(certify_mod, "PROGRESS_SECONDS", 3600.0)
