@@ -7,7 +7,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from .pwmbank import ServoPWMBank
-from .servo_engine import ServoEngine, WORDS_PER_CHANNEL
+from .servo_engine import ServoEngine
 from .servo_fields import ChannelField, FailsafeAction
 
 __all__ = ["ServoController", "ChannelField", "FailsafeAction"]
@@ -155,7 +155,7 @@ class ServoController(wiring.Component):
         self._engine = ServoEngine(channels, width_bits, time_bits, home_at_reset,
                                    max(len(self._servos), 1))
         # the first pass follows the memory initialisation within the first period
-        least = WORDS_PER_CHANNEL * channels + self._engine.pass_cycles + 2
+        least = self._engine.init_cycles + self._engine.pass_cycles + 2
         if period < least:
             raise ValueError(f"period must be >= {least} cycles for {channels} channels of "
                              f"{width_bits} bits, not {period!r}")
@@ -185,6 +185,11 @@ class ServoController(wiring.Component):
     @property
     def servos(self) -> list[str]:
         return list(self._servos)
+
+    @property
+    def init_cycles(self) -> int:
+        """Cycles of the memory initialisation after reset."""
+        return self._engine.init_cycles
 
     @property
     def pass_cycles(self) -> int:
