@@ -3,13 +3,13 @@ from __future__ import annotations
 
 import enum
 
-from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from .servo_fields import ChannelField, FailsafeAction
-from .servo_microcode import CONDS, OPS, SPECIALS, Scratch, assemble, program
+from .servo_microcode import BASE_CONDS, CONDS, OPS, SPECIALS, Scratch, assemble, program
 
 __all__ = ["ServoEngine", "Word", "WORDS_PER_CHANNEL", "word_defaults"]
 
@@ -69,7 +69,7 @@ def _encode(asm, to_bits) -> list[int]:
         v = {"asel": asel, "ben": ben, "inv": inv, "cin": cin, "accwe": accwe,
              "q": {None: 0, "load": 1, "shift": 2}[q], "bh": int(s.op == "LDH"), "mask": int(s.mask),
              "rdf": _operand(asm.rdf[i]), "rdt": _operand(asm.rdt[i]), "we": int(s.st is not None),
-             "ww": _operand(s.st), "cond": CONDS.index(s.cond), "sp": SPECIALS.index(s.sp),
+             "ww": _operand(s.st), "cond": CONDS[s.cond][0] | CONDS[s.cond][1] << 4, "sp": SPECIALS.index(s.sp),
              "idle": int(s.idle), "to": 0 if s.to is None else asm.labels[s.to]}
         word, off = 0, 0
         for name, bits in _fields(to_bits):
@@ -242,13 +242,16 @@ class ServoEngine(wiring.Component):
         w, aw, c = self._w, self._aw, self._c
         d = rd.data
         le = g.n | g.z
-        conds = {"never": Const(0, 1), "always": Const(1, 1), "n": g.n, "~n": ~g.n, "z": g.z, "~z": ~g.z, "le": le,
-                 "gt": ~le, "nocommit": ~(g.commit_now & d[aw - 1]), "~fs_now": ~g.fs_now,
-                 "D0": d[0], "~D0": ~d[0], "D1": d[1], "DW": d[w], "~tflag": ~g.tflag,
-                 "~last": g.ch != c - 1, "~ka": ~g.ka, "nocount": g.z | g.fired | ~g.tvalid,
-                 "go": g.pass_pending & host_idle & ~g.ik_open, "~rdreq": ~g.rdreq}
-        m.d.comb += [g.rdreq.eq(g.free & self.read.valid & ~g.st_valid),
-                     g.take.eq(Array(conds[k] for k in CONDS)[u["cond"]])]
+        base = {"0": Const(0, 1), "n": g.n, "z": g.z, "le": le, "staged": g.commit_now & d[aw - 1],
+                "fs_now": g.fs_now, "D0": d[0], "D1": d[1], "DW": d[w], "tflag": g.tflag,
+                "last": g.ch == c - 1, "ka": g.ka, "nocount": g.z | g.fired | ~g.tvalid,
+                "go": g.pass_pending & host_idle & ~g.ik_open, "rdreq": g.rdreq}
+        m.d.comb += g.rdreq.eq(g.free & self.read.valid & ~g.st_valid)
+        # a binary tree of 2:1 multiplexers (an indexed Array maps to a much larger shifter)
+        level = [base[k] for k in BASE_CONDS]
+        for bit in range(4):
+            level = [Mux(u["cond"][bit], hi, lo) for lo, hi in zip(level[::2], level[1::2])]
+        m.d.comb += g.take.eq(level[0] ^ u["cond"][4])
         nxt = Signal.like(g.pc)
         m.d.comb += [nxt.eq(Mux(g.boot, 0, Mux(g.take, u["to"], g.pc + 1))), rp.addr.eq(nxt)]
         m.d.sync += g.pc.eq(nxt)
@@ -272,8 +275,10 @@ class ServoEngine(wiring.Component):
         sign = acc[aw - 1]
         inv, cin = Signal(), Signal()
         for sig, f in ((inv, u["inv"]), (cin, u["cin"])):
-            m.d.comb += sig.eq(Array([Const(0, 1), Const(1, 1), ~sign, g.down])[f])
-        a = Array([Const(0, aw), acc, Cat(q[w - 1], acc[:aw - 1]), ~acc])[u["asel"]]
+            m.d.comb += sig.eq(Mux(f[1], Mux(f[0], g.down, ~sign), f[0]))
+        sel = u["asel"]
+        shifted = Cat(q[w - 1], acc[:aw - 1])
+        a = Mux(sel[1], Mux(sel[0], ~acc, shifted), Mux(sel[0], acc, 0))
         r = Signal(aw)
         m.d.comb += [r.eq(a + (b ^ inv.replicate(aw)) + cin), g.n.eq(r[aw - 1]), g.z.eq(r == 0)]
         with m.If(u["accwe"]):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["OPS", "CONDS", "SPECIALS", "Scratch", "Ins", "program", "assemble", "Assembled"]
+__all__ = ["OPS", "BASE_CONDS", "CONDS", "SPECIALS", "Scratch", "Ins", "program", "assemble", "Assembled"]
 
 # op -> (a: 0 zero / 1 ACC / 2 ACC << 1 | Q msb / 3 ~ACC, b: D used, inv/cin mode, ACC written, Q mode)
 OPS = {
@@ -23,8 +23,13 @@ OPS = {
     "DADD": (1, 1, "dir", 1, None), "DIV": (2, 1, "div", 1, "shift"), "SHQ": (2, 0, "add", 1, "shift"),
     "QCLR": (0, 0, "add", 1, "load"), "LDH": (0, 1, "add", 1, None), "NEG": (3, 0, "inc", 1, None),
 }
-CONDS = ("never", "always", "n", "~n", "z", "~z", "le", "gt", "nocommit", "~fs_now", "D0", "~D0",
-         "D1", "DW", "~tflag", "~last", "~ka", "nocount", "go", "~rdreq")
+# a branch condition is one of 16 base conditions, possibly inverted: name -> (base, inverted)
+BASE_CONDS = ("0", "n", "z", "le", "staged", "fs_now", "D0", "D1", "DW", "tflag", "last", "ka",
+              "nocount", "go", "rdreq", "0")
+CONDS = {"never": (0, 0), "always": (0, 1), "n": (1, 0), "~n": (1, 1), "z": (2, 0), "~z": (2, 1),
+         "le": (3, 0), "gt": (3, 1), "nocommit": (4, 1), "~fs_now": (5, 1), "D0": (6, 0),
+         "~D0": (6, 1), "D1": (7, 0), "DW": (8, 0), "~tflag": (9, 1), "~last": (10, 1),
+         "~ka": (11, 1), "nocount": (12, 0), "go": (13, 0), "~rdreq": (14, 1)}
 _D_CONDS = ("nocommit", "D0", "~D0", "D1", "DW")
 SPECIALS = ("none", "CH0", "START", "CLRKA", "FIRE", "TCAP", "CLAMPED", "CAPTURE", "LOADNEXT",
             "ACCEPT", "ST_T", "ST_C", "ST_M", "ST_E", "INITNEXT")
