@@ -53,8 +53,8 @@ _MODES = {"add": (0, 0), "sub": (1, 1), "inc": (0, 1), "dec": (1, 0), "div": (2,
 
 def _fields(to_bits):
     return (("asel", 2), ("ben", 1), ("inv", 2), ("cin", 2), ("accwe", 1), ("q", 2), ("bh", 1),
-            ("mask", 1), ("rdf", 5), ("rdt", 5), ("we", 1), ("ww", 5), ("cond", 5), ("sp", 4),
-            ("idle", 1), ("to", to_bits))
+            ("mask", 1), ("rdf", 5), ("rdt", 5), ("we", 1), ("ww", 5), ("cond", 5), ("idle", 1),
+            ("to", to_bits), ("nxt", to_bits)) + tuple((name, 1) for name in SPECIALS[1:])
 
 
 def _operand(o):
@@ -69,8 +69,10 @@ def _encode(asm, to_bits) -> list[int]:
         v = {"asel": asel, "ben": ben, "inv": inv, "cin": cin, "accwe": accwe,
              "q": {None: 0, "load": 1, "shift": 2}[q], "bh": int(s.op == "LDH"), "mask": int(s.mask),
              "rdf": _operand(asm.rdf[i]), "rdt": _operand(asm.rdt[i]), "we": int(s.st is not None),
-             "ww": _operand(s.st), "cond": CONDS[s.cond][0] | CONDS[s.cond][1] << 4, "sp": SPECIALS.index(s.sp),
-             "idle": int(s.idle), "to": 0 if s.to is None else asm.labels[s.to]}
+             "ww": _operand(s.st), "cond": CONDS[s.cond][0] | CONDS[s.cond][1] << 4,
+             "idle": int(s.idle), "to": 0 if s.to is None else asm.labels[s.to],
+             "nxt": (i + 1) % len(asm.ins)}
+        v.update({name: int(s.sp == name) for name in SPECIALS[1:]})
         word, off = 0, 0
         for name, bits in _fields(to_bits):
             word |= v[name] << off
@@ -171,15 +173,17 @@ class ServoEngine(wiring.Component):
         return m
 
     def _decode(self, m, word, g):
-        """The fields of the instruction in hand; no special strobe in the cycle after reset."""
+        """The fields of the instruction in hand (one bit per special strobe: no decoder); in
+        the cycle after reset the ROM's output is not yet an instruction."""
         u, off = {}, 0
         for name, bits in _fields(self._to_bits):
             u[name] = word[off:off + bits]
             off += bits
-        sp = Signal(4)
-        m.d.comb += sp.eq(Mux(g.boot, 0, u["sp"]))
         m.d.sync += g.boot.eq(0)
-        u["is"] = lambda name: sp == SPECIALS.index(name)  # noqa: E731
+        # strobes seen outside; the others only change what INIT sets again
+        for name in ("FIRE", "CLAMPED", "ACCEPT", "ST_E"):
+            u[name] = u[name] & ~g.boot
+        u["is"] = lambda name: u[name]  # noqa: E731
         return u
 
     # -- host side: parameter writes and staging, while the engine idles
@@ -252,9 +256,8 @@ class ServoEngine(wiring.Component):
         for bit in range(4):
             level = [Mux(u["cond"][bit], hi, lo) for lo, hi in zip(level[::2], level[1::2])]
         m.d.comb += g.take.eq(level[0] ^ u["cond"][4])
-        nxt = Signal.like(g.pc)
-        m.d.comb += [nxt.eq(Mux(g.boot, 0, Mux(g.take, u["to"], g.pc + 1))), rp.addr.eq(nxt)]
-        m.d.sync += g.pc.eq(nxt)
+        # the fall-through address is a ROM field too: no program counter, no incrementer
+        m.d.comb += rp.addr.eq(Mux(g.boot, 0, Mux(g.take, u["to"], u["nxt"])))
         opnd = Mux(g.take, u["rdt"], u["rdf"])
         # the last instruction of a channel already reads the next channel's first operand
         ch_next = Mux(u["is"]("LOADNEXT") | u["is"]("INITNEXT"), g.ch + 1, g.ch)
@@ -346,7 +349,6 @@ class _Globals:
     def __init__(self, eng):
         w, aw, c = eng._w, eng._aw, eng._c
         self.boot = Signal(init=1)
-        self.pc = Signal(eng._to_bits)
         self.ch = Signal(range(c + 1))
         self.acc, self.q = Signal(aw), Signal(w)
         self.n, self.z, self.take = Signal(), Signal(), Signal()
