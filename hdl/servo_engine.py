@@ -26,7 +26,7 @@ class Word(enum.IntEnum):
     HOME = ChannelField.HOME
     ENABLE = ChannelField.ENABLE
     FAILSAFE = ChannelField.FAILSAFE
-    STAGED = 8          # pulse | timed << (A - 2) | staged << (A - 1)
+    STAGED = 8          # pulse | from a target << (A - 2) | staged << (A - 1)
     STAGED_TIME = 9
     TARGET = 10
     POS = 11            # current pulse
@@ -208,11 +208,10 @@ class ServoEngine(wiring.Component):
                 with m.If(wp.field == ChannelField.TIMEOUT):
                     m.d.sync += [g.tvalid.eq(1), g.ka.eq(1), g.fired.eq(0)]
         with m.Elif(g.free & self.target.valid):
-            timed = tp.time != 0
+            # the "timed" flag marks a target (its time, 0 = untimed, follows) from an ik servo
             m.d.comb += [we.eq(1), addr.eq(Cat(Const(Word.STAGED, 4), tp.channel)),
-                         value.eq(staged | tp.pulse | (timed << (aw - 2)))]
-            m.d.sync += [g.failsafe.eq(0), second.eq(timed)]
-            m.d.comb += self.target.ready.eq(~timed)
+                         value.eq(staged | tp.pulse | (1 << (aw - 2)))]
+            m.d.sync += [g.failsafe.eq(0), second.eq(1)]
         with m.Elif((g.free | g.ik_open & u["idle"] & host_idle) & self.ik.valid):
             m.d.comb += [self.ik.ready.eq(1), we.eq(1), addr.eq(Cat(Const(Word.STAGED, 4), ip.channel)),
                          value.eq(staged | ip.pulse)]
