@@ -1,4 +1,10 @@
-"""The servo controller's channel memory and its sequential engine (one pass per PWM period)."""
+"""The servo controller's channel memory and its microcoded engine (one pass per PWM period).
+
+One adder does every rule of ``sim/servo_model.py`` in turn (trim, clamp, failsafe counter,
+profile, divisions), its operands and temporaries streamed from the channel memory: the logic
+is the adder, the accumulator, a division register, the branch multiplexer and the host ports'
+multiplexers into the memory; the program (``hdl/servo_microcode.py``) sits in a ROM.
+"""
 from __future__ import annotations
 
 import enum

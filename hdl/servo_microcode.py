@@ -298,6 +298,8 @@ def assemble(prog: list[Ins]) -> Assembled:
             if s.label in labels:
                 raise ValueError(f"label {s.label!r} twice")
             labels[s.label] = i
+    if prog[-1].cond != "always":
+        raise ValueError(f"the last instruction {prog[-1]!r} must jump, not fall off the program")
     rdf, rdt = [None] * len(prog), [None] * len(prog)
     a = Assembled(prog, labels, rdf, rdt)
     for i, s in enumerate(prog):
