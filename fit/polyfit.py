@@ -44,6 +44,7 @@ class Basis:
         self.points = np.asarray(points, dtype=np.float64)
         self._powers: dict = {}
         self._columns: dict = {}
+        self._magnitudes: dict = {}
 
     def __getstate__(self):
         return {"points": self.points}
@@ -63,6 +64,12 @@ class Basis:
             col = np.prod([self._power(k, e) for k, e in enumerate(term)], axis=0)
             self._columns[term] = col
         return col
+
+    def magnitude(self, term: tuple[int, ...]) -> float:
+        """max |column(term)| over the points."""
+        if term not in self._magnitudes:
+            self._magnitudes[term] = float(np.abs(self.column(term)).max())
+        return self._magnitudes[term]
 
     def matrix(self, terms: list[tuple[int, ...]]) -> np.ndarray:
         if not terms:

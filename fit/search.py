@@ -206,7 +206,7 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
     rejected: set = set()
     misses = 0
     while misses < PRUNE_REJECTS:
-        scale = np.max([np.abs(rows.matrix(terms)).max(axis=0) for rows in data.check], axis=0)
+        scale = np.max([[rows.basis.magnitude(t) for t in terms] for rows in data.check], axis=0)
         order = np.argsort(np.max(np.abs(coef), axis=0) * scale, kind="stable")
         pick = None
         for i in order:

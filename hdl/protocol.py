@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .servo_fields import FailsafeAction
+
 __all__ = ["PROTOCOL_VERSION", "SYNC", "MAX_PAYLOAD", "ANSWER_BIT", "NACK", "CRC", "CRC_BYTE_ORDER",
            "COUNTER_BITS", "ERROR_COUNTERS", "RECEIVER_COUNTERS", "NACK_REASONS", "FAILSAFE_ACTIONS",
            "KINDS", "Field", "Command", "Shape", "COMMANDS", "NACK_FIELDS", "command", "answer_code",
@@ -70,12 +72,16 @@ NACK_REASONS = (
     ("busy", "the controller cannot take the request now"),
     ("unsupported", "this controller does not implement the command"),
 )
-#: per-channel action when the failsafe timeout expires, code = index
-FAILSAFE_ACTIONS = (
-    ("hold", "keep the last pulse"),
-    ("relax", "stop the pulses (the servo goes limp)"),
-    ("home", "move to the home pulse"),
-)
+_FAILSAFE_MEANINGS = {
+    FailsafeAction.HOLD: "keep the last pulse",
+    FailsafeAction.RELAX: "stop the pulses (the servo goes limp)",
+    FailsafeAction.HOME: "move to the home pulse",
+}
+#: per-channel action when the failsafe timeout expires, code = index; the codes' home is
+#: :class:`~ikseries.hdl.servo_fields.FailsafeAction`, this table only names and explains them
+FAILSAFE_ACTIONS = tuple((a.name.lower(), _FAILSAFE_MEANINGS[a]) for a in sorted(FailsafeAction))
+if [a.value for a in sorted(FailsafeAction)] != list(range(len(FAILSAFE_ACTIONS))):
+    raise ImportError("FailsafeAction codes must be 0 .. n-1: the protocol sends them as indices")
 
 #: integer kinds: (bytes, signed)
 KINDS = {"u8": (1, False), "u16": (2, False), "u24": (3, False), "u32": (4, False),

@@ -9,6 +9,7 @@ import tempfile
 from pathlib import Path
 
 from . import steps
+from .boardbuild import BITSTREAM_DIR, BoardBuildError, BoardSpec, board_build, controller_module, robot_on_board
 from .buildrecord import (BuildRecordError, OutputDirError, check_output_dir, recorded_files, remove_created,
                           write_record)
 from .constraints.timing import clock_sdc
@@ -33,10 +34,12 @@ class BuildError(RuntimeError):
     """The build cannot produce a design that meets the robot's requirements."""
 
 
-def planned_outputs(robot, *, vcd: bool, cocotb) -> set[str]:
+def planned_outputs(robot, *, vcd: bool, cocotb, board: BoardSpec | None = None) -> set[str]:
     """Every name a build of ``robot`` with these options may write into its directory."""
     name = module_name(robot.name)
     out = {f"{name}.v", f"{name}.sdc", *FIXED_ARTIFACTS}
+    if board is not None:
+        out |= {f"{controller_module(name)}.v", BITSTREAM_DIR}
     if vcd:
         out.add("sim.vcd")
     out |= {f"cocotb_{s}.log" for s in (SIMULATORS if cocotb == "auto" else cocotb)}
@@ -108,8 +111,8 @@ def _staging(out_dir: Path, created: Path | None):
             remove_created(out_dir, created)
 
 
-def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print
-          ) -> BuildReport:
+def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print,
+          board: BoardSpec | None = None) -> BuildReport:
     """Run the whole pipeline (:mod:`ikseries.steps`) and write every artifact into ``out_dir``.
 
     Files are written to a hidden temporary directory inside ``out_dir`` and moved into
@@ -118,28 +121,36 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     removed; a build that would replace any other file is refused before the fit. ``vcd`` also
     writes the waveform of the verification simulation (``sim.vcd``); ``cocotb``
     names simulators ("icarus", "verilator") that also run the exported Verilog
-    ("auto": every installed one; empty: none). Returns the build's report.
+    ("auto": every installed one; empty: none). With ``board``
+    (:func:`ikseries.boardbuild.board_spec`) the robot runs at the clock the board's PLL makes,
+    and the build also writes the robot controller's Verilog and its bitstream
+    (:mod:`ikseries.boardbuild`). Returns the build's report.
     """
     out_dir = Path(out_dir)
     try:
         created = check_output_dir(out_dir)
     except OutputDirError as e:
         raise BuildError(str(e)) from None
-    _check_foreign(out_dir, planned_outputs(robot, vcd=vcd, cocotb=cocotb))
+    if board is not None:
+        on_board = robot_on_board(robot, board)
+        if on_board is not robot:
+            progress(f"{board.board.name}: the core clock is {board.clock.describe()}; fitting for it")
+        robot = on_board
+    _check_foreign(out_dir, planned_outputs(robot, vcd=vcd, cocotb=cocotb, board=board))
     try:
         fitted = steps.fit(robot, progress)
         core = steps.core(robot, fitted.plan, progress)
         with _staging(out_dir, created) as tmp:
             report = _write_outputs(robot, fitted, core, tmp, synth=synth, vcd=vcd, cocotb=cocotb,
-                                    progress=progress)
+                                    progress=progress, board=board)
             written = _install(tmp, out_dir)
-    except steps.StepError as e:
+    except (steps.StepError, BoardBuildError) as e:
         raise BuildError(str(e)) from None
     progress(f"wrote {out_dir}/: " + ", ".join(written))
     return report
 
 
-def _write_outputs(robot, fitted, core, tmp: Path, *, synth, vcd, cocotb, progress) -> BuildReport:
+def _write_outputs(robot, fitted, core, tmp: Path, *, synth, vcd, cocotb, progress, board=None) -> BuildReport:
     """Verify the core and write every output of the build into ``tmp``."""
     plan, component, name = fitted.plan, core.component, core.module
     sim = steps.simulate(component, plan, progress, vcd=str(tmp / "sim.vcd") if vcd else None)
@@ -158,12 +169,19 @@ def _write_outputs(robot, fitted, core, tmp: Path, *, synth, vcd, cocotb, progre
     progress("plotting the error map")
     emap = error_map(robot, plan, tmp / "error_map.png")
     man = manifest(robot, plan, component, name, core.choice.record())
-    (tmp / "manifest.json").write_text(json.dumps(man, indent=1, sort_keys=True) + "\n")
+    if board is not None:
+        man["board"] = {**board.record(robot), "controller_module": controller_module(name)}
+    man_text = json.dumps(man, indent=1, sort_keys=True) + "\n"
+    (tmp / "manifest.json").write_text(man_text)
+    on_board = None
+    if board is not None:
+        on_board = board_build(robot, plan, board, name, man_text, tmp, progress)
+        (tmp / f"{on_board.module}.v").write_text(on_board.verilog)
     cocotb_runs = None
     if cocotb:
         cocotb_runs = steps.cocotb(tmp / "plan.json", robot.hardware.pwm_period_ticks, cocotb, tmp / "cocotb", tmp,
                                    progress, component, manifest_file=tmp / "manifest.json")
         shutil.rmtree(tmp / "cocotb", ignore_errors=True)
-    report = BuildReport(robot, fitted, core, man, sim, synthesis, cocotb_runs, emap)
+    report = BuildReport(robot, fitted, core, man, sim, synthesis, cocotb_runs, emap, on_board)
     report.write(tmp)
     return report

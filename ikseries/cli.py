@@ -1,8 +1,9 @@
-"""Command-line interface: ``ikseries presets | build | fit | eval | report``."""
+"""Command-line interface: ``ikseries presets | build | fit | eval | report | program | serve``."""
 from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import signal
 import sys
 import threading
@@ -112,11 +113,38 @@ def cmd_build(args):
         bad = [x for x in sims if x not in SIMULATORS]
         if bad:
             raise CliError(f"--cocotb must be auto, none or a list from {','.join(SIMULATORS)}, not {bad[0]!r}")
-    rep = build(robot, out, synth=not args.no_synth, vcd=args.vcd, cocotb=sims, progress=_progress(args.quiet))
+    board = _board_spec(robot, args)
+    rep = build(robot, out, synth=not args.no_synth, vcd=args.vcd, cocotb=sims, progress=_progress(args.quiet),
+                board=board)
     choice = rep.core.choice
     print(f"{robot.name}: max error {rep.worst_error_pu:.3f} pu (tolerance {robot.fit.tolerance_pu:g}), "
           f"latency {choice.core.latency} cycles, {choice.candidate.describe()}, "
           f"every leg refreshed {choice.refresh_hz:,.0f} times/s, output in {out}/")
+    if rep.board is not None:
+        bits = rep.board.bitstream
+        print(f"{bits.board}: bitstream {out}/bitstream/{bits.path.name}, Fmax {bits.fmax_mhz:g} MHz "
+              f"(clock {rep.board.spec.clock_hz / 1e6:g} MHz); load it with `ikseries program {out}`")
+
+
+def _board_spec(robot, args):
+    """The validated ``--board`` part of a build (None without it), before any fit."""
+    if args.board is None:
+        for opt, given in (("--servo-pins", args.servo_pins), ("--baud", args.baud)):
+            if given is not None:
+                raise CliError(f"{opt} needs --board (a board to put the controller on), not {given!r} alone")
+        return None
+    from .boardbuild import DEFAULT_BAUD, BoardBuildError, board_spec
+    pins = None if args.servo_pins is None else [p.strip() for p in args.servo_pins.split(",") if p.strip()]
+    baud = DEFAULT_BAUD
+    if args.baud is not None:
+        try:
+            baud = int(args.baud)
+        except ValueError:
+            raise CliError(f"--baud must be a positive integer (bits per second), not {args.baud!r}") from None
+    try:
+        return board_spec(robot, args.board, pins, baud)
+    except BoardBuildError as e:
+        raise CliError(str(e)) from None
 
 
 def _eval_plan(robot, args, say):
@@ -202,6 +230,148 @@ def cmd_report(args):
     print(f"wrote {bdir / 'pnr.json'} and the place-and-route section of {bdir / 'report.md'}")
 
 
+def _program_target(args) -> tuple[str, Path]:
+    """(board name or file, bitstream) of ``ikseries program``: as given, or from the manifest
+    of a build directory made with ``--board``."""
+    path = Path(args.bitstream)
+    if not path.is_dir():
+        if args.board is None:
+            raise CliError(f"--board is needed with a bitstream file ({args.bitstream}); a build directory "
+                           "made with --board names its board itself")
+        return args.board, path
+    try:
+        man = json.loads((path / "manifest.json").read_text())
+        board_rec = man["board"]
+    except (OSError, ValueError, KeyError):
+        raise CliError(f"{args.bitstream} must be a bitstream or a build directory made with --board "
+                       "(its manifest.json names the board), not a directory without one") from None
+    from .boardbuild import BITSTREAM_DIR
+    from .constraints.boards import board
+    suffix = board(args.board or board_rec["board"]).bitstream_suffix
+    return args.board or board_rec["board"], path / BITSTREAM_DIR / f"{man['module']}{suffix}"
+
+
+def cmd_program(args):
+    from .constraints.boards import BoardError, board
+    from .program import ProgramError, program
+    try:
+        name, bitstream = _program_target(args)
+        b = board(name)
+    except BoardError as e:
+        raise CliError(str(e)) from None
+    args.bitstream = str(bitstream)
+    try:
+        program(b, args.bitstream, flash=args.flash)
+    except ProgramError as e:    # the board or the tool failed, not the command line: status 1
+        print(f"ikseries: error: {e}", file=sys.stderr)
+        return 1
+    print(f"loaded {args.bitstream} into the {b.name}'s {'flash' if args.flash else 'FPGA'}")
+    return 0
+
+
+def _board_manifest(build_dir: str, command: str) -> dict:
+    """The manifest of a build directory made with ``--board`` (one line when it is not one)."""
+    try:
+        man = json.loads((Path(build_dir) / "manifest.json").read_text())
+        man["board"]["controller_module"]
+    except (OSError, ValueError, KeyError, TypeError):
+        raise CliError(f"{command} needs a build directory made with `ikseries build --board`, not {build_dir!r} "
+                       "(no manifest.json naming a board there)") from None
+    return man
+
+
+def _serve_arguments(args) -> list:
+    """verilog, top, channels, divisor, period, clock of ``ikseries serve``: from the build
+    directory's manifest, each replaced by its option where given."""
+    explicit = (args.verilog, args.top, args.channels, args.divisor, args.period, args.clock_hz)
+    if args.build is None:
+        missing = [o for o, v in zip(("--verilog", "--top", "--channels", "--divisor", "--period", "--clock-hz"),
+                                     explicit) if v is None]
+        if missing:
+            raise CliError(f"serve needs a build directory made with --board, or {', '.join(missing)}")
+        return list(explicit)
+    man = _board_manifest(args.build, "serve")
+    b = man["board"]
+    found = (str(Path(args.build) / f"{b['controller_module']}.v"), b["controller_module"], str(len(b["channels"])),
+             str(b["uart_divisor"]), str(man["pwm"][0]["period_cycles"]), str(b["clock"]["achieved_hz"]))
+    return [e if e is not None else f for e, f in zip(explicit, found)]
+
+
+def cmd_serve(args):
+    from .servecmd import ServeError, ServeFailed, parse_options, serve
+    try:
+        opts = parse_options(*_serve_arguments(args), args.workdir)
+    except ServeError as e:
+        raise CliError(str(e)) from None
+    try:
+        serve(opts, lambda line: print(line, flush=True), _progress(args.quiet))
+    except ServeFailed as e:     # the simulator, not the command line: status 1
+        print(f"ikseries: error: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _host(args, need_build: bool):
+    """(controller, build info) of a host command; its errors one line."""
+    from .host.controller import ControllerError
+    from .hostcmd import HostCommandError, build_info, open_controller
+    if need_build and args.build is None:
+        raise CliError(f"{args.cmd} needs --build DIR (the build directory of the controller on the port: "
+                       "its inputs and units)")
+    try:
+        info = None if args.build is None else build_info(args.build)
+        for name, v in (("--baud", args.baud), ("--timeout", args.timeout)):
+            if not v > 0:
+                raise HostCommandError(f"{name} must be a positive number, not {v!r}")
+        return open_controller(args.port, args.baud, args.timeout, info), info
+    except (HostCommandError, ControllerError, ValueError) as e:
+        raise CliError(str(e)) from None
+    except OSError as e:      # pyserial's SerialException is an OSError
+        raise CliError(f"cannot open {args.port}: {e}") from None
+
+
+def _channel_list(ctl, channels: list[str]) -> list[int]:
+    for c in channels:
+        if not c.isdigit() or not int(c) < ctl.shape.channels:
+            raise CliError(f"a channel must be an integer in [0, {ctl.shape.channels - 1}], not {c!r}")
+    return [int(c) for c in channels] if channels else list(range(ctl.shape.channels))
+
+
+def cmd_host(args):
+    from .host.controller import ControllerError
+    from .hostcmd import HostCommandError, port_targets, status_lines
+    ctl, info = _host(args, need_build=args.cmd == "move")
+    try:
+        if args.cmd == "move":
+            if not 0 <= args.leg < ctl.shape.legs:
+                raise CliError(f"leg must be in [0, {ctl.shape.legs - 1}], not {args.leg}")
+            ctl.move(args.leg, port_targets(info, args.values))
+            print(f"leg {args.leg} moving to {' '.join(args.values)}")
+        elif args.cmd in ("enable", "relax"):
+            getattr(ctl, args.cmd)(_channel_list(ctl, args.channels))
+            print(f"{'enabled' if args.cmd == 'enable' else 'relaxed'} channels {' '.join(args.channels) or 'all'}")
+        else:
+            print("\n".join(status_lines(ctl, info)))
+    except (HostCommandError, ValueError) as e:
+        raise CliError(str(e)) from None
+    except ControllerError as e:     # the controller refused or did not answer: status 1
+        print(f"ikseries: error: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _host_parser(sub, name: str, help: str):
+    h = sub.add_parser(name, help=help)
+    h.add_argument("--port", required=True, help="the controller's serial port (a board's, or the pty of "
+                   "`ikseries serve`)")
+    h.add_argument("--build", metavar="DIR", help="the build directory of the controller (made with --board): "
+                   "inputs and units, and a check that the controller is this build's")
+    h.add_argument("--baud", type=float, default=1e6, help="line rate (default 1000000)")
+    h.add_argument("--timeout", type=float, default=1.0, help="seconds to wait for each answer (default 1; "
+                   "multiply by the slowdown `ikseries serve` reports)")
+    return h
+
+
 def _parser() -> argparse.ArgumentParser:
     from . import __version__
     from .constraints.devices import FAMILIES, FIT_DEVICES, PNR_DEVICES, PRIMITIVES, PARTS
@@ -239,6 +409,13 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--products", metavar="MODE",
                    help="override fit.products: exact (default: every product as wide as it needs, split "
                         "into DSP-sized limbs in hardware) or dsp (operands narrowed to one --dsp block each)")
+    b.add_argument("--board", metavar="BOARD",
+                   help="also build the robot controller (host link, IK, servo controller) and its bitstream for "
+                        "this board: a name (icebreaker, ulx3s-25f, ulx3s-85f) or a board file (.toml)")
+    b.add_argument("--servo-pins", metavar="PINS",
+                   help="with --board: the servo pins of channels 0, 1, ... (comma-separated; default: the "
+                        "board's servo pins in order)")
+    b.add_argument("--baud", metavar="N", help="with --board: the host link's bit rate (default 1000000)")
     b.add_argument("-q", "--quiet", action="store_true")
     f = sub.add_parser("fit", help="fit only (no hardware) by one method, with a report")
     f.add_argument("robot", nargs="?", help="robot description (TOML); default: --preset cylinder-leg")
@@ -266,6 +443,34 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--preset", help="with no BUILD_DIR: this preset's default build directory")
     r.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
     r.add_argument("-q", "--quiet", action="store_true")
+    from .constraints.boards import BOARD_NAMES
+    g = sub.add_parser("program", help="load a bitstream into a board with openFPGALoader")
+    g.add_argument("bitstream", metavar="BITSTREAM", help="the .bin (iCE40) or .bit (ECP5) file, or a build "
+                   "directory made with --board")
+    g.add_argument("--board", help=f"{', '.join(BOARD_NAMES)} or a board file (.toml); default: the build "
+                   "directory's board")
+    g.add_argument("--flash", action="store_true", help="write the board's SPI flash (kept at power-off) "
+                   "instead of the FPGA's configuration memory")
+    v = sub.add_parser("serve", help="simulate a board-level design behind a pseudo-terminal: drive it with the "
+                       "host tools before flashing, see its servo pulses")
+    v.add_argument("build", nargs="?", metavar="BUILD_DIR", help="a build directory made with --board: its "
+                   "robot controller, channels, UART divisor, PWM period and clock (each option below replaces one)")
+    v.add_argument("--verilog", help="the design's exported Verilog (rx, tx, pwm, clk, rst ports)")
+    v.add_argument("--top", help="its top module")
+    v.add_argument("--channels", help="servo channels: the width of its pwm port")
+    v.add_argument("--divisor", help="UART clock cycles per bit of the design")
+    v.add_argument("--period", help="PWM period in clock cycles")
+    v.add_argument("--clock-hz", help="the board's clock, for pulse widths in µs and the speed")
+    v.add_argument("--workdir", help="build the model here and keep it (a rerun rebuilds only what changed); "
+                   "default: a temporary directory removed at exit")
+    v.add_argument("-q", "--quiet", action="store_true", help="no build progress or speed lines on stderr")
+    m = _host_parser(sub, "move", "move one leg's tip to a target (values in the robot's units)")
+    m.add_argument("leg", type=int, help="leg index")
+    m.add_argument("values", nargs="+", metavar="VALUE", help="one value per robot input, in its unit")
+    _host_parser(sub, "status", "the controller's identity, error counters and every channel's pulses")
+    for name, what in (("enable", "start sending pulses"), ("relax", "stop sending pulses (servos go limp)")):
+        e = _host_parser(sub, name, f"{what} on channels")
+        e.add_argument("channels", nargs="*", metavar="CHANNEL", help="channel numbers (default: all)")
     return p
 
 
@@ -310,15 +515,17 @@ def _dispatch(args) -> int:
     from .pnr import PnrError
     from .robot import RobotError
     try:
-        {"presets": cmd_presets, "build": cmd_build, "fit": cmd_fit, "eval": cmd_eval,
-         "report": cmd_report}[args.cmd](args)
+        status = {"presets": cmd_presets, "build": cmd_build, "fit": cmd_fit, "eval": cmd_eval,
+                  "report": cmd_report, "program": cmd_program,
+                  "serve": cmd_serve, "move": cmd_host, "status": cmd_host, "enable": cmd_host,
+                  "relax": cmd_host}[args.cmd](args)
     except (CliError, RobotError) as exc:
         print(f"ikseries: error: {exc}", file=sys.stderr)
         return 2
     except (BuildError, PnrError) as exc:
         print(f"ikseries: error: {exc}", file=sys.stderr)
         return 1
-    return 0
+    return status or 0
 
 
 if __name__ == "__main__":

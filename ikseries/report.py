@@ -25,6 +25,7 @@ class BuildReport:
     synthesis: object | None
     cocotb: object | None
     error_map: dict
+    board: object | None = None     # ikseries.boardbuild.BoardBuild with --board
 
     @property
     def verilog_file(self) -> str:
@@ -42,6 +43,8 @@ class BuildReport:
             t["synth_s"] = self.synthesis.seconds
         if self.cocotb is not None:
             t["cocotb_s"] = self.cocotb.seconds
+        if self.board is not None:
+            t["bitstream_s"] = self.board.bitstream.seconds
         return t
 
     def record(self) -> dict:
@@ -76,6 +79,8 @@ class BuildReport:
         }
         if "primitives" in man:
             rec["primitives"] = man["primitives"]
+        if self.board is not None:
+            rec["board"] = _board_record(self.board, robot)
         return rec
 
     def markdown(self) -> str:
@@ -298,10 +303,37 @@ def _coefficients_section(r: dict) -> list[str]:
     return out
 
 
+def _board_record(b, robot) -> dict:
+    bits = b.bitstream
+    return {**b.spec.record(robot), "controller_verilog": f"{b.module}.v", "controller_module": b.module,
+            "bitstream": f"bitstream/{bits.path.name}", "fmax_mhz": bits.fmax_mhz, "meets_clock": bits.meets_clock,
+            "utilisation": bits.utilisation}
+
+
+def _board_section(r: dict) -> list[str]:
+    b = r.get("board")
+    if not b:
+        return []
+    clock = b["clock"]
+    out = ["## Board", "",
+           f"{b['board']}: bitstream `{b['bitstream']}` of the robot controller `{b['controller_module']}` "
+           f"(host link, command dispatcher, IK core, servo controller; `{b['controller_verilog']}`). Core clock "
+           f"{clock['achieved_hz'] / 1e6:.9g} MHz from the {clock['oscillator_hz'] / 1e6:g} MHz oscillator"
+           f"{'' if clock['primitive'] is None else ' through ' + clock['primitive']}; Fmax of the whole top {b['fmax_mhz']:g} MHz "
+           f"({'meets' if b['meets_clock'] else 'misses'} the clock). Host link {b['baud']:,} baud "
+           f"(UART divisor {b['uart_divisor']}).", "",
+           _row(["resource", "used", "available"]), _row(["---"] * 3),
+           *(_row([k, str(v["used"]), str(v["available"])]) for k, v in b["utilisation"].items()), "",
+           "Pin map:", "", _row(["pin", "package pin", "channel", "leg", "servo"]), _row(["---"] * 5),
+           *(_row([c["pin"], c["package_pin"], str(c["channel"]), str(c["leg"]), c["servo"]]) for c in b["channels"]),
+           ""]
+    return out
+
+
 def render_markdown(r: dict) -> str:
     """report.md from a build's report record (:meth:`BuildReport.record`, report.json)."""
     t = r["times_s"]
     out = [*_header(r), *_accuracy_section(r), *_series_section(r), *_timing_section(r),
-           *_resources_section(r), *_coefficients_section(r),
+           *_resources_section(r), *_board_section(r), *_coefficients_section(r),
            "## Build times", "", ", ".join(f"{k[:-2]} {v:g} s" for k, v in t.items()), ""]
     return "\n".join(out)

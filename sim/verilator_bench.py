@@ -31,9 +31,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import re
-import shutil
 import string
 import subprocess
 import time
@@ -43,7 +40,8 @@ import numpy as np
 
 from ..fit.baselines.cordic import CordicPlan
 from ..fit.plan import Plan, bits_for
-from .runner import primitive_models, simulator_available, verilator_make_fixes, verilator_path
+from .runner import simulator_available
+from .verilator_build import check_identifier, verilate
 
 __all__ = ["VerilatorTestbench", "write_vectors", "testbench_cpp", "build_testbench", "run_testbench"]
 
@@ -126,33 +124,13 @@ def build_testbench(plan: Plan | CordicPlan, verilog: str, top: str, workdir, *,
 
     Raises ``RuntimeError`` if Verilator is unavailable or the build fails (quoting its output).
     """
-    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", top):
-        raise ValueError(f"top must be a plain Verilog identifier, not {top!r}")
-    if not re.fullmatch(r"-O[0-3s]", cxx_opt):
-        raise ValueError(f"cxx_opt must be one of -O0, -O1, -O2, -O3, -Os, not {cxx_opt!r}")
+    check_identifier(top)
     ok, why = simulator_available("verilator")
     if not ok:
         raise RuntimeError(why)
     ins, outs = _fields(plan)
-    workdir = Path(workdir).resolve()
-    workdir.mkdir(parents=True, exist_ok=True)
-    (workdir / f"{top}.v").write_text(verilog)
-    (workdir / "tb.cpp").write_text(testbench_cpp(plan, top, advance))
-    path = verilator_path()
-    env = dict(os.environ, PATH=path)
-    # run-once code at -O0 (see runner.run)
-    fixes = [verilator_make_fixes(path), f"OPT_FAST={cxx_opt}", "OPT_SLOW=-O0", f"OPT_GLOBAL={cxx_opt}"]
-    env["MAKEFLAGS"] = " ".join(x for x in (os.environ.get("MAKEFLAGS", ""), *fixes) if x)
-    argv = [shutil.which("verilator", path=path), "--cc", "--exe", "--build", "-j", str(jobs), "--no-timing",
-            "-Wno-fatal", "-Wno-lint", "-Wno-style", "--top-module", top, "--Mdir", "obj",
-            "-o", f"V{top}", f"{top}.v", *map(str, primitive_models(verilog)), "tb.cpp"]
-    t0 = time.perf_counter()
-    proc = subprocess.run(argv, cwd=workdir, env=env, stdin=subprocess.DEVNULL, capture_output=True, text=True)
-    build_s = round(time.perf_counter() - t0, 2)
-    binary = workdir / "obj" / f"V{top}"
-    if proc.returncode != 0 or not binary.is_file():
-        tail = "\n".join((proc.stdout + proc.stderr).rstrip().splitlines()[-25:])
-        raise RuntimeError(f"Verilator build of {top} failed (status {proc.returncode}):\n{tail}")
+    binary, build_s = verilate(verilog, top, testbench_cpp(plan, top, advance), "tb.cpp", workdir,
+                               cxx_opt=cxx_opt, jobs=jobs)
     return VerilatorTestbench(binary, tuple(n for n, _ in ins), tuple(n for n, _ in outs), build_s)
 
 
