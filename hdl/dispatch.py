@@ -105,16 +105,18 @@ class Dispatcher(wiring.Component):
     writes and enable/relax: ``H + 3`` plus a cycle per channel scanned, plus any wait for the
     engine's pass (``pass_cycles`` at most); channel_status and status: ``H + 8`` cycles per
     channel read; moves: per leg ``2 C + 3`` cycles, the core's latency and ``servos`` cycles,
-    then a wait of at most ``pass_cycles`` cycles for the staging window (the pass) and
-    ``3 * channels + 2`` cycles to stage and commit. The widths reach the pins at the second
-    period start after the commit at the latest (the servo controller's latency). A request
+    then a wait of at most ``stage_cycles + pass_cycles`` for the staging window (the end of
+    a period, the pass) and ``stage_cycles`` to stage and commit (``stage_cycles = channels *
+    (1 + target_cycles) + 2``, the servo controller's ``target_cycles``); :meth:`move_cycles`
+    adds these up. The widths reach the pins at the second period start after the commit at
+    the latest (the servo controller's latency). A request
     waits in the link while the previous answer's payload is still being sent.
 
     Throughput
     ----------
-    One request at a time. A full ``move_legs`` of L legs takes about
-    ``L * (2 C + latency + servos + 3) + pass_cycles + 3 * channels`` cycles, far below the
-    line time of its frame at the rates :func:`~ikseries.hdl.uart.uart_divisor` allows for
+    One request at a time. A full ``move_legs`` takes at most ``move_cycles(legs)``, about
+    ``legs * (2 C + latency + servos + 3) + pass_cycles + 2 * stage_cycles`` cycles, far below
+    the line time of its frame at the rates :func:`~ikseries.hdl.uart.uart_divisor` allows for
     a clock of tens of MHz (see ``tests/test_controller.py``, which measures it): the UART
     is the limit.
     """
@@ -132,8 +134,11 @@ class Dispatcher(wiring.Component):
         self._buf_bytes = max(answer_bytes(_STATUS_FIELDS), answer_bytes(_CHANNEL_FIELDS),
                               answer_bytes(P.NACK_FIELDS))
         self._max_answer = max(self._identity_len, self._buf_bytes)
-        # the pass starts at a period start; staging must end, and commit, before the next one
-        self._stage_cycles = 3 * self._channels + 4
+        # the pass starts at a period start, and may start between two targets: the whole group
+        # (a read cycle and a target transfer per channel) and its commit strobe must fit before
+        # the next period start, counted from the cycle STAGE_WAIT decides
+        self._stage_cycles = self._channels * (1 + servo.target_cycles) + 2
+        self._pass_cycles, self._core_latency = servo.pass_cycles, core.latency
         ls, cs, ss = link.signature.members, core.signature.members, servo.signature.members
         super().__init__({
             **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counters",
@@ -147,6 +152,20 @@ class Dispatcher(wiring.Component):
     @property
     def shape(self) -> P.Shape:
         return self._shape
+
+    @property
+    def stage_cycles(self) -> int:
+        """Cycles from the decision to stage a group of widths to its commit strobe, inclusive
+        of a margin cycle: staging starts only with this many cycles left before a period start."""
+        return self._stage_cycles
+
+    def move_cycles(self, legs: int) -> int:
+        """Most cycles from ``request.valid`` of a move of ``legs`` legs to its commit strobe:
+        fetch and decode, each leg through the core (unselected legs a cycle each), a wait for
+        the staging window (it may just have closed: the rest of the period and a pass), and
+        the staging itself. A ``set_pulse`` is a move of no legs."""
+        per_leg = 2 * self._coords + 3 + self._core_latency + self._servos
+        return 5 + (self._legs - legs) + legs * per_leg + self._pass_cycles + 2 * self._stage_cycles
 
     def elaborate(self, platform):
         m = Module()

@@ -124,8 +124,9 @@ class ServoController(wiring.Component):
 
     Throughput
     ----------
-    While the engine is idle: one ``write`` per cycle, one ``target`` per 2 cycles, one ``ik``
-    leg per ``servos`` cycles, one ``read`` per 6 cycles (less while ``status`` is not taken).
+    While the engine is idle: one ``write`` per cycle, one ``target`` per ``target_cycles``
+    (2) cycles, one ``ik`` leg per ``servos`` cycles, one ``read`` per 6 cycles (less while
+    ``status`` is not taken).
     The engine takes at most ``pass_cycles`` cycles from a period start (the longest path
     through its microprogram, computed by its assembler: 1,024 for 18 channels of 16 bits,
     85 µs at 12 MHz; the host ports wait meanwhile).
@@ -194,6 +195,11 @@ class ServoController(wiring.Component):
     def init_cycles(self) -> int:
         """Cycles of the memory initialisation after reset."""
         return self._engine.init_cycles
+
+    @property
+    def target_cycles(self) -> int:
+        """Cycles of one ``target`` transfer while the engine is idle."""
+        return self._engine.target_cycles
 
     @property
     def pass_cycles(self) -> int:

@@ -142,6 +142,12 @@ class ServoEngine(wiring.Component):
         return 1 + self._c * a.longest("INITCH", lambda i: a.ins[i].sp == "INITNEXT")
 
     @property
+    def target_cycles(self) -> int:
+        """Cycles of one ``target`` transfer while idle: one memory write per word it stages
+        (the pulse with its flags, then its time)."""
+        return len((Word.STAGED, Word.STAGED_TIME))
+
+    @property
     def channel_cycles(self) -> int:
         """The longest path of one channel through the microprogram."""
         a = self._asm
