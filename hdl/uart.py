@@ -1,7 +1,7 @@
 """8N1 UART receiver and transmitter with an integer clock divisor (cycles per bit)."""
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -60,6 +60,10 @@ class UARTRx(wiring.Component):
         is still not taken is lost and pulses ``overrun``.
     framing_error, overrun : Out(1)
         One-cycle pulses, registered.
+    idle_tick : Out(1)
+        A one-cycle pulse, registered, every ``divisor`` cycles while the receiver waits for a
+        start bit (the first one bit time after a stop bit's middle; none during a break): a
+        pause between bytes in bit times, for :class:`~ikseries.hdl.link.FrameReceiver`'s timeout.
 
     Latency
     -------
@@ -76,7 +80,7 @@ class UARTRx(wiring.Component):
         _check_divisor(divisor)
         self._divisor = divisor
         super().__init__({"rx": In(1, init=1), "o": Out(stream.Signature(8)),
-                          "framing_error": Out(1), "overrun": Out(1)})
+                          "framing_error": Out(1), "overrun": Out(1), "idle_tick": Out(1)})
 
     @property
     def divisor(self) -> int:
@@ -93,32 +97,33 @@ class UARTRx(wiring.Component):
         m.d.sync += pins.eq(Cat(self.rx, pins[0]))
         line = pins[1]
         timer = Signal(range(d))
+        tick = timer == 0
         bit = Signal(range(8))
         shift = Signal(8)
-        m.d.sync += [self.framing_error.eq(0), self.overrun.eq(0)]
+        # free-running between bytes too, so that idle_tick measures pauses in bit times
+        m.d.sync += [timer.eq(Mux(tick, d - 1, timer - 1)), self.framing_error.eq(0), self.overrun.eq(0),
+                     self.idle_tick.eq(0)]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
         with m.FSM():
             with m.State("idle"):
+                m.d.sync += self.idle_tick.eq(tick)
                 with m.If(~line):
                     m.d.sync += timer.eq((d - 1) // 2 - 1)
                     m.next = "start"
             with m.State("start"):
-                m.d.sync += timer.eq(timer - 1)
-                with m.If(timer == 0):
-                    m.d.sync += [timer.eq(d - 1), bit.eq(0)]
+                with m.If(tick):
+                    m.d.sync += bit.eq(0)
                     m.next = "data"
                     with m.If(line):        # the start bit did not last half a bit: a glitch
                         m.next = "idle"
             with m.State("data"):
-                m.d.sync += timer.eq(timer - 1)
-                with m.If(timer == 0):
-                    m.d.sync += [timer.eq(d - 1), shift.eq(Cat(shift[1:], line)), bit.eq(bit + 1)]
+                with m.If(tick):
+                    m.d.sync += [shift.eq(Cat(shift[1:], line)), bit.eq(bit + 1)]
                     with m.If(bit == 7):
                         m.next = "stop"
             with m.State("stop"):
-                m.d.sync += timer.eq(timer - 1)
-                with m.If(timer == 0):
+                with m.If(tick):
                     with m.If(~line):
                         m.d.sync += self.framing_error.eq(1)
                         m.next = "break"

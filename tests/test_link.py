@@ -61,6 +61,9 @@ def test_doc_tables_are_rendered_from_the_table():
     assert m.group(1) == P.markdown_tables(), "docs/protocol.md is stale: re-render markdown_tables()"
     for c in P.COMMANDS:    # the prose's figures come from the same table
         assert f"| 0x{c.code:02X} | `{c.name}` |" in m.group(1)
+    t = P.RX_TIMEOUT_BYTES
+    assert f"more than {t} byte times ({t * P.BYTE_BITS} bit times of idle line)" in doc.replace("\n", " ")
+    assert f"quiet for {t + 1} byte times or more is always received whole" in doc.replace("\n", " ")
     move = 3 + P.max_request_payload(HEXAPOD) + 2
     assert f"{move} bytes, {move * 10} µs, so {int(1e6 / (10 * move))} updates per second" in doc.replace("\n", " ")
 
