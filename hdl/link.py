@@ -245,7 +245,7 @@ class FrameReceiver(wiring.Component):
         wbank, rbank = Signal(), Signal()
         length = Signal(range(self._max + 1))
         command = Signal(8)
-        index = Signal(self._addr_bits)
+        index = Signal(range(self._max + 1))
         byte = self.i.payload
         known, length_ok = self._length_check(m, byte, length)
         events = {name: Signal(name=f"{name}_event") for name in P.RECEIVER_COUNTERS}
@@ -253,7 +253,7 @@ class FrameReceiver(wiring.Component):
         counters = _counter_engine(m, [events[name] for name in P.RECEIVER_COUNTERS], self._counter_bits, write)
         m.d.comb += [counters.addr.eq(self.counter_addr), self.counter_data.eq(counters.data)]
         m.d.comb += [rd.addr.eq(Cat(self.rd_addr, rbank)), self.rd_data.eq(rd.data),
-                     wr.addr.eq(Cat(index, wbank)), wr.data.eq(byte), check.byte.eq(byte)]
+                     wr.addr.eq(Cat(index[:self._addr_bits], wbank)), wr.data.eq(byte), check.byte.eq(byte)]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
         hunting = Signal()
@@ -298,15 +298,13 @@ class FrameReceiver(wiring.Component):
                     with m.Else():
                         m.d.sync += [command.eq(byte), index.eq(0)]
                         m.next = "body"
-                        with m.If(length == 0):
-                            m.next = crc_states[0]
-            with m.State("body"):
+            with m.State("body"):       # payload bytes, then the first CRC byte (index == length)
                 with frame_state("body"):
-                    m.d.comb += wr.en.eq(1)
+                    m.d.comb += wr.en.eq(index != length)
                     m.d.sync += index.eq(index + 1)
-                    with m.If(index + 1 == length):
-                        m.next = crc_states[0]
-            for name, after in zip(crc_states, crc_states[1:] + ["check"]):
+                    with m.If(index == length):
+                        m.next = crc_states[1]
+            for name, after in zip(crc_states[1:], crc_states[2:] + ["check"]):
                 with m.State(name):
                     with frame_state(name):
                         m.next = after
@@ -376,6 +374,9 @@ class FrameTransmitter(wiring.Component):
         m.submodules.crc = gen = SerialCRC()
         length = Signal(range(self._max + 1))
         command = Signal(8)
+        sent = Signal(range(self._max + 1))
+        done = sent == length
+        m.d.comb += self.index.eq(sent)
         busy = Signal()         # the CRC is stepping through the byte on o (which stays put until it is done)
         m.d.comb += [gen.byte.eq(self.o.payload), gen.step.eq(busy)]
         with m.If(gen.last):
@@ -404,17 +405,15 @@ class FrameTransmitter(wiring.Component):
             with m.State("cmd"):
                 with m.If(free):
                     send(command)
-                    m.d.sync += self.index.eq(0)
+                    m.d.sync += sent.eq(0)
                     m.next = "payload"
-                    with m.If(length == 0):
-                        m.next = crc_states[0]
-            with m.State("payload"):
-                m.d.comb += self.data.ready.eq(free)
-                with m.If(self.data.valid & free):
+            with m.State("payload"):        # until ``sent`` reaches the length (at once for an empty payload)
+                m.d.comb += self.data.ready.eq(free & ~done)
+                with m.If(done):
+                    m.next = crc_states[0]
+                with m.Elif(self.data.valid & free):
                     send(self.data.payload)
-                    m.d.sync += self.index.eq(self.index + 1)
-                    with m.If(self.index + 1 == length):
-                        m.next = crc_states[0]
+                    m.d.sync += sent.eq(sent + 1)
             # the CRC takes each CRC byte but the last: that shifts the next one to its top byte
             for k, (name, after) in enumerate(zip(crc_states, crc_states[1:] + ["idle"])):
                 with m.State(name):
