@@ -212,7 +212,8 @@ class FrameReceiver(wiring.Component):
 
         ``length_ok`` is a bit of a block RAM table addressed by the code's low bits and the
         length (a LUT tree of every command's lengths cost 50 LUTs), valid one cycle after
-        ``code`` and ``length`` are; ``known`` is logic.
+        ``code`` and ``length`` are; ``known`` is logic (in the table it saved 2 LUTs for a
+        second block RAM).
         """
         code_bits = max(self._lengths).bit_length()
         length_bits = self._max.bit_length()
@@ -226,13 +227,20 @@ class FrameReceiver(wiring.Component):
         return Cat(*(code == c for c in self._lengths)).any(), read.data
 
     def _timeout(self, m, take):
-        """True once ``timeout_ticks`` ticks came without a byte taken."""
-        idle = Signal(range(self.timeout_ticks + 1))
-        expired = idle == self.timeout_ticks
+        """True once ``timeout_ticks`` ticks came without a byte taken.
+
+        The count is a 6-bit XNOR shift register (period 63; zero, its reset value, is a state
+        of it): one LUT of feedback instead of a 6-bit adder.
+        """
+        assert self.timeout_ticks < 63
+        state, expired_at = Signal(6), 0
+        for _ in range(self.timeout_ticks):
+            expired_at = (expired_at << 1 | (1 ^ (expired_at >> 5 & 1) ^ (expired_at >> 4 & 1))) & 0x3F
+        expired = state == expired_at
         with m.If(take):
-            m.d.sync += idle.eq(0)
+            m.d.sync += state.eq(0)
         with m.Elif(self.tick & ~expired):
-            m.d.sync += idle.eq(idle + 1)
+            m.d.sync += state.eq(Cat(~(state[5] ^ state[4]), state[:5]))
         return expired
 
     def elaborate(self, platform):
