@@ -115,9 +115,10 @@ def _counter_engine(m, events, counter_bits, write_domain):
         m.d.sync += clearing.eq(0)
     hit = pending.bit_select(held, 1)
     # the incremented word's carry out is set only for an all-ones (saturated) word
-    m.d.comb += [scan_rd.addr.eq(scan), wr.addr.eq(held), wr.data.eq(Mux(clearing, 0, total[:counter_bits])),
+    # the clearing scan writes 1 for a pending event: an event waits at most 8 cycles, reset or not
+    m.d.comb += [scan_rd.addr.eq(scan), wr.addr.eq(held), wr.data.eq(Mux(clearing, hit, total[:counter_bits])),
                  wr.en.eq(clearing | (hit & ~total[counter_bits]))]
-    served = Cat(*(~clearing & (held == k) for k in range(words)))
+    served = Cat(*(held == k for k in range(words)))
     m.d.sync += pending.eq((pending & ~served) | Cat(*events))
     return outside
 

@@ -11,7 +11,7 @@ import random
 from amaranth.sim import Simulator
 
 from .hdl import protocol as P
-from .hdl.link import FrameReceiver
+from .hdl.link import FrameReceiver, SerialCRC
 from .host.protocol import encode, field_bounds, request_parser
 
 __all__ = ["random_values", "random_request", "mixed_stream", "random_pauses", "model_receiver",
@@ -20,9 +20,11 @@ __all__ = ["random_values", "random_request", "mixed_stream", "random_pauses", "
 
 def frame_gap(shape: P.Shape) -> int:
     """Cycles between bytes fed to the receiver so that the bench's consumer (reading a payload
-    byte a cycle, then taking the frame) is done before the shortest next frame (5 bytes) ends.
-    A UART delivers a byte only every 10 bit times, far slower."""
-    return -(-(P.max_request_payload(shape) + 4) // 5)
+    byte a cycle, then taking the frame) is done before the shortest next frame (5 bytes) ends;
+    the receiver itself holds each byte after SYNC for the CRC's steps. A UART delivers a byte
+    only every 10 bit times, far slower."""
+    held = 4 * (SerialCRC.cycles_per_byte - 1)
+    return max(1, -(-(P.max_request_payload(shape) + 4 - held) // 5))
 
 
 def _value(rng: random.Random, f: P.Field, shape: P.Shape, corner: bool):

@@ -7,15 +7,16 @@ from pathlib import Path
 
 import pytest
 from amaranth.back import verilog
+from amaranth.hdl import Module, ResetInserter, Signal
 from amaranth.lib import crc as amaranth_crc
 from amaranth.sim import Simulator
 
 from ikseries.hdl import protocol as P
-from ikseries.hdl.link import FrameReceiver, FrameTransmitter, Link
-from ikseries.hdl.uart import BAUD_TOLERANCE, UARTRx, UARTTx, uart_divisor
+from ikseries.hdl.link import FrameReceiver, FrameTransmitter, Link, SerialCRC
+from ikseries.hdl.uart import BAUD_TOLERANCE, MIN_DIVISOR, UARTRx, UARTTx, uart_divisor
 from ikseries.host.protocol import (Decoder, Message, crc, decode_request, encode, encode_answer, field_bounds,
                                     frame, request_parser)
-from ikseries.linkcheck import mixed_stream, model_receiver, random_values, simulate_receiver
+from ikseries.linkcheck import mixed_stream, model_receiver, random_pauses, random_values, simulate_receiver
 
 ROOT = Path(__file__).resolve().parent.parent
 HEXAPOD = P.Shape(legs=6, coords=3, channels=18)
@@ -88,6 +89,45 @@ def test_protocol_crc_is_the_named_one():
     a = amaranth_crc.catalog.CRC16_CCITT_FALSE
     assert (a.crc_width, a.polynomial, a.initial_crc, a.reflect_input, a.reflect_output, a.xor_output) == \
         (P.CRC.width, P.CRC.polynomial, P.CRC.initial, P.CRC.reflect_input, P.CRC.reflect_output, P.CRC.xor_output)
+
+
+def test_serial_crc_equals_the_host_crc():
+    rng = random.Random(11)
+    messages = [bytes(rng.randrange(256) for _ in range(n)) for n in (9, 0, 3, 1)]
+    messages[0] = b"123456789"
+    dut = SerialCRC()
+    got = []
+    sim = Simulator(dut)
+    sim.add_clock(1e-6)
+
+    async def bench(ctx):
+        for message in messages:        # each restarts the CRC: start wins over a step
+            ctx.set(dut.start, 1)
+            ctx.set(dut.step, 1)
+            await ctx.tick()
+            ctx.set(dut.start, 0)
+            for b in message:
+                ctx.set(dut.byte, b)
+                for k in range(8):
+                    assert ctx.get(dut.last) == (k == 7)
+                    await ctx.tick()
+                ctx.set(dut.step, 0)    # a pause between bytes changes nothing
+                await ctx.tick()
+                ctx.set(dut.step, 1)
+            got.append(ctx.get(dut.crc))
+    sim.add_testbench(bench)
+    sim.run()
+    assert got == [crc(m) for m in messages] and got[0] == P.CRC.check
+    with pytest.raises(ValueError, match=r"^params must be an MSB-first CRC of whole bytes without output "
+                                         r"reflection or xor, not 'KERMIT'$"):
+        k = amaranth_crc.catalog.CRC16_KERMIT
+        SerialCRC(P.CRCParameters("KERMIT", 16, k.polynomial, k.initial_crc, True, True, 0, check=0))
+
+
+def test_min_divisor_leaves_a_byte_time_for_the_serial_crc():
+    """A UART byte (10 bit times) outlasts the receiver's slowest byte: the CRC's steps, the
+    frame check, then SYNC hunted at once; so the UART's byte is always taken before the next."""
+    assert P.BYTE_BITS * MIN_DIVISOR >= SerialCRC.cycles_per_byte + 2
 
 
 def _normal(v):
@@ -182,14 +222,16 @@ def test_uart_divisor():
         UARTTx(4.0)
 
 
-def _line_levels(data: bytes, cycles_per_bit: float, idle: int, stop_bits=None) -> list[int]:
+def _line_levels(data: bytes, cycles_per_bit: float, idle: int, stop_bits=None, pauses=None) -> list[int]:
     """The rx pin, one level per clock cycle, for ``data`` sent 8N1 at ``cycles_per_bit``
-    (a stop bit of byte k is low when ``stop_bits[k]`` is 0)."""
+    (a stop bit of byte k is low when ``stop_bits[k]`` is 0; ``pauses[k]`` idle bit times
+    before byte k)."""
     bits = [1] * idle
     t = float(idle)
     levels = []
     for k, b in enumerate(data):
-        frame_bits = [0] + [(b >> i) & 1 for i in range(8)] + [1 if stop_bits is None else stop_bits[k]]
+        frame_bits = [1] * (pauses or {}).get(k, 0)
+        frame_bits += [0] + [(b >> i) & 1 for i in range(8)] + [1 if stop_bits is None else stop_bits[k]]
         for v in frame_bits:
             t += cycles_per_bit
             levels += [v] * (round(t) - len(bits) - len(levels))
@@ -332,12 +374,62 @@ def test_receiver_counts_each_kind_of_bad_frame_by_construction():
 
 @pytest.mark.parametrize("shape, seed, nbytes", [(HEXAPOD, 1, 2500), (SMALL, 2, 1200)], ids=["hexapod", "small"])
 def test_receiver_equals_the_protocol_model_on_mixed_traffic(shape, seed, nbytes):
-    data = mixed_stream(random.Random(seed), shape, nbytes)
-    frames, counters = model_receiver(shape, data)
-    got = simulate_receiver(shape, data)
+    rng = random.Random(seed)
+    data = mixed_stream(rng, shape, nbytes)
+    pauses = random_pauses(rng, len(data), 40)
+    frames, counters = model_receiver(shape, data, pauses)
+    got = simulate_receiver(shape, data, pauses=pauses)
     assert len(frames) > 30 and all(counters.values())      # every kind of error did occur
+    assert (frames, counters) != model_receiver(shape, data)    # and the pauses changed the verdict
     assert got["frames"] == frames
     assert got["counters"] == {**counters, "framing": 0, "overrun": 0, "dropped": 0}
+
+
+def test_a_pause_resynchronises_after_garbage_that_looks_like_a_header():
+    good = encode("set_pulse", HEXAPOD, channel=1, pulse=2000)
+    ghost = bytes((P.SYNC, 37, 0x11, 0x3F))     # a move_legs header: 37 more bytes would be its payload
+    data = ghost + good + good
+    # without a pause the ghost swallows the first good frame (and the second's start)
+    assert model_receiver(HEXAPOD, data)[0] == []
+    for pauses in ([], [len(ghost)]):
+        frames, counters = model_receiver(HEXAPOD, data, pauses)
+        got = simulate_receiver(HEXAPOD, data, pauses=pauses)
+        assert got["frames"] == frames and got["counters"] == {**counters, "framing": 0, "overrun": 0, "dropped": 0}
+    assert got["frames"] == [(0x12, good[3:-2])] * 2 and got["counters"]["crc"] == 0   # abandoned: uncounted
+
+
+def test_receiver_counters_are_cleared_by_reset():
+    rst = Signal()
+    dut = FrameReceiver(HEXAPOD)
+    top = Module()
+    top.submodules.dut = ResetInserter(rst)(dut)
+    seen = []
+    sim = Simulator(top)
+    sim.add_clock(1e-6)
+
+    async def read(ctx):
+        values = []
+        for k in range(len(P.RECEIVER_COUNTERS)):
+            ctx.set(dut.counter_addr, k)
+            await ctx.tick()
+            values.append(ctx.get(dut.counter_data))
+        return values
+
+    async def bench(ctx):
+        for _ in range(3):
+            ctx.set(dut.framing_error, 1)
+            await ctx.tick()
+            ctx.set(dut.framing_error, 0)
+            await ctx.tick().repeat(8)
+        seen.append(await read(ctx))
+        ctx.set(rst, 1)
+        await ctx.tick()
+        ctx.set(rst, 0)
+        await ctx.tick().repeat(8)      # the first scan after reset writes zeros
+        seen.append(await read(ctx))
+    sim.add_testbench(bench)
+    sim.run()
+    assert seen == [[0, 3, 0, 0, 0, 0], [0] * 6]
 
 
 def test_receiver_resynchronises_on_a_refused_sync_byte():
