@@ -583,6 +583,62 @@ def test_link_answers_a_request_end_to_end():
         "channel": 3, "commanded": 123456, "current": 65432, "moving": 1, "enabled": 1})]
 
 
+def _link_receive(shape, d, levels):
+    """Requests the Link takes from rx ``levels`` (each taken at once), then its counters."""
+    dut = Link(shape, d)
+    got, counters = [], []
+    sim = Simulator(dut)
+    sim.add_clock(1e-6)
+
+    async def host(ctx):
+        for v in levels:
+            ctx.set(dut.rx, v)
+            await ctx.tick()
+        await ctx.tick().repeat(16)
+        for k in range(len(P.RECEIVER_COUNTERS)):
+            ctx.set(dut.counter_addr, k)
+            await ctx.tick()
+            counters.append(ctx.get(dut.counter_data))
+
+    async def controller(ctx):
+        while len(counters) < len(P.RECEIVER_COUNTERS):
+            await ctx.tick()
+            if ctx.get(dut.request.valid):
+                payload = bytearray()
+                for a in range(ctx.get(dut.request.payload.length)):
+                    ctx.set(dut.rd_addr, a)
+                    await ctx.tick()
+                    payload.append(ctx.get(dut.rd_data))
+                got.append((ctx.get(dut.request.payload.command), bytes(payload)))
+                ctx.set(dut.request.ready, 1)
+                await ctx.tick()
+                ctx.set(dut.request.ready, 0)
+    sim.add_testbench(host)
+    sim.add_testbench(controller)
+    sim.run()
+    return got, dict(zip(P.RECEIVER_COUNTERS, counters))
+
+
+def test_link_timeout_is_in_byte_times_and_counters_are_read_through_the_link():
+    """At the fastest divisor: a pause of RX_TIMEOUT_BYTES byte times inside a frame is harmless,
+    one byte time more abandons it (uncounted) and resynchronises after a ghost header."""
+    d, t = MIN_DIVISOR, P.RX_TIMEOUT_BYTES * P.BYTE_BITS
+    frames = [encode("set_pulse", SMALL, channel=k, pulse=1000 + 7 * k) for k in range(4)]
+    assert all(P.SYNC not in f[1:] for f in frames)     # an abandoned frame's rest is hunted over
+    ghost = bytes((P.SYNC, 5, 0x11))                    # a move_legs header of SMALL
+    data = frames[0] + ghost + frames[1] + frames[2] + frames[3] + b"\x00" + frames[0]
+    starts = [0, len(frames[0]), len(frames[0]) + 3]
+    pauses = {5: t, starts[2]: t + P.BYTE_BITS, starts[2] + 9 + 4: t + P.BYTE_BITS, len(data) - 9: 2}
+    stop_bits = [1] * len(data)
+    stop_bits[len(data) - 10] = 0       # the 0x00 with a low stop bit: a framing error
+    got, counters = _link_receive(SMALL, d, _line_levels(data, d, idle=6, stop_bits=stop_bits, pauses=pauses))
+    assert got == [(0x12, f[3:-2]) for f in (frames[0], frames[1], frames[3], frames[0])]
+    assert counters == {**dict.fromkeys(P.RECEIVER_COUNTERS, 0), "framing": 1}
+    for pause in (t, t + P.BYTE_BITS):     # the same edges at a divisor where no tick precedes the take
+        mid = _line_levels(frames[0], 12, idle=6, pauses={5: pause})
+        assert _link_receive(SMALL, 12, mid)[0] == ([(0x12, frames[0][3:-2])] if pause == t else [])
+
+
 def test_link_verilog_is_deterministic():
     first = verilog.convert(Link(HEXAPOD, 48), name="link", emit_src=False)
     assert verilog.convert(Link(HEXAPOD, 48), name="link", emit_src=False) == first
