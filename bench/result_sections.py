@@ -225,11 +225,12 @@ def link_fuzz(res: dict) -> list[str]:
     """Lines of the ``bench/link_fuzz.py`` section from its JSON ``res``."""
     f, s = res["fuzz"], res["shape"]
     lines = [f"Shape {s['legs']} legs × {s['coords']} coordinates, {s['channels']} channels; seed {res['seed']}, "
-             f"chunks of {res['chunk']:,} bytes. Every good frame and every counter of the simulated "
+             f"chunks of {res['chunk']:,} bytes, a receive-timeout pause before about one byte in "
+             f"{res['pause_every']}. Every good frame and every counter of the simulated "
              "`FrameReceiver` compared with the host parser (`ikseries.host.protocol.FrameParser`).", "",
-             *table(("bytes", "good frames", "mismatching chunks", "simulation s", "bytes/s", "cycles/s"),
-                    [(f"{f['bytes']:,}", f"{f['frames']:,}", f["mismatches"], num(f["seconds"], ".1f"),
-                      f"{f['bytes_per_s']:,}", f"{f['cycles_per_s']:,}")]),
+             *table(("bytes", "pauses", "good frames", "mismatching chunks", "simulation s", "bytes/s", "cycles/s"),
+                    [(f"{f['bytes']:,}", f"{f['pauses']:,}", f"{f['frames']:,}", f["mismatches"],
+                      num(f["seconds"], ".1f"), f"{f['bytes_per_s']:,}", f"{f['cycles_per_s']:,}")]),
              *table(tuple(f["counters"]), [tuple(f"{v:,}" for v in f["counters"].values())])]
     if res["area_ice40"]:
         lines += [f"Yosys `synth_ice40` counts, {res['clock_hz'] / 1e6:g} MHz clock at {res['baud'] / 1e6:g} Mbaud "
