@@ -99,8 +99,9 @@ def _counter_engine(m, events, counter_bits, write_domain):
     """Saturating counters of ``events`` (one-cycle pulses) in a block RAM, one shared incrementer.
 
     A scan reads one word a cycle (every word each 8 cycles) and writes it back incremented (on
-    ``write_domain``) if its event is pending, so an event may come once per 8 cycles. Returns the memory's read port for
-    the outside. After a reset the first scan writes zeros (the configured contents are zero too).
+    ``write_domain``) if its event is pending, so an event may come once per 8 cycles. Returns the
+    memory's read port for the outside. After a reset the first scan writes zeros (the configured
+    contents are zero too).
     """
     words = 8
     # a small memory: Yosys would build it of flip-flops, the very cells this saves
@@ -186,7 +187,8 @@ class FrameReceiver(wiring.Component):
     def __init__(self, shape: P.Shape, counter_bits: int = P.COUNTER_BITS):
         if not isinstance(shape, P.Shape):
             raise TypeError(f"shape must be an ikseries.hdl.protocol.Shape, not {shape!r}")
-        if not isinstance(counter_bits, int) or isinstance(counter_bits, bool) or not 1 <= counter_bits <= P.COUNTER_BITS:
+        if (not isinstance(counter_bits, int) or isinstance(counter_bits, bool)
+                or not 1 <= counter_bits <= P.COUNTER_BITS):
             raise ValueError(f"counter_bits must be an integer in [1, {P.COUNTER_BITS}], not {counter_bits!r}")
         self._shape = shape
         self._counter_bits = counter_bits
@@ -256,6 +258,7 @@ class FrameReceiver(wiring.Component):
         command = Signal(8)
         index = Signal(range(self._max + 1))
         byte = self.i.payload
+        take_command = Signal()     # the CMD byte is good: keep it
         known, length_ok = self._length_check(m, byte, length)
         events = {name: Signal(name=f"{name}_event") for name in P.RECEIVER_COUNTERS}
         m.d.comb += [events["framing"].eq(self.framing_error), events["overrun"].eq(self.overrun)]
@@ -265,6 +268,18 @@ class FrameReceiver(wiring.Component):
                      wr.addr.eq(Cat(index[:self._addr_bits], wbank)), wr.data.eq(byte), check.byte.eq(byte)]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
+        good = self._frame_fsm(m, check, wr, events, (known, length_ok), length, index, take_command)
+        with m.If(good):
+            m.d.sync += [self.o.valid.eq(1), self.o.payload.command.eq(command),
+                         self.o.payload.length.eq(length), rbank.eq(wbank), wbank.eq(~wbank)]
+        with m.If(take_command):
+            m.d.sync += command.eq(byte)
+        return m
+
+    def _frame_fsm(self, m, check, wr, events, command_check, length, index, take_command):
+        """The receiving rules, byte by byte; returns a pulse: a good frame to offer on ``o``."""
+        known, length_ok = command_check
+        byte, good = self.i.payload, Signal()
         hunting = Signal()
         take = self.i.valid & self.i.ready
         m.d.comb += self.i.ready.eq(hunting | check.last)
@@ -277,14 +292,15 @@ class FrameReceiver(wiring.Component):
                 m.d.comb += check.start.eq(1)
                 m.next = "len"
 
-        def frame_state(name):
+        def frame_state():
             """A state inside a frame: the CRC steps through the byte, which is taken at the last."""
             m.d.comb += check.step.eq(self.i.valid)
             with m.If(expired):
                 m.next = "hunt"
             return m.If(~expired & take)
 
-        crc_states = [f"crc{k}" for k in range(P.CRC.width // 8)]
+        # the body state takes the first CRC byte too (index == length); these take the rest
+        crc_states = [f"crc{k}" for k in range(1, P.CRC.width // 8)]
         with m.FSM():
             with m.State("hunt"):
                 m.d.comb += hunting.eq(1)
@@ -292,30 +308,31 @@ class FrameReceiver(wiring.Component):
                     m.d.comb += check.start.eq(1)
                     m.next = "len"
             with m.State("len"):
-                with frame_state("len"):
+                with frame_state():
                     with m.If(byte > self._max):
                         refuse("bad_length")
                     with m.Else():
                         m.d.sync += length.eq(byte)
                         m.next = "cmd"
             with m.State("cmd"):
-                with frame_state("cmd"):
+                with frame_state():
                     with m.If(~known):
                         refuse("unknown_command")
                     with m.Elif(~length_ok):
                         refuse("bad_length")
                     with m.Else():
-                        m.d.sync += [command.eq(byte), index.eq(0)]
+                        m.d.comb += take_command.eq(1)
+                        m.d.sync += index.eq(0)
                         m.next = "body"
-            with m.State("body"):       # payload bytes, then the first CRC byte (index == length)
-                with frame_state("body"):
+            with m.State("body"):
+                with frame_state():
                     m.d.comb += wr.en.eq(index != length)
                     m.d.sync += index.eq(index + 1)
                     with m.If(index == length):
-                        m.next = crc_states[1]
-            for name, after in zip(crc_states[1:], crc_states[2:] + ["check"]):
+                        m.next = (crc_states + ["check"])[0]
+            for name, after in zip(crc_states, crc_states[1:] + ["check"]):
                 with m.State(name):
-                    with frame_state(name):
+                    with frame_state():
                         m.next = after
             with m.State("check"):      # the CRC register has taken the last byte
                 with m.If(check.crc != 0):
@@ -323,10 +340,9 @@ class FrameReceiver(wiring.Component):
                 with m.Elif(self.o.valid & ~self.o.ready):
                     m.d.comb += events["dropped"].eq(1)
                 with m.Else():
-                    m.d.sync += [self.o.valid.eq(1), self.o.payload.command.eq(command),
-                                 self.o.payload.length.eq(length), rbank.eq(wbank), wbank.eq(~wbank)]
+                    m.d.comb += good.eq(1)
                 m.next = "hunt"
-        return m
+        return good
 
 
 class FrameTransmitter(wiring.Component):

@@ -290,8 +290,8 @@ def markdown_tables() -> str:
                 f"xor output 0x{CRC.xor_output:04X}, check 0x{CRC.check:04X}"),
         ("CRC byte order", f"{CRC_BYTE_ORDER}-endian (high byte first)"),
         ("error counters", f"{COUNTER_BITS}-bit, saturating"),
-        ("receive timeout", f"a pause of more than {RX_TIMEOUT_BYTES} byte times ({RX_TIMEOUT_BYTES * BYTE_BITS} bit times) "
-                            "inside a frame abandons it")])
+        ("receive timeout", f"a pause of more than {RX_TIMEOUT_BYTES} byte times "
+                            f"({RX_TIMEOUT_BYTES * BYTE_BITS} bit times) inside a frame abandons it")])
     out += ["### Commands", "", "C: coordinates per leg; k: legs in the mask (1 .. legs). Sizes in bytes.", ""]
     out += _rows(("code", "command", "request payload", "request size", "answer code", "answer payload",
                   "answer size", "what it does"),
