@@ -37,6 +37,8 @@ class SerialCRC(wiring.Component):
         Take the next bit of ``byte`` (most significant first).
     last : Out(1)
         This step takes the byte's last bit.
+    bit : Out(3)
+        Steps taken of this byte (``last``: 7).
     crc : Out(width)
         The register: the CRC of the bytes taken so far.
 
@@ -56,7 +58,7 @@ class SerialCRC(wiring.Component):
             raise ValueError("params must be an MSB-first CRC of whole bytes without output reflection or xor, "
                              f"not {params.name!r}")
         self._params = params
-        super().__init__({"start": In(1), "byte": In(8), "step": In(1), "last": Out(1),
+        super().__init__({"start": In(1), "byte": In(8), "step": In(1), "last": Out(1), "bit": Out(3),
                           "crc": Out(params.width, init=params.initial)})
 
     def elaborate(self, platform):
@@ -65,7 +67,7 @@ class SerialCRC(wiring.Component):
         # start always comes before the first step: no reset needed, which keeps the register 0 LUTs
         r = Signal(p.width, init=p.initial, reset_less=True)
         bit = Signal(3, reset_less=True)
-        m.d.comb += self.crc.eq(r)
+        m.d.comb += [self.crc.eq(r), self.bit.eq(bit)]
         feedback = r[-1] ^ self.byte.bit_select(~bit, 1)        # ~bit = 7 - bit: MSB first
         shifted = Cat(*((r[i - 1] if i else 0) ^ (feedback if (p.polynomial >> i) & 1 else 0)
                         for i in range(p.width)))
@@ -98,10 +100,12 @@ def _write_domain(m):
 def _counter_engine(m, events, counter_bits, write_domain):
     """Saturating counters of ``events`` (one-cycle pulses) in a block RAM, one shared incrementer.
 
-    A scan reads one word a cycle (every word each 8 cycles) and writes it back incremented (on
-    ``write_domain``) if its event is pending, so an event may come once per 8 cycles. Returns the
-    memory's read port for the outside. After a reset the first scan writes zeros (the configured
-    contents are zero too).
+    A scan reads one word a cycle (every word each 8 cycles) and, if its event is pending, writes
+    it back incremented half a cycle after the next edge (on ``write_domain``, from registers: the
+    read, the incrementer and the write in half a cycle made 28 MHz), so an event may come once per
+    8 cycles and shows on the outside port 10 cycles later at most. Returns the memory's read port
+    for the outside. After a reset the first scan writes zeros (the configured contents are zero
+    too).
     """
     words = 8
     # a small memory: Yosys would build it of flip-flops, the very cells this saves
@@ -115,10 +119,11 @@ def _counter_engine(m, events, counter_bits, write_domain):
     with m.If(held == words - 1):
         m.d.sync += clearing.eq(0)
     hit = pending.bit_select(held, 1)
-    # the incremented word's carry out is set only for an all-ones (saturated) word
-    # the clearing scan writes 1 for a pending event: an event waits at most 8 cycles, reset or not
-    m.d.comb += [scan_rd.addr.eq(scan), wr.addr.eq(held), wr.data.eq(Mux(clearing, hit, total[:counter_bits])),
+    # the incremented word's carry out is set only for an all-ones (saturated) word; the
+    # clearing scan writes 1 for a pending event: an event waits at most 8 cycles, reset or not
+    m.d.sync += [wr.addr.eq(held), wr.data.eq(Mux(clearing, hit, total[:counter_bits])),
                  wr.en.eq(clearing | (hit & ~total[counter_bits]))]
+    m.d.comb += scan_rd.addr.eq(scan)
     served = Cat(*(held == k for k in range(words)))
     m.d.sync += pending.eq((pending & ~served) | Cat(*events))
     return outside
@@ -166,7 +171,7 @@ class FrameReceiver(wiring.Component):
         completed while ``o`` was still held).
     counter_data : Out(counter_bits)
         That counter, one cycle after ``counter_addr`` (a block RAM read); saturating, zero from
-        reset, up to 9 cycles behind its event.
+        reset, up to 10 cycles behind its event.
 
     Latency
     -------
@@ -283,6 +288,7 @@ class FrameReceiver(wiring.Component):
         hunting = Signal()
         take = self.i.valid & self.i.ready
         m.d.comb += self.i.ready.eq(hunting | check.last)
+        m.d.sync += wr.en.eq(0)
         expired = self._timeout(m, take)
 
         def refuse(counter):
@@ -325,8 +331,11 @@ class FrameReceiver(wiring.Component):
                         m.d.sync += index.eq(0)
                         m.next = "body"
             with m.State("body"):
+                # registered a step ahead: the write (half a cycle after the edge) then comes
+                # straight from flip-flops, in the cycle the byte is taken
+                with m.If(self.i.valid & (check.bit == SerialCRC.cycles_per_byte - 2) & (index != length)):
+                    m.d.sync += wr.en.eq(1)
                 with frame_state():
-                    m.d.comb += wr.en.eq(index != length)
                     m.d.sync += index.eq(index + 1)
                     with m.If(index == length):
                         m.next = (crc_states + ["check"])[0]

@@ -147,7 +147,7 @@ def simulate_receiver(shape: P.Shape, data: bytes, gap: int | None = None, frami
             ctx.set(dut.overrun, 0)
             await ctx.tick().repeat(7)
             cycles += 8
-        await ctx.tick().repeat(4 * gap + 16)      # the counters' scan: at most 9 cycles behind
+        await ctx.tick().repeat(4 * gap + 16)      # the counters: at most 10 cycles behind
         counters = {}
         for k, name in enumerate(P.RECEIVER_COUNTERS):
             ctx.set(dut.counter_addr, k)
