@@ -5,7 +5,8 @@ and garbage request traffic (``ikseries.linkcheck.mixed_stream``), with a receiv
 before about one byte in ``--pause-every``, to the simulated ``FrameReceiver`` of the hexapod
 shape, in chunks of ``--chunk`` bytes (one simulation each, seeded per chunk), and compares
 every frame and counter with the host parser's verdict (``FrameParser.pause`` at the pauses). Then
-synthesises ``Link`` (and its parts) for iCE40 with Yosys. Prints a table and writes JSON.
+synthesises ``Link`` (and its parts) for iCE40 with Yosys, and places and routes ``Link`` in the
+timing harness on an iCE40UP5K (logic cells, Fmax). Prints a table and writes JSON.
 
     python bench/link_fuzz.py [--bytes 100000] [--chunk 5000] [--pause-every 64] [--seed 1] [--no-synth]
                               [--out docs/results/link_fuzz.json]
@@ -30,11 +31,13 @@ from ikseries.hdl import protocol as P
 from ikseries.hdl.link import FrameReceiver, FrameTransmitter, Link
 from ikseries.hdl.uart import UARTRx, UARTTx, uart_divisor
 from ikseries.linkcheck import mixed_stream, model_receiver, random_pauses, simulate_receiver
+from ikseries.pnr import place_and_route
 from ikseries.synth import synth_counts
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 SHAPE = P.Shape(legs=6, coords=3, channels=18)
 CLOCK_HZ, BAUD = 48e6, 1e6
+PNR_DEVICE = "ice40-up5k-sg48"
 
 
 def fuzz(nbytes: int, chunk: int, seed: int, pause_every: int) -> dict:
@@ -78,6 +81,17 @@ def area(workdir: Path) -> list[dict]:
     return rows
 
 
+def link_pnr(workdir: Path) -> dict:
+    """``Link`` placed and routed in the timing harness (its ports exceed the package's pins)."""
+    v = verilog.convert(Link(SHAPE, uart_divisor(CLOCK_HZ, BAUD)), name="top", emit_src=False)
+    r = place_and_route(v, "top", PNR_DEVICE, int(CLOCK_HZ), workdir, harness=True)
+    u = r.utilisation
+    out = {"device": PNR_DEVICE, "fmax_mhz": r.fmax_mhz, "harness_ffs": r.harness_ffs,
+           **{k: u[k]["used"] for k in ("LC", "LUT", "FF", "BRAM")}}
+    print(out, flush=True)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bytes", type=int, default=100_000)
@@ -92,10 +106,11 @@ def main(argv=None) -> int:
             ap.error(f"--{name.replace('_', '-')} must be a positive integer, not {getattr(args, name)}")
     run = FACTS["run_facts"]("link_fuzz", argv)
     result = fuzz(args.bytes, args.chunk, args.seed, args.pause_every)
-    rows = []
+    rows, pnr = [], None
     if not args.no_synth:
         with tempfile.TemporaryDirectory() as tmp:
             rows = area(Path(tmp))
+            pnr = link_pnr(Path(tmp) / "pnr")
     print()
     print(f"{result['bytes']} bytes, {result['pauses']} pauses, {result['frames']} good frames, {result['mismatches']} mismatching chunks, "
           f"{result['seconds']} s ({result['bytes_per_s']} bytes/s, {result['cycles_per_s']} cycles/s simulated)")
@@ -107,7 +122,7 @@ def main(argv=None) -> int:
             print(f"{r['design']:24} {c['LUT']:5} {c['FF']:5} {c['carry']:5} {c['BRAM']:5}")
     payload = {"shape": {"legs": SHAPE.legs, "coords": SHAPE.coords, "channels": SHAPE.channels},
                "seed": args.seed, "chunk": args.chunk, "pause_every": args.pause_every, "fuzz": result, "clock_hz": CLOCK_HZ, "baud": BAUD,
-               "area_ice40": rows}
+               "area_ice40": rows, "pnr_ice40": pnr}
     out = FACTS["write_result"](args.out, payload, run)
     print(f"wrote {out}")
     return 1 if result["mismatches"] else 0

@@ -238,6 +238,11 @@ def link_fuzz(res: dict) -> list[str]:
                   *table(("design", "LUT", "FF", "carry", "BRAM"),
                          [(r["design"], r["counts"]["LUT"], r["counts"]["FF"], r["counts"]["carry"],
                            r["counts"]["BRAM"]) for r in res["area_ice40"]])]
+    p = res.get("pnr_ice40")
+    if p:
+        lines += [f"`Link` placed and routed on {p['device']} (nextpnr) inside the timing harness, which adds "
+                  f"{p['harness_ffs']} flip-flops: {p['LC']} logic cells ({p['LUT']} LUTs, {p['FF']} FFs), "
+                  f"{p['BRAM']} block RAMs, Fmax {num(p['fmax_mhz'], '.1f')} MHz.", ""]
     return lines
 
 
