@@ -372,7 +372,7 @@ class FrameTransmitter(wiring.Component):
     data : In(stream.Signature(8))
         Payload bytes of the answer being sent, byte ``index`` first.
     index : Out(range(max_payload))
-        Index of the payload byte wanted on ``data``.
+        Index of the payload byte wanted on ``data`` (while ``data.ready``).
     o : Out(stream.Signature(8))
         Frame bytes, registered.
 
@@ -384,9 +384,9 @@ class FrameTransmitter(wiring.Component):
 
     Throughput
     ----------
-    A frame of LEN payload bytes takes 8 * (LEN + 3) + 2 cycles when ``o`` is always ready and
-    ``data`` always valid (a UART byte lasts at least 40); the next header is taken in the cycle
-    CRC_LO is taken.
+    A frame of LEN payload bytes takes 9 * (LEN + 3) + 2 cycles from the header taken to CRC_LO
+    taken when ``o`` is always ready and ``data`` always valid (a UART byte lasts at least 40);
+    the next header is taken in the cycle CRC_LO is taken.
     """
 
     def __init__(self, max_payload: int | None = None):

@@ -517,6 +517,30 @@ def test_transmitter_frames_decode_with_the_host_decoder():
     assert decoder.feed(sent) == expect and decoder.counters["crc"] == 0
 
 
+def test_transmitter_throughput_is_as_documented():
+    dut = FrameTransmitter()
+    cycles = []
+    sim = Simulator(dut)
+    sim.add_clock(1e-6)
+
+    async def bench(ctx):
+        ctx.set(dut.o.ready, 1)
+        ctx.set(dut.data.valid, 1)
+        for n in (0, 3):
+            ctx.set(dut.i.payload.length, n)
+            ctx.set(dut.i.valid, 1)
+            await ctx.tick().until(dut.i.ready)
+            ctx.set(dut.i.valid, 0)
+            taken = count = 0
+            while taken < n + 5:
+                *_, valid = await ctx.tick().sample(dut.o.valid)
+                taken, count = taken + valid, count + 1
+            cycles.append(count)
+    sim.add_testbench(bench)
+    sim.run()
+    assert cycles == [9 * (n + 3) + 2 for n in (0, 3)]
+
+
 def test_transmitter_refuses_a_bad_size():
     with pytest.raises(ValueError, match=r"^max_payload must be an integer in \[1, 64\], not 65$"):
         FrameTransmitter(65)
