@@ -139,7 +139,9 @@ class FrameReceiver(wiring.Component):
     pulses of ``tick`` without a byte) abandons the frame. Payload bytes go into a two-bank
     block RAM: the bank of the frame on ``o`` is read through ``rd_addr``/``rd_data`` while the
     next frame fills the other, so a frame is offered only once its CRC is good (an atomic
-    multi-leg move is never half applied). The error counters live in a second block RAM.
+    multi-leg move is never half applied). The command/length check is a block RAM table and the
+    error counters live in a block RAM too (Yosys gives it two copies, one a read port): four
+    iCE40 block RAMs in all, written on the falling clock edge.
 
     Parameters
     ----------
