@@ -234,7 +234,8 @@ def link_fuzz(res: dict) -> list[str]:
              *table(tuple(f["counters"]), [tuple(f"{v:,}" for v in f["counters"].values())])]
     if res["area_ice40"]:
         lines += [f"Yosys `synth_ice40` counts, {res['clock_hz'] / 1e6:g} MHz clock at {res['baud'] / 1e6:g} Mbaud "
-                  "(logic cells ≈ LUTs: an iCE40 logic cell holds one LUT4, its carry and one flip-flop).", "",
+                  "(an iCE40 logic cell holds one LUT4, its carry and one flip-flop; a flip-flop whose input is no LUT "
+                  "of its own still takes a cell, so the placed count below is the one to budget).", "",
                   *table(("design", "LUT", "FF", "carry", "BRAM"),
                          [(r["design"], r["counts"]["LUT"], r["counts"]["FF"], r["counts"]["carry"],
                            r["counts"]["BRAM"]) for r in res["area_ice40"]])]
