@@ -468,7 +468,8 @@ class Link(wiring.Component):
     shape : ikseries.hdl.protocol.Shape
         The robot (request lengths).
     divisor : int
-        Clock cycles per bit (:func:`ikseries.hdl.uart.uart_divisor`).
+        Clock cycles per bit (:func:`ikseries.hdl.uart.uart_divisor`); at least ``MIN_DIVISOR``, so
+        a byte's 10 bit times (40 cycles and more) outlast the receiver's slowest byte (9 cycles).
     counter_bits : int
         The receiver's counter width.
 
