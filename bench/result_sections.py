@@ -225,18 +225,25 @@ def link_fuzz(res: dict) -> list[str]:
     """Lines of the ``bench/link_fuzz.py`` section from its JSON ``res``."""
     f, s = res["fuzz"], res["shape"]
     lines = [f"Shape {s['legs']} legs × {s['coords']} coordinates, {s['channels']} channels; seed {res['seed']}, "
-             f"chunks of {res['chunk']:,} bytes. Every good frame and every counter of the simulated "
+             f"chunks of {res['chunk']:,} bytes, a receive-timeout pause before about one byte in "
+             f"{res['pause_every']}. Every good frame and every counter of the simulated "
              "`FrameReceiver` compared with the host parser (`ikseries.host.protocol.FrameParser`).", "",
-             *table(("bytes", "good frames", "mismatching chunks", "simulation s", "bytes/s", "cycles/s"),
-                    [(f"{f['bytes']:,}", f"{f['frames']:,}", f["mismatches"], num(f["seconds"], ".1f"),
-                      f"{f['bytes_per_s']:,}", f"{f['cycles_per_s']:,}")]),
+             *table(("bytes", "pauses", "good frames", "mismatching chunks", "simulation s", "bytes/s", "cycles/s"),
+                    [(f"{f['bytes']:,}", f"{f['pauses']:,}", f"{f['frames']:,}", f["mismatches"],
+                      num(f["seconds"], ".1f"), f"{f['bytes_per_s']:,}", f"{f['cycles_per_s']:,}")]),
              *table(tuple(f["counters"]), [tuple(f"{v:,}" for v in f["counters"].values())])]
     if res["area_ice40"]:
         lines += [f"Yosys `synth_ice40` counts, {res['clock_hz'] / 1e6:g} MHz clock at {res['baud'] / 1e6:g} Mbaud "
-                  "(logic cells ≈ LUTs: an iCE40 logic cell holds one LUT4, its carry and one flip-flop).", "",
+                  "(an iCE40 logic cell holds one LUT4, its carry and one flip-flop; a flip-flop whose input is no LUT "
+                  "of its own still takes a cell, so the placed count below is the one to budget).", "",
                   *table(("design", "LUT", "FF", "carry", "BRAM"),
                          [(r["design"], r["counts"]["LUT"], r["counts"]["FF"], r["counts"]["carry"],
                            r["counts"]["BRAM"]) for r in res["area_ice40"]])]
+    p = res.get("pnr_ice40")
+    if p:
+        lines += [f"`Link` placed and routed on {p['device']} (nextpnr) inside the timing harness, which adds "
+                  f"{p['harness_ffs']} flip-flops: {p['LC']} logic cells ({p['LUT']} LUTs, {p['FF']} FFs), "
+                  f"{p['BRAM']} block RAMs, Fmax {num(p['fmax_mhz'], '.1f')} MHz.", ""]
     return lines
 
 
