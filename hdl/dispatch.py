@@ -2,12 +2,13 @@
 and the servo controller, its answer back to the link."""
 from __future__ import annotations
 
-from amaranth.hdl import Cat, ClockDomain, ClockSignal, Const, Module, Mux, Signal, signed
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 
 from . import protocol as P
 from .answers import answer_bytes, field_value, has_targets, head_bytes, pack_answer
+from .bram import falling_edge_write_port
 from .servo_fields import ChannelField, FailsafeAction
 
 __all__ = ["Dispatcher"]
@@ -28,29 +29,6 @@ def _field_word(fields, name: str) -> int:
             return bits // P.COUNTER_BITS
         bits += 8 * f.group_bytes(None)
     raise ValueError(f"no answer field {name!r}")
-
-
-class _Write:
-    """A write port's ``en``, ``addr`` and ``data``, as plain signals."""
-
-    def __init__(self, port):
-        self.en, self.addr, self.data = Signal(), Signal.like(port.addr), Signal.like(port.data)
-
-
-def _falling_edge_writes(m, mem) -> _Write:
-    """A write port of ``mem`` for the FSM: its requests are registered, then written on the
-    falling edge. A read port and a write port on the same edge make Yosys emulate the
-    read-old-data collision with a bypass register and multiplexer per read port (43 FF and
-    25 LUT for 18 words of 18 bits); on the other edge there is no collision to emulate. The
-    register keeps the half cycle free of logic; the write lands a cycle and a half after the
-    FSM asks, and every read of a written word comes at least two cycles later (the staging
-    states follow a width's write through STAGE_WAIT), so what is read is unchanged."""
-    m.domains.write = ClockDomain("write", clk_edge="neg", local=True, reset_less=True)
-    m.d.comb += ClockSignal("write").eq(ClockSignal("sync"))
-    port = mem.write_port(domain="write")
-    ask = _Write(port)
-    m.d.sync += [port.en.eq(ask.en), port.addr.eq(ask.addr), port.data.eq(ask.data)]
-    return ask
 
 
 def _saturating_increment(m, counter, event):
@@ -208,7 +186,7 @@ class Dispatcher(wiring.Component):
         m = Module()
         r = _Regs(self)
         m.submodules.widths = mem = Memory(shape=self._w, depth=self._channels, init=[])
-        wr, rd = _falling_edge_writes(m, mem), mem.read_port()
+        wr, rd = falling_edge_write_port(m, mem), mem.read_port()
         self._always(m, r)
         m.d.comb += rd.addr.eq(r.ch)
         with m.FSM():

@@ -14,6 +14,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
+from .bram import falling_edge_write_port
 from .servo_fields import ChannelField, FailsafeAction
 from .servo_microcode import BASE_CONDS, CONDS, OPS, SPECIALS, Scratch, assemble, program
 
@@ -175,7 +176,7 @@ class ServoEngine(wiring.Component):
                                         init=self._defaults())
         m.submodules.rom = rom = Memory(shape=unsigned(sum(b for _, b in _fields(self._to_bits))),
                                         depth=len(self._asm.ins), init=_encode(self._asm, self._to_bits))
-        rd, wr, rp = mem.read_port(), mem.write_port(), rom.read_port()
+        rd, wr, rp = mem.read_port(), falling_edge_write_port(m, mem), rom.read_port()
         g = _Globals(self)
         u = self._decode(m, rp.data, g)
         host_idle = self._host(m, wr, g, u)
