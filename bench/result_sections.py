@@ -257,6 +257,18 @@ def servo_cells(res: dict) -> list[str]:
             *table(("design", "LUT", "FF", "carry", "BRAM"), rows)]
 
 
+def controller_cells(res: dict) -> list[str]:
+    """Lines of the ``bench/controller_cells.py`` section from its JSON ``res``."""
+    names = (("RobotController", "controller"), ("Link", "link"), ("Dispatcher", "dispatcher"),
+             ("ServoController (with its PWM bank)", "servo"), ("ServoController without its bank", "servo_without_bank"),
+             ("RobotCore without its unused bank", "core_without_bank"), ("beyond the core", "beyond_core"))
+    rows = [(name, *(res[key].get(k, 0) for k in ("LUT", "FF", "carry", "BRAM"))) for name, key in names]
+    return [f"{res['legs']} legs, {res['channels']} channels, {res['width_bits']}-bit widths, period "
+            f"{res['period']:,} cycles, UART divisor {res['divisor']}; Yosys `synth_ice40 -dsp` counts "
+            "(the budget: 600 logic cells beyond the core).", "",
+            *table(("design", "LUT", "FF", "carry", "BRAM"), rows)]
+
+
 SECTIONS = {
     "fit_benchmark": ("Fits of every preset", "Per preset and servo: what the fit costs and achieves.",
                       fit_benchmark),
@@ -283,4 +295,6 @@ SECTIONS = {
                   "long seeded mix of good, corrupted and garbage bytes; Yosys counts of the link.", link_fuzz),
     "servo_cells": ("Servo controller area", "Yosys iCE40 counts of the per-channel servo controller "
                     "(speed, acceleration, timed moves, failsafe) for a hexapod.", servo_cells),
+    "controller_cells": ("Robot controller area", "Yosys iCE40 counts of the hexapod robot controller, "
+                         "its parts and what it adds beyond its IK core.", controller_cells),
 }
