@@ -225,18 +225,25 @@ def link_fuzz(res: dict) -> list[str]:
     """Lines of the ``bench/link_fuzz.py`` section from its JSON ``res``."""
     f, s = res["fuzz"], res["shape"]
     lines = [f"Shape {s['legs']} legs × {s['coords']} coordinates, {s['channels']} channels; seed {res['seed']}, "
-             f"chunks of {res['chunk']:,} bytes. Every good frame and every counter of the simulated "
+             f"chunks of {res['chunk']:,} bytes, a receive-timeout pause before about one byte in "
+             f"{res['pause_every']}. Every good frame and every counter of the simulated "
              "`FrameReceiver` compared with the host parser (`ikseries.host.protocol.FrameParser`).", "",
-             *table(("bytes", "good frames", "mismatching chunks", "simulation s", "bytes/s", "cycles/s"),
-                    [(f"{f['bytes']:,}", f"{f['frames']:,}", f["mismatches"], num(f["seconds"], ".1f"),
-                      f"{f['bytes_per_s']:,}", f"{f['cycles_per_s']:,}")]),
+             *table(("bytes", "pauses", "good frames", "mismatching chunks", "simulation s", "bytes/s", "cycles/s"),
+                    [(f"{f['bytes']:,}", f"{f['pauses']:,}", f"{f['frames']:,}", f["mismatches"],
+                      num(f["seconds"], ".1f"), f"{f['bytes_per_s']:,}", f"{f['cycles_per_s']:,}")]),
              *table(tuple(f["counters"]), [tuple(f"{v:,}" for v in f["counters"].values())])]
     if res["area_ice40"]:
         lines += [f"Yosys `synth_ice40` counts, {res['clock_hz'] / 1e6:g} MHz clock at {res['baud'] / 1e6:g} Mbaud "
-                  "(logic cells ≈ LUTs: an iCE40 logic cell holds one LUT4, its carry and one flip-flop).", "",
+                  "(an iCE40 logic cell holds one LUT4, its carry and one flip-flop; a flip-flop whose input is no LUT "
+                  "of its own still takes a cell, so the placed count below is the one to budget).", "",
                   *table(("design", "LUT", "FF", "carry", "BRAM"),
                          [(r["design"], r["counts"]["LUT"], r["counts"]["FF"], r["counts"]["carry"],
                            r["counts"]["BRAM"]) for r in res["area_ice40"]])]
+    p = res.get("pnr_ice40")
+    if p:
+        lines += [f"`Link` placed and routed on {p['device']} (nextpnr) inside the timing harness, which adds "
+                  f"{p['harness_ffs']} flip-flops: {p['LC']} logic cells ({p['LUT']} LUTs, {p['FF']} FFs), "
+                  f"{p['BRAM']} block RAMs, Fmax {num(p['fmax_mhz'], '.1f')} MHz.", ""]
     return lines
 
 
@@ -247,6 +254,18 @@ def servo_cells(res: dict) -> list[str]:
                               ("ServoPWMBank alone", "pwm_bank"), ("controller without the bank", "controller_without_bank"))]
     return [f"{res['channels']} channels, {res['width_bits']}-bit widths, period {res['period']:,} cycles; "
             "Yosys `synth_ice40 -dsp` counts.", "",
+            *table(("design", "LUT", "FF", "carry", "BRAM"), rows)]
+
+
+def controller_cells(res: dict) -> list[str]:
+    """Lines of the ``bench/controller_cells.py`` section from its JSON ``res``."""
+    names = (("RobotController", "controller"), ("Link", "link"), ("Dispatcher", "dispatcher"),
+             ("ServoController (with its PWM bank)", "servo"), ("ServoController without its bank", "servo_without_bank"),
+             ("RobotCore without its unused bank", "core_without_bank"), ("beyond the core", "beyond_core"))
+    rows = [(name, *(res[key].get(k, 0) for k in ("LUT", "FF", "carry", "BRAM"))) for name, key in names]
+    return [f"{res['legs']} legs, {res['channels']} channels, {res['width_bits']}-bit widths, period "
+            f"{res['period']:,} cycles, UART divisor {res['divisor']}; Yosys `synth_ice40 -dsp` counts "
+            "(the budget: 600 logic cells beyond the core).", "",
             *table(("design", "LUT", "FF", "carry", "BRAM"), rows)]
 
 
@@ -276,4 +295,6 @@ SECTIONS = {
                   "long seeded mix of good, corrupted and garbage bytes; Yosys counts of the link.", link_fuzz),
     "servo_cells": ("Servo controller area", "Yosys iCE40 counts of the per-channel servo controller "
                     "(speed, acceleration, timed moves, failsafe) for a hexapod.", servo_cells),
+    "controller_cells": ("Robot controller area", "Yosys iCE40 counts of the hexapod robot controller, "
+                         "its parts and what it adds beyond its IK core.", controller_cells),
 }

@@ -8,6 +8,7 @@ from amaranth.lib.memory import Memory
 
 from . import protocol as P
 from .answers import answer_bytes, field_value, has_targets, head_bytes, pack_answer
+from .bram import falling_edge_write_port
 from .servo_fields import ChannelField, FailsafeAction
 
 __all__ = ["Dispatcher"]
@@ -16,6 +17,18 @@ _C = {c.name: c for c in P.COMMANDS}
 _REASON = {name: i + 1 for i, (name, _) in enumerate(P.NACK_REASONS)}
 _STATUS_FIELDS = _C["status"].answer
 _CHANNEL_FIELDS = _C["channel_status"].answer
+
+
+def _field_word(fields, name: str) -> int:
+    """Index of answer field ``name`` in its payload counted in link counter words (the status
+    answer's counters are consecutive words of that size)."""
+    bits = 0
+    for f in fields:
+        if f.name == name:
+            assert bits % P.COUNTER_BITS == 0 and 8 * P.KINDS[f.kind][0] == P.COUNTER_BITS
+            return bits // P.COUNTER_BITS
+        bits += 8 * f.group_bytes(None)
+    raise ValueError(f"no answer field {name!r}")
 
 
 def _saturating_increment(m, counter, event):
@@ -53,6 +66,7 @@ class _Regs:
         self.uptime = Signal(32)
         self.since = Signal(range(d._period + 1))           # cycles since the last period start
         self.clamped = Signal(P.COUNTER_BITS)
+        self.cnt = Signal(range(len(P.RECEIVER_COUNTERS) + 1))   # link counter being read
 
 
 class Dispatcher(wiring.Component):
@@ -91,7 +105,7 @@ class Dispatcher(wiring.Component):
 
     Attributes
     ----------
-    request, rd_addr, rd_data, counters, answer, answer_data, answer_index
+    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index
         To the link's ports of the same names.
     ik_i, ik_o
         To the core's ``i`` and ``o``.
@@ -104,17 +118,20 @@ class Dispatcher(wiring.Component):
     (``H`` payload bytes read, at most :func:`~ikseries.hdl.answers.head_bytes`); parameter
     writes and enable/relax: ``H + 3`` plus a cycle per channel scanned, plus any wait for the
     engine's pass (``pass_cycles`` at most); channel_status and status: ``H + 8`` cycles per
-    channel read; moves: per leg ``2 C + 3`` cycles, the core's latency and ``servos`` cycles,
-    then a wait of at most ``pass_cycles`` cycles for the staging window (the pass) and
-    ``3 * channels + 2`` cycles to stage and commit. The widths reach the pins at the second
-    period start after the commit at the latest (the servo controller's latency). A request
+    channel read, for status after ``len(RECEIVER_COUNTERS) + 1`` cycles reading the link's
+    counters (each as it was up to 10 cycles before); moves: per leg ``2 C + 3`` cycles, the core's latency and ``servos`` cycles,
+    then a wait of at most ``stage_cycles + pass_cycles`` for the staging window (the end of
+    a period, the pass) and ``stage_cycles`` to stage and commit (``stage_cycles = channels *
+    (1 + target_cycles) + 2``, the servo controller's ``target_cycles``); :meth:`move_cycles`
+    adds these up. The widths reach the pins at the second period start after the commit at
+    the latest (the servo controller's latency). A request
     waits in the link while the previous answer's payload is still being sent.
 
     Throughput
     ----------
-    One request at a time. A full ``move_legs`` of L legs takes about
-    ``L * (2 C + latency + servos + 3) + pass_cycles + 3 * channels`` cycles, far below the
-    line time of its frame at the rates :func:`~ikseries.hdl.uart.uart_divisor` allows for
+    One request at a time. A full ``move_legs`` takes at most ``move_cycles(legs)``, about
+    ``legs * (2 C + latency + servos + 3) + pass_cycles + 2 * stage_cycles`` cycles, far below
+    the line time of its frame at the rates :func:`~ikseries.hdl.uart.uart_divisor` allows for
     a clock of tens of MHz (see ``tests/test_controller.py``, which measures it): the UART
     is the limit.
     """
@@ -132,12 +149,15 @@ class Dispatcher(wiring.Component):
         self._buf_bytes = max(answer_bytes(_STATUS_FIELDS), answer_bytes(_CHANNEL_FIELDS),
                               answer_bytes(P.NACK_FIELDS))
         self._max_answer = max(self._identity_len, self._buf_bytes)
-        # the pass starts at a period start; staging must end, and commit, before the next one
-        self._stage_cycles = 3 * self._channels + 4
+        # the pass starts at a period start, and may start between two targets: the whole group
+        # (a read cycle and a target transfer per channel) and its commit strobe must fit before
+        # the next period start, counted from the cycle STAGE_WAIT decides
+        self._stage_cycles = self._channels * (1 + servo.target_cycles) + 2
+        self._pass_cycles, self._core_latency = servo.pass_cycles, core.latency
         ls, cs, ss = link.signature.members, core.signature.members, servo.signature.members
         super().__init__({
-            **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counters",
-                                         "answer", "answer_data", "answer_index")},
+            **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counter_addr",
+                                         "counter_data", "answer", "answer_data", "answer_index")},
             "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(),
             **{n: ss[n].flip() for n in ("write", "target", "commit", "read", "status",
                                          "keepalive", "busy", "period_start")},
@@ -148,11 +168,25 @@ class Dispatcher(wiring.Component):
     def shape(self) -> P.Shape:
         return self._shape
 
+    @property
+    def stage_cycles(self) -> int:
+        """Cycles from the decision to stage a group of widths to its commit strobe, inclusive
+        of a margin cycle: staging starts only with this many cycles left before a period start."""
+        return self._stage_cycles
+
+    def move_cycles(self, legs: int) -> int:
+        """Most cycles from ``request.valid`` of a move of ``legs`` legs to its commit strobe:
+        fetch and decode, each leg through the core (unselected legs a cycle each), a wait for
+        the staging window (it may just have closed: the rest of the period and a pass), and
+        the staging itself. A ``set_pulse`` is a move of no legs."""
+        per_leg = 2 * self._coords + 3 + self._core_latency + self._servos
+        return 5 + (self._legs - legs) + legs * per_leg + self._pass_cycles + 2 * self._stage_cycles
+
     def elaborate(self, platform):
         m = Module()
         r = _Regs(self)
         m.submodules.widths = mem = Memory(shape=self._w, depth=self._channels, init=[])
-        wr, rd = mem.write_port(), mem.read_port()
+        wr, rd = falling_edge_write_port(m, mem), mem.read_port()
         self._always(m, r)
         m.d.comb += rd.addr.eq(r.ch)
         with m.FSM():
@@ -229,8 +263,8 @@ class Dispatcher(wiring.Component):
                              r.ans_ident.eq(1)]
                 m.next = "ANSWER"
             with m.Case(code["status"]):
-                m.d.sync += r.ch.eq(0)
-                m.next = "STATUS_READ"
+                m.d.sync += [r.ch.eq(0), r.cnt.eq(0)]
+                m.next = "STATUS_COUNT"
             with m.Case(code["channel_status"]):
                 self._channel_checked(m, r, arg("channel_status", "channel"), "CHANNEL_READ")
             with m.Case(code["move_leg"]):
@@ -411,11 +445,22 @@ class Dispatcher(wiring.Component):
                 self._answer_buffer(m, r, P.answer_code(_C["channel_status"]), _CHANNEL_FIELDS, {
                     "channel": r.w_ch, "commanded": st.target, "current": st.current,
                     "moving": st.moving, "enabled": st.enabled})
+        # the link's counters, read one a cycle (a block RAM), go straight to their place in the
+        # answer buffer: no second copy of them in registers
+        first = _field_word(_STATUS_FIELDS, P.RECEIVER_COUNTERS[0])
+        counted = {name: r.buf.word_select(first + i, P.COUNTER_BITS) for i, name in enumerate(P.RECEIVER_COUNTERS)}
+        with m.State("STATUS_COUNT"):
+            m.d.comb += self.counter_addr.eq(r.cnt)
+            with m.If(r.cnt != 0):
+                m.d.sync += r.buf.word_select((first - 1) + r.cnt, P.COUNTER_BITS).eq(self.counter_data)
+            with m.If(r.cnt == len(P.RECEIVER_COUNTERS)):
+                m.next = "STATUS_READ"
+            with m.Else():
+                m.d.sync += r.cnt.eq(r.cnt + 1)
         with m.State("STATUS_READ"):
             with m.If(r.ch == self._channels):
-                counters = {name: self.counters[name] for name in P.RECEIVER_COUNTERS}
                 self._answer_buffer(m, r, P.answer_code(_C["status"]), _STATUS_FIELDS, {
-                    "uptime": r.uptime, **counters, "clamped": r.clamped,
+                    "uptime": r.uptime, **counted, "clamped": r.clamped,
                     "moving": r.moving, "enabled": r.enabled})
             with m.Else():
                 m.d.comb += [self.read.valid.eq(1), self.read.payload.eq(r.ch)]

@@ -4,23 +4,79 @@ Frame format, CRC and command lengths come from :mod:`ikseries.hdl.protocol`.
 """
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Signal
-from amaranth.lib import crc, data, stream, wiring
+from amaranth.hdl import Cat, ClockDomain, ClockSignal, Module, Mux, Signal
+from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from . import protocol as P
 from .uart import UARTRx, UARTTx
 
-__all__ = ["FrameReceiver", "FrameTransmitter", "Link", "frame_layout", "counters_layout", "crc_processor"]
+__all__ = ["SerialCRC", "FrameReceiver", "FrameTransmitter", "Link", "frame_layout"]
 
 
-def crc_processor() -> crc.Processor:
-    """A byte-wide CRC generator of the protocol's :data:`~ikseries.hdl.protocol.CRC`."""
-    p = P.CRC
-    return crc.Algorithm(crc_width=p.width, polynomial=p.polynomial, initial_crc=p.initial,
-                         reflect_input=p.reflect_input, reflect_output=p.reflect_output,
-                         xor_output=p.xor_output)(data_width=8).create()
+class SerialCRC(wiring.Component):
+    """The protocol's CRC a bit per cycle: a byte on ``byte`` takes :attr:`cycles_per_byte` steps.
+
+    Sixteen flip-flops and a few XORs instead of a byte-wide XOR matrix: a UART byte lasts at
+    least ``10 * MIN_DIVISOR`` = 40 cycles, far more than the 8 steps.
+
+    Parameters
+    ----------
+    params : ikseries.hdl.protocol.CRCParameters
+        An MSB-first CRC of whole bytes without output reflection or xor (so that the CRC over a
+        message and its CRC, sent high byte first, is 0).
+
+    Attributes
+    ----------
+    start : In(1)
+        Load the initial value and restart at the byte's first bit (wins over ``step``).
+    byte : In(8)
+        The byte being taken; held for its 8 steps.
+    step : In(1)
+        Take the next bit of ``byte`` (most significant first).
+    last : Out(1)
+        This step takes the byte's last bit.
+    bit : Out(3)
+        Steps taken of this byte (``last``: 7).
+    crc : Out(width)
+        The register: the CRC of the bytes taken so far.
+
+    Latency
+    -------
+    ``crc`` includes a byte one cycle after its last step.
+
+    Throughput
+    ----------
+    One byte per 8 steps.
+    """
+
+    cycles_per_byte = 8
+
+    def __init__(self, params: P.CRCParameters = P.CRC):
+        if params.reflect_input or params.reflect_output or params.xor_output or params.width % 8:
+            raise ValueError("params must be an MSB-first CRC of whole bytes without output reflection or xor, "
+                             f"not {params.name!r}")
+        self._params = params
+        super().__init__({"start": In(1), "byte": In(8), "step": In(1), "last": Out(1), "bit": Out(3),
+                          "crc": Out(params.width, init=params.initial)})
+
+    def elaborate(self, platform):
+        m = Module()
+        p = self._params
+        # start always comes before the first step: no reset needed, which keeps the register 0 LUTs
+        r = Signal(p.width, init=p.initial, reset_less=True)
+        bit = Signal(3, reset_less=True)
+        m.d.comb += [self.crc.eq(r), self.bit.eq(bit)]
+        feedback = r[-1] ^ self.byte.bit_select(~bit, 1)        # ~bit = 7 - bit: MSB first
+        shifted = Cat(*((r[i - 1] if i else 0) ^ (feedback if (p.polynomial >> i) & 1 else 0)
+                        for i in range(p.width)))
+        m.d.comb += self.last.eq(bit == 7)
+        with m.If(self.start):
+            m.d.sync += [r.eq(p.initial), bit.eq(0)]
+        with m.Elif(self.step):
+            m.d.sync += [r.eq(shifted), bit.eq(bit + 1)]
+        return m
 
 
 def frame_layout(max_payload: int) -> data.StructLayout:
@@ -28,14 +84,49 @@ def frame_layout(max_payload: int) -> data.StructLayout:
     return data.StructLayout({"command": 8, "length": range(max_payload + 1)})
 
 
-def counters_layout(bits: int = P.COUNTER_BITS) -> data.StructLayout:
-    """The receiver's error counters (:data:`~ikseries.hdl.protocol.RECEIVER_COUNTERS`)."""
-    return data.StructLayout({name: bits for name in P.RECEIVER_COUNTERS})
+def _write_domain(m):
+    """A write clock domain on the falling edge of ``sync``, named ``"write"``.
+
+    A block RAM port pair on one clock edge makes Yosys guard every non-transparent read port
+    against a same-cycle write to its address with a bypass register and multiplexer (for a
+    16-bit word, 19 flip-flops and 16 LUTs a port on iCE40): writing on the other edge leaves
+    nothing to guard. The write's address, data and enable must settle in half a cycle.
+    """
+    m.domains.write = ClockDomain("write", clk_edge="neg", local=True, reset_less=True)
+    m.d.comb += ClockSignal("write").eq(ClockSignal("sync"))
+    return "write"
 
 
-def _saturating_increment(m, counter, event):
-    with m.If(event & (counter != (1 << len(counter)) - 1)):
-        m.d.sync += counter.eq(counter + 1)
+def _counter_engine(m, events, counter_bits, write_domain):
+    """Saturating counters of ``events`` (one-cycle pulses) in a block RAM, one shared incrementer.
+
+    A scan reads one word a cycle (every word each 8 cycles) and, if its event is pending, writes
+    it back incremented half a cycle after the next edge (on ``write_domain``, from registers: the
+    read, the incrementer and the write in half a cycle made 28 MHz), so an event may come once per
+    8 cycles and shows on the outside port 10 cycles later at most. Returns the memory's read port
+    for the outside. After a reset the first scan writes zeros (the configured contents are zero
+    too).
+    """
+    words = 8
+    # a small memory: Yosys would build it of flip-flops, the very cells this saves
+    m.submodules.counters = mem = Memory(shape=counter_bits, depth=words, init=[], attrs={"ram_style": "block"})
+    wr, scan_rd, outside = mem.write_port(domain=write_domain), mem.read_port(), mem.read_port()
+    scan, held = Signal(range(words)), Signal(range(words))     # word being read; word read last cycle
+    clearing = Signal(init=1)
+    pending = Signal(words)
+    total = scan_rd.data + 1
+    m.d.sync += [scan.eq(scan + 1), held.eq(scan)]
+    with m.If(held == words - 1):
+        m.d.sync += clearing.eq(0)
+    hit = pending.bit_select(held, 1)
+    # the incremented word's carry out is set only for an all-ones (saturated) word; the
+    # clearing scan writes 1 for a pending event: an event waits at most 8 cycles, reset or not
+    m.d.sync += [wr.addr.eq(held), wr.data.eq(Mux(clearing, hit, total[:counter_bits])),
+                 wr.en.eq(clearing | (hit & ~total[counter_bits]))]
+    m.d.comb += scan_rd.addr.eq(scan)
+    served = Cat(*(held == k for k in range(words)))
+    m.d.sync += pending.eq((pending & ~served) | Cat(*events))
+    return outside
 
 
 class FrameReceiver(wiring.Component):
@@ -44,9 +135,13 @@ class FrameReceiver(wiring.Component):
     Follows the receiving rules of ``docs/protocol.md``: hunts for SYNC; refuses a LEN above the
     largest request and a LEN the command does not take, or an unknown command, as soon as that
     byte arrives (a refused byte equal to SYNC starts the next frame); then takes LEN payload
-    bytes and the CRC. Payload bytes go into a two-bank block RAM: the bank of the frame on
-    ``o`` is read through ``rd_addr``/``rd_data`` while the next frame fills the other, so a
-    frame is offered only once its CRC is good (an atomic multi-leg move is never half applied).
+    bytes and the CRC; a pause of more than ``RX_TIMEOUT_BYTES`` byte times (``timeout_ticks``
+    pulses of ``tick`` without a byte) abandons the frame. Payload bytes go into a two-bank
+    block RAM: the bank of the frame on ``o`` is read through ``rd_addr``/``rd_data`` while the
+    next frame fills the other, so a frame is offered only once its CRC is good (an atomic
+    multi-leg move is never half applied). The command/length check is a block RAM table and the
+    error counters live in a block RAM too (Yosys gives it two copies, one a read port): four
+    iCE40 block RAMs in all, written on the falling clock edge.
 
     Parameters
     ----------
@@ -59,43 +154,59 @@ class FrameReceiver(wiring.Component):
     Attributes
     ----------
     i : In(stream.Signature(8))
-        Received bytes; ready except in the cycle after a frame's last byte.
+        Received bytes. While hunting a byte is taken at once; inside a frame it is held for the
+        CRC's 8 steps and taken in the last.
     framing_error, overrun : In(1)
-        The UART's error pulses, counted.
+        The UART's error pulses, counted; at most one per 8 cycles each (a UART gives one per byte).
+    tick : In(1)
+        Pulses counted towards the timeout (:attr:`~ikseries.hdl.uart.UARTRx.idle_tick`: one per
+        bit time of idle line); restarted by every byte taken.
     o : Out(stream.Signature(frame_layout(max_payload)))
         Good frames: command code and payload length. Held until taken.
     rd_addr : In(addr_bits)
         Payload byte index of the frame on ``o``.
     rd_data : Out(8)
         That byte, one cycle after ``rd_addr`` (a block RAM read). Valid while ``o.valid``.
-    counters : Out(counters_layout(counter_bits))
-        Saturating counts: ``crc``, ``bad_length``,
-        ``unknown_command``, ``dropped`` (a good frame completed while ``o`` was still held),
-        ``framing`` and ``overrun`` (pulses of the inputs); zero from reset.
+    counter_addr : In(range(len(RECEIVER_COUNTERS)))
+        Index of an error counter in :data:`~ikseries.hdl.protocol.RECEIVER_COUNTERS`: ``crc``,
+        ``framing``, ``overrun``, ``bad_length``, ``unknown_command``, ``dropped`` (a good frame
+        completed while ``o`` was still held).
+    counter_data : Out(counter_bits)
+        That counter, one cycle after ``counter_addr`` (a block RAM read); saturating, zero from
+        reset, up to 10 cycles behind its event.
 
     Latency
     -------
-    ``o.valid`` rises two cycles after the frame's last CRC byte is taken.
+    ``o.valid`` rises :attr:`latency` cycles after the frame's last byte is valid on ``i``.
 
     Throughput
     ----------
-    One byte per cycle, except the cycle after each frame's last byte.
+    One byte per cycle while hunting, one per 8 cycles inside a frame, plus one cycle after each
+    frame's last byte.
     """
+
+    #: pulses of ``tick`` that abandon a frame: with one per idle bit time, a pause of at most
+    #: RX_TIMEOUT_BYTES byte times never does and one of a byte time more always does
+    timeout_ticks = P.BYTE_BITS * P.RX_TIMEOUT_BYTES + P.BYTE_BITS // 2
+    #: cycles from the frame's last byte valid on ``i`` to ``o.valid``
+    latency = SerialCRC.cycles_per_byte + 1
 
     def __init__(self, shape: P.Shape, counter_bits: int = P.COUNTER_BITS):
         if not isinstance(shape, P.Shape):
             raise TypeError(f"shape must be an ikseries.hdl.protocol.Shape, not {shape!r}")
-        if not isinstance(counter_bits, int) or isinstance(counter_bits, bool) or not 1 <= counter_bits <= P.COUNTER_BITS:
+        if (not isinstance(counter_bits, int) or isinstance(counter_bits, bool)
+                or not 1 <= counter_bits <= P.COUNTER_BITS):
             raise ValueError(f"counter_bits must be an integer in [1, {P.COUNTER_BITS}], not {counter_bits!r}")
         self._shape = shape
+        self._counter_bits = counter_bits
         self._lengths = {c.code: sorted(P.request_lengths(c, shape)) for c in P.COMMANDS}
         self._max = P.max_request_payload(shape)
         self._addr_bits = max(1, (self._max - 1).bit_length())
         super().__init__({
-            "i": In(stream.Signature(8)), "framing_error": In(1), "overrun": In(1),
+            "i": In(stream.Signature(8)), "framing_error": In(1), "overrun": In(1), "tick": In(1),
             "o": Out(stream.Signature(frame_layout(self._max))),
             "rd_addr": In(self._addr_bits), "rd_data": Out(8),
-            "counters": Out(counters_layout(counter_bits)),
+            "counter_addr": In(range(len(P.RECEIVER_COUNTERS))), "counter_data": Out(counter_bits),
         })
 
     @property
@@ -106,35 +217,81 @@ class FrameReceiver(wiring.Component):
     def addr_bits(self) -> int:
         return self._addr_bits
 
-    #: cycles from taking a frame's last byte to ``o.valid``
-    latency = 2
-
     def _length_check(self, m, code, length):
-        """(known, length_ok) of command byte ``code`` with payload length ``length``."""
-        known, ok = Signal(), Signal()
-        with m.Switch(code):
-            for c, lengths in self._lengths.items():
-                with m.Case(c):
-                    m.d.comb += [known.eq(1), ok.eq(Cat(*(length == n for n in lengths)).any())]
-        return known, ok
+        """(known, length_ok) of command byte ``code`` with payload length ``length``.
+
+        ``length_ok`` is a bit of a block RAM table addressed by the code's low bits and the
+        length (a LUT tree of every command's lengths cost 50 LUTs), valid one cycle after
+        ``code`` and ``length`` are; ``known`` is logic (in the table it saved 2 LUTs for a
+        second block RAM).
+        """
+        code_bits = max(self._lengths).bit_length()
+        length_bits = self._max.bit_length()
+        table = [0] * (1 << (code_bits + length_bits))
+        for c, lengths in self._lengths.items():
+            for n in lengths:
+                table[c << length_bits | n] = 1
+        m.submodules.lengths = rom = Memory(shape=1, depth=len(table), init=table, attrs={"ram_style": "block"})
+        read = rom.read_port()
+        m.d.comb += read.addr.eq(Cat(length, code[:code_bits]))
+        return Cat(*(code == c for c in self._lengths)).any(), read.data
+
+    def _timeout(self, m, take):
+        """True once ``timeout_ticks`` ticks came without a byte taken.
+
+        The count is a 6-bit XNOR shift register (period 63; zero, its reset value, is a state
+        of it): one LUT of feedback instead of a 6-bit adder.
+        """
+        assert self.timeout_ticks < 63
+        state, expired_at = Signal(6), 0
+        for _ in range(self.timeout_ticks):
+            expired_at = (expired_at << 1 | (1 ^ (expired_at >> 5 & 1) ^ (expired_at >> 4 & 1))) & 0x3F
+        expired = state == expired_at
+        with m.If(take):
+            m.d.sync += state.eq(0)
+        with m.Elif(self.tick & ~expired):
+            m.d.sync += state.eq(Cat(~(state[5] ^ state[4]), state[:5]))
+        return expired
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.crc = check = crc_processor()
+        m.submodules.crc = check = SerialCRC()
+        write = _write_domain(m)
         bank = 1 << self._addr_bits
         m.submodules.mem = mem = Memory(shape=8, depth=2 * bank, init=[])
-        wr, rd = mem.write_port(), mem.read_port()
+        wr, rd = mem.write_port(domain=write), mem.read_port()
         wbank, rbank = Signal(), Signal()
         length = Signal(range(self._max + 1))
         command = Signal(8)
-        index = Signal(range(self._max + 2))
-        byte, take = self.i.payload, self.i.valid & self.i.ready
+        index = Signal(range(self._max + 1))
+        byte = self.i.payload
+        take_command = Signal()     # the CMD byte is good: keep it
         known, length_ok = self._length_check(m, byte, length)
-        events = {name: Signal(name=f"{name}_event") for name in ("crc", "bad_length", "unknown_command", "dropped")}
+        events = {name: Signal(name=f"{name}_event") for name in P.RECEIVER_COUNTERS}
+        m.d.comb += [events["framing"].eq(self.framing_error), events["overrun"].eq(self.overrun)]
+        counters = _counter_engine(m, [events[name] for name in P.RECEIVER_COUNTERS], self._counter_bits, write)
+        m.d.comb += [counters.addr.eq(self.counter_addr), self.counter_data.eq(counters.data)]
         m.d.comb += [rd.addr.eq(Cat(self.rd_addr, rbank)), self.rd_data.eq(rd.data),
-                     wr.addr.eq(Cat(index[:self._addr_bits], wbank)), wr.data.eq(byte), check.data.eq(byte)]
+                     wr.addr.eq(Cat(index[:self._addr_bits], wbank)), wr.data.eq(byte), check.byte.eq(byte)]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
+        good = self._frame_fsm(m, check, wr, events, (known, length_ok), length, index, take_command)
+        with m.If(good):
+            m.d.sync += [self.o.valid.eq(1), self.o.payload.command.eq(command),
+                         self.o.payload.length.eq(length), rbank.eq(wbank), wbank.eq(~wbank)]
+        with m.If(take_command):
+            m.d.sync += command.eq(byte)
+        return m
+
+    def _frame_fsm(self, m, check, wr, events, command_check, length, index, take_command):
+        """The receiving rules, byte by byte; returns a pulse: a good frame to offer on ``o``."""
+        known, length_ok = command_check
+        byte, good = self.i.payload, Signal()
+        hunting = Signal()
+        take = self.i.valid & self.i.ready
+        m.d.comb += self.i.ready.eq(hunting | check.last)
+        m.d.sync += wr.en.eq(0)
+        expired = self._timeout(m, take)
 
         def refuse(counter):
             m.d.comb += events[counter].eq(1)
@@ -143,53 +300,60 @@ class FrameReceiver(wiring.Component):
                 m.d.comb += check.start.eq(1)
                 m.next = "len"
 
+        def frame_state():
+            """A state inside a frame: the CRC steps through the byte, which is taken at the last."""
+            m.d.comb += check.step.eq(self.i.valid)
+            with m.If(expired):
+                m.next = "hunt"
+            return m.If(~expired & take)
+
+        # the body state takes the first CRC byte too (index == length); these take the rest
+        crc_states = [f"crc{k}" for k in range(1, P.CRC.width // 8)]
         with m.FSM():
             with m.State("hunt"):
-                m.d.comb += self.i.ready.eq(1)
+                m.d.comb += hunting.eq(1)
                 with m.If(take & (byte == P.SYNC)):
                     m.d.comb += check.start.eq(1)
                     m.next = "len"
             with m.State("len"):
-                m.d.comb += self.i.ready.eq(1)
-                with m.If(take):
+                with frame_state():
                     with m.If(byte > self._max):
                         refuse("bad_length")
                     with m.Else():
-                        m.d.comb += check.valid.eq(1)
                         m.d.sync += length.eq(byte)
                         m.next = "cmd"
             with m.State("cmd"):
-                m.d.comb += self.i.ready.eq(1)
-                with m.If(take):
+                with frame_state():
                     with m.If(~known):
                         refuse("unknown_command")
                     with m.Elif(~length_ok):
                         refuse("bad_length")
                     with m.Else():
-                        m.d.comb += check.valid.eq(1)
-                        m.d.sync += [command.eq(byte), index.eq(0)]
+                        m.d.comb += take_command.eq(1)
+                        m.d.sync += index.eq(0)
                         m.next = "body"
             with m.State("body"):
-                m.d.comb += self.i.ready.eq(1)
-                with m.If(take):
-                    m.d.comb += [check.valid.eq(1), wr.en.eq(index < length)]
+                # registered a step ahead: the write (half a cycle after the edge) then comes
+                # straight from flip-flops, in the cycle the byte is taken
+                with m.If(self.i.valid & (check.bit == SerialCRC.cycles_per_byte - 2) & (index != length)):
+                    m.d.sync += wr.en.eq(1)
+                with frame_state():
                     m.d.sync += index.eq(index + 1)
-                    with m.If(index == length + 1):     # the CRC's last byte
-                        m.next = "check"
+                    with m.If(index == length):
+                        m.next = (crc_states + ["check"])[0]
+            for name, after in zip(crc_states, crc_states[1:] + ["check"]):
+                with m.State(name):
+                    with frame_state():
+                        m.next = after
             with m.State("check"):      # the CRC register has taken the last byte
-                with m.If(~check.match_detected):
+                with m.If(check.crc != 0):
                     m.d.comb += events["crc"].eq(1)
                 with m.Elif(self.o.valid & ~self.o.ready):
                     m.d.comb += events["dropped"].eq(1)
                 with m.Else():
-                    m.d.sync += [self.o.valid.eq(1), self.o.payload.command.eq(command),
-                                 self.o.payload.length.eq(length), rbank.eq(wbank), wbank.eq(~wbank)]
+                    m.d.comb += good.eq(1)
                 m.next = "hunt"
-        for name, event in events.items():
-            _saturating_increment(m, self.counters[name], event)
-        _saturating_increment(m, self.counters.framing, self.framing_error)
-        _saturating_increment(m, self.counters.overrun, self.overrun)
-        return m
+        return good
 
 
 class FrameTransmitter(wiring.Component):
@@ -210,20 +374,21 @@ class FrameTransmitter(wiring.Component):
     data : In(stream.Signature(8))
         Payload bytes of the answer being sent, byte ``index`` first.
     index : Out(range(max_payload))
-        Index of the payload byte wanted on ``data``.
+        Index of the payload byte wanted on ``data`` (while ``data.ready``).
     o : Out(stream.Signature(8))
         Frame bytes, registered.
 
     Latency
     -------
-    SYNC is on ``o`` one cycle after the header is taken; each further byte one cycle after the
-    previous one is taken (and, for payload bytes, ``data`` is valid), except CRC_HI: two cycles
-    after the last covered byte is taken (the CRC takes bytes as they leave).
+    SYNC is on ``o`` one cycle after the header is taken; LEN one cycle after SYNC is taken; every
+    later byte one cycle after the previous one is taken and the CRC has taken it (8 cycles after
+    it came on ``o``), for payload bytes once ``data`` is valid.
 
     Throughput
     ----------
-    A frame of LEN payload bytes takes LEN + 6 cycles when ``o`` is always ready and ``data``
-    always valid; the next header is taken in the cycle CRC_LO is taken.
+    A frame of LEN payload bytes takes 9 * (LEN + 3) + 2 cycles from the header taken to CRC_LO
+    taken when ``o`` is always ready and ``data`` always valid (a UART byte lasts at least 40);
+    the next header is taken in the cycle CRC_LO is taken.
     """
 
     def __init__(self, max_payload: int | None = None):
@@ -242,20 +407,25 @@ class FrameTransmitter(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.crc = gen = crc_processor()
+        m.submodules.crc = gen = SerialCRC()
         length = Signal(range(self._max + 1))
         command = Signal(8)
-        free = ~self.o.valid | self.o.ready       # the output register can take a byte
-
-        feed = Signal()     # o.payload is a frame byte the CRC covers (LEN, CMD, payload)
-        # the CRC takes each covered byte as it leaves o, so it needs no multiplexer of its own
-        m.d.comb += [gen.data.eq(self.o.payload), gen.valid.eq(self.o.valid & self.o.ready & feed)]
+        sent = Signal(range(self._max + 1))
+        done = sent == length
+        m.d.comb += self.index.eq(sent)
+        busy = Signal()         # the CRC is stepping through the byte on o (which stays put until it is done)
+        m.d.comb += [gen.byte.eq(self.o.payload), gen.step.eq(busy)]
+        with m.If(gen.last):
+            m.d.sync += busy.eq(0)
+        free = (~self.o.valid | self.o.ready) & ~busy      # the output register can take a byte
 
         def send(value, covered=True):
-            m.d.sync += [self.o.valid.eq(1), self.o.payload.eq(value), feed.eq(covered)]
+            m.d.sync += [self.o.valid.eq(1), self.o.payload.eq(value), busy.eq(covered)]
 
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
+        crc_top = gen.crc[-8:]
+        crc_states = [f"crc{k}" for k in range(P.CRC.width // 8)]
         with m.FSM():
             with m.State("idle"):
                 m.d.comb += self.i.ready.eq(free)
@@ -271,25 +441,21 @@ class FrameTransmitter(wiring.Component):
             with m.State("cmd"):
                 with m.If(free):
                     send(command)
-                    m.d.sync += self.index.eq(0)
+                    m.d.sync += sent.eq(0)
                     m.next = "payload"
-                    with m.If(length == 0):
-                        m.next = "crc_hi"
-            with m.State("payload"):
-                m.d.comb += self.data.ready.eq(free)
-                with m.If(self.data.valid & free):
+            with m.State("payload"):        # until ``sent`` reaches the length (at once for an empty payload)
+                m.d.comb += self.data.ready.eq(free & ~done)
+                with m.If(done):
+                    m.next = crc_states[0]
+                with m.Elif(self.data.valid & free):
                     send(self.data.payload)
-                    m.d.sync += self.index.eq(self.index + 1)
-                    with m.If(self.index == length - 1):
-                        m.next = "crc_hi"
-            with m.State("crc_hi"):
-                with m.If(~self.o.valid):      # the last covered byte has left: the CRC is complete
-                    send(gen.crc[8:], covered=False)
-                    m.next = "crc_lo"
-            with m.State("crc_lo"):
-                with m.If(free):
-                    send(gen.crc[:8], covered=False)
-                    m.next = "idle"
+                    m.d.sync += sent.eq(sent + 1)
+            # the CRC takes each CRC byte but the last: that shifts the next one to its top byte
+            for k, (name, after) in enumerate(zip(crc_states, crc_states[1:] + ["idle"])):
+                with m.State(name):
+                    with m.If(free):
+                        send(crc_top, covered=after != "idle")
+                        m.next = after
         return m
 
 
@@ -302,7 +468,8 @@ class Link(wiring.Component):
     shape : ikseries.hdl.protocol.Shape
         The robot (request lengths).
     divisor : int
-        Clock cycles per bit (:func:`ikseries.hdl.uart.uart_divisor`).
+        Clock cycles per bit (:func:`ikseries.hdl.uart.uart_divisor`); at least ``MIN_DIVISOR``, so
+        a byte's 10 bit times (40 cycles and more) outlast the receiver's slowest byte (9 cycles).
     counter_bits : int
         The receiver's counter width.
 
@@ -312,8 +479,8 @@ class Link(wiring.Component):
         Serial input pin (from the host).
     tx : Out(1)
         Serial output pin (to the host), registered; idle high from reset.
-    request, rd_addr, rd_data, counters
-        The receiver's ``o``, ``rd_addr``, ``rd_data`` and ``counters``.
+    request, rd_addr, rd_data, counter_addr, counter_data
+        The receiver's ``o``, ``rd_addr``, ``rd_data``, ``counter_addr`` and ``counter_data``.
     answer, answer_data, answer_index
         The transmitter's ``i``, ``data`` and ``index``.
 
@@ -334,7 +501,7 @@ class Link(wiring.Component):
         super().__init__({
             "rx": In(1, init=1), "tx": Out(1, init=1),
             "request": Out(stream.Signature(frame_layout(r.max_payload))), "rd_addr": In(r.addr_bits), "rd_data": Out(8),
-            "counters": Out(counters_layout(counter_bits)),
+            "counter_addr": In(range(len(P.RECEIVER_COUNTERS))), "counter_data": Out(counter_bits),
             "answer": In(stream.Signature(frame_layout(t.max_payload))), "answer_data": In(stream.Signature(8)),
             "answer_index": Out(range(t.max_payload)),
         })
@@ -362,6 +529,7 @@ class Link(wiring.Component):
         wiring.connect(m, wiring.flipped(self.answer), t.i)
         wiring.connect(m, wiring.flipped(self.answer_data), t.data)
         m.d.comb += [rx.rx.eq(self.rx), self.tx.eq(tx.tx), r.framing_error.eq(rx.framing_error),
-                     r.overrun.eq(rx.overrun), r.rd_addr.eq(self.rd_addr), self.rd_data.eq(r.rd_data),
-                     self.counters.eq(r.counters), self.answer_index.eq(t.index)]
+                     r.overrun.eq(rx.overrun), r.tick.eq(rx.idle_tick), r.rd_addr.eq(self.rd_addr),
+                     self.rd_data.eq(r.rd_data), r.counter_addr.eq(self.counter_addr),
+                     self.counter_data.eq(r.counter_data), self.answer_index.eq(t.index)]
         return m

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 from .servo_fields import FailsafeAction
 
 __all__ = ["PROTOCOL_VERSION", "SYNC", "MAX_PAYLOAD", "ANSWER_BIT", "NACK", "CRC", "CRC_BYTE_ORDER",
-           "COUNTER_BITS", "ERROR_COUNTERS", "RECEIVER_COUNTERS", "NACK_REASONS", "FAILSAFE_ACTIONS",
-           "KINDS", "Field", "Command", "Shape", "COMMANDS", "NACK_FIELDS", "command", "answer_code",
+           "COUNTER_BITS", "BYTE_BITS", "RX_TIMEOUT_BYTES", "ERROR_COUNTERS", "RECEIVER_COUNTERS", "NACK_REASONS",
+           "FAILSAFE_ACTIONS", "KINDS", "Field", "Command", "Shape", "COMMANDS", "NACK_FIELDS", "command", "answer_code",
            "request_lengths", "answer_lengths", "max_request_payload", "markdown_tables"]
 
 PROTOCOL_VERSION = 1
@@ -35,6 +35,13 @@ ANSWER_BIT = 0x80
 NACK = 0xFF
 #: width of every error counter, in the hardware and in the status answer; they saturate
 COUNTER_BITS = 16
+#: bit times of one byte on the line (8N1: start bit, 8 data bits, stop bit)
+BYTE_BITS = 10
+#: a pause of more than this many byte times between two bytes of a frame abandons the frame (it is
+#: not counted) and the receiver hunts for SYNC again; a host that waits for each answer (at least
+#: 5 bytes) or for its own timeout before the next request therefore never has that request swallowed
+#: by earlier garbage that looked like a header
+RX_TIMEOUT_BYTES = 4
 
 
 @dataclass(frozen=True)
@@ -288,7 +295,9 @@ def markdown_tables() -> str:
                 f"reflect input {CRC.reflect_input}, reflect output {CRC.reflect_output}, "
                 f"xor output 0x{CRC.xor_output:04X}, check 0x{CRC.check:04X}"),
         ("CRC byte order", f"{CRC_BYTE_ORDER}-endian (high byte first)"),
-        ("error counters", f"{COUNTER_BITS}-bit, saturating")])
+        ("error counters", f"{COUNTER_BITS}-bit, saturating"),
+        ("receive timeout", f"a pause of more than {RX_TIMEOUT_BYTES} byte times "
+                            f"({RX_TIMEOUT_BYTES * BYTE_BITS} bit times) inside a frame abandons it")])
     out += ["### Commands", "", "C: coordinates per leg; k: legs in the mask (1 .. legs). Sizes in bytes.", ""]
     out += _rows(("code", "command", "request payload", "request size", "answer code", "answer payload",
                   "answer size", "what it does"),

@@ -1,4 +1,10 @@
-"""The servo controller's channel memory and its sequential engine (one pass per PWM period)."""
+"""The servo controller's channel memory and its microcoded engine (one pass per PWM period).
+
+One adder does every rule of ``sim/servo_model.py`` in turn (trim, clamp, failsafe counter,
+profile, divisions), its operands and temporaries streamed from the channel memory: the logic
+is the adder, the accumulator, a division register, the branch multiplexer and the host ports'
+multiplexers into the memory; the program (``hdl/servo_microcode.py``) sits in a ROM.
+"""
 from __future__ import annotations
 
 import enum
@@ -8,7 +14,9 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
+from .bram import falling_edge_write_port
 from .servo_fields import ChannelField, FailsafeAction
+from .servo_microcode import BASE_CONDS, CONDS, OPS, SPECIALS, Scratch, assemble, program
 
 __all__ = ["ServoEngine", "Word", "WORDS_PER_CHANNEL", "word_defaults"]
 
@@ -25,7 +33,7 @@ class Word(enum.IntEnum):
     HOME = ChannelField.HOME
     ENABLE = ChannelField.ENABLE
     FAILSAFE = ChannelField.FAILSAFE
-    STAGED = 8          # pulse | staged << W | timed << (W + 1)
+    STAGED = 8          # pulse | from a target << (A - 2) | staged << (A - 1)
     STAGED_TIME = 9
     TARGET = 10
     POS = 11            # current pulse
@@ -33,15 +41,6 @@ class Word(enum.IntEnum):
     STOP = 13           # the profile's stop distance
     ACT_ACCEL = 14      # acceleration in force for the profile
     TIMED = 15          # periods left of a timed move
-
-
-# the engine's read order per channel (capture registers are named after the words)
-_READS = (Word.FAILSAFE, Word.ENABLE, Word.HOME, Word.TARGET, Word.POS, Word.VEL, Word.TIMED,
-          Word.SPEED, Word.ACCEL, Word.ACT_ACCEL, Word.STOP)
-_WRITES = (Word.ENABLE, Word.TARGET, Word.POS, Word.VEL, Word.STOP, Word.ACT_ACCEL, Word.TIMED)
-# cycles per channel besides the divider: begin, staged, trim, min, max, time, reads + 1,
-# apply failsafe, decide, step, writes
-_CHANNEL_CYCLES = 6 + len(_READS) + 1 + 3 + len(_WRITES)
 
 
 def word_defaults(width_bits: int, home: int, enabled: bool) -> list[int]:
@@ -53,17 +52,59 @@ def word_defaults(width_bits: int, home: int, enabled: bool) -> list[int]:
     return w
 
 
+
+
+# ROM word fields, low bits first: (name, bits); `to` takes the bits the program's length needs
+_MODES = {"add": (0, 0), "sub": (1, 1), "inc": (0, 1), "dec": (1, 0), "div": (2, 2), "dir": (3, 3)}
+
+
+def _fields(to_bits):
+    return (("asel", 2), ("ben", 1), ("inv", 2), ("cin", 2), ("accwe", 1), ("q", 2), ("bh", 1),
+            ("mask", 1), ("rdf", 5), ("rdt", 5), ("we", 1), ("ww", 5), ("cond", 5), ("idle", 1),
+            ("to", to_bits), ("nxt", to_bits)) + tuple((name, 1) for name in SPECIALS[1:])
+
+
+def _operand(o):
+    return 0 if o is None else o[1] | o[0] << 4
+
+
+def _encode(asm, to_bits) -> list[int]:
+    words = []
+    for i, s in enumerate(asm.ins):
+        asel, ben, mode, accwe, q = OPS[s.op]
+        inv, cin = _MODES[mode]
+        v = {"asel": asel, "ben": ben, "inv": inv, "cin": cin, "accwe": accwe,
+             "q": {None: 0, "load": 1, "shift": 2}[q], "bh": int(s.op == "LDH"), "mask": int(s.mask),
+             "rdf": _operand(asm.rdf[i]), "rdt": _operand(asm.rdt[i]), "we": int(s.st is not None),
+             "ww": _operand(s.st), "cond": CONDS[s.cond][0] | CONDS[s.cond][1] << 4,
+             "idle": int(s.idle), "to": 0 if s.to is None else asm.labels[s.to],
+             "nxt": (i + 1) % len(asm.ins)}
+        v.update({name: int(s.sp == name) for name in SPECIALS[1:]})
+        word, off = 0, 0
+        for name, bits in _fields(to_bits):
+            word |= v[name] << off
+            off += bits
+        words.append(word)
+    return words
+
+
 class ServoEngine(wiring.Component):
     """Channel memory, host ports and the per-period engine of :class:`ServoController`.
 
     Parameters and stream layouts as documented there; ``load`` gives one channel's width per
     transfer for the PWM bank, ``ik`` stages one servo per transfer (``last`` commits).
 
+    The engine is a microcoded accumulator machine (``hdl/servo_microcode.py``): one adder,
+    one ``W``-bit shift register for its divisions, its program in a ROM, its operands and
+    temporaries in the channel memory (``16 * (channels + 1)`` words of ``A = max(W + 3,
+    time_bits + 2)`` bits, the last row scratch, see :class:`~ikseries.hdl.servo_microcode.Scratch`).
+
     Latency
     -------
-    ``16 * channels + 1`` cycles of initialisation after reset; a pass starts at most
-    ``servos + 7`` cycles after ``period_start`` and takes ``channels * (28 + W)`` cycles
-    at most (``pass_cycles`` in all).
+    ``init_cycles = 16 * channels + 1`` cycles of initialisation after reset; a pass starts
+    at most ``max(servos, 6) + 2`` cycles after ``period_start`` (an ``ik`` leg or a status
+    read in progress finishes first) and takes at most ``8 + channels * C`` cycles, ``C`` the
+    longest path through the per-channel microprogram (``pass_cycles`` in all).
 
     Throughput
     ----------
@@ -73,7 +114,10 @@ class ServoEngine(wiring.Component):
     def __init__(self, channels, width_bits, time_bits, home_at_reset, servos):
         self._c, self._w, self._tb = channels, width_bits, time_bits
         self._home, self._servos = home_at_reset, servos
-        self._mw = max(width_bits + 2, time_bits)
+        self._aw = max(width_bits + 3, time_bits + 2)
+        self._home_rom = home_at_reset is not None and any(home_at_reset)
+        self._asm = assemble(program(width_bits, self._home_rom, home_at_reset is not None))
+        self._to_bits = max(1, (len(self._asm.ins) - 1).bit_length())
         self.write_layout = data.StructLayout({"channel": range(channels), "field": 4,
                                                "value": signed(width_bits + 1)})
         self.target_layout = data.StructLayout({"channel": range(channels),
@@ -94,88 +138,110 @@ class ServoEngine(wiring.Component):
         })
 
     @property
+    def init_cycles(self) -> int:
+        a = self._asm
+        return 1 + self._c * a.longest("INITCH", lambda i: a.ins[i].sp == "INITNEXT")
+
+    @property
+    def target_cycles(self) -> int:
+        """Cycles of one ``target`` transfer while idle: one memory write per word it stages
+        (the pulse with its flags, then its time)."""
+        return len((Word.STAGED, Word.STAGED_TIME))
+
+    @property
+    def channel_cycles(self) -> int:
+        """The longest path of one channel through the microprogram."""
+        a = self._asm
+        return a.longest("CH0", lambda i: a.ins[i].sp == "LOADNEXT")
+
+    @property
     def pass_cycles(self) -> int:
-        return self._servos + 6 + 1 + self._c * (_CHANNEL_CYCLES + self._w)
+        a = self._asm
+        status = a.longest("S0", lambda i: a.ins[i].sp == "ST_E")
+        start = a.longest("PASS", lambda i: a.ins[i].label == "CH0") - 1
+        # wait for the host (an ik leg, a status read, a timed target's second word), see the
+        # pending pass in IDLE0, the globals, the channels, back to IDLE0
+        return max(self._servos, status + 1, 2) + 2 + start + self._c * self.channel_cycles + 1
 
     def _defaults(self):
         home = self._home or [0] * self._c
-        return [v for h in home for v in word_defaults(self._w, h, self._home is not None)]
+        words = [v for h in home for v in word_defaults(self._w, h, self._home is not None)]
+        scratch = [0] * WORDS_PER_CHANNEL
+        scratch[Scratch.FULL] = (1 << self._w) - 1
+        return words + scratch
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.mem = mem = Memory(shape=unsigned(self._mw), depth=WORDS_PER_CHANNEL * self._c,
+        m.submodules.mem = mem = Memory(shape=unsigned(self._aw), depth=WORDS_PER_CHANNEL * (self._c + 1),
                                         init=self._defaults())
-        rd, wr = mem.read_port(), mem.write_port()
-        g = _Globals(self._w)
-        host_idle = self._host(m, rd, wr, g)
-        self._engine(m, rd, wr, g, host_idle)
+        m.submodules.rom = rom = Memory(shape=unsigned(sum(b for _, b in _fields(self._to_bits))),
+                                        depth=len(self._asm.ins), init=_encode(self._asm, self._to_bits))
+        rd, wr, rp = mem.read_port(), falling_edge_write_port(m, mem), rom.read_port()
+        g = _Globals(self)
+        u = self._decode(m, rp.data, g)
+        host_idle = self._host(m, wr, g, u)
+        self._sequencer(m, rp, rd, g, u, host_idle)
+        self._datapath(m, rd.data, wr, g, u)
+        self._specials(m, rd.data, g, u)
         return m
 
-    # -- host side: parameter writes, staging, status reads (only while the engine is idle)
-    def _host(self, m, rd, wr, g):
-        w = self._w
-        state = Signal(range(3))            # 0 idle, 1 second word of a timed target, 2 status read
-        rk = Signal(range(6))
-        ch = Signal(range(self._c))
-        st = Signal(self.status_layout)
-        st_valid = Signal()
-        idle = (state == 0)
-        free = idle & g.eng_idle & ~g.pass_pending
-        m.d.comb += [self.status.valid.eq(st_valid), self.status.payload.eq(st)]
-        with m.If(self.status.valid & self.status.ready):
-            m.d.sync += st_valid.eq(0)
+    def _decode(self, m, word, g):
+        """The fields of the instruction in hand (one bit per special strobe: no decoder); in
+        the cycle after reset the ROM's output is not yet an instruction."""
+        u, off = {}, 0
+        for name, bits in _fields(self._to_bits):
+            u[name] = word[off:off + bits]
+            off += bits
+        m.d.sync += g.boot.eq(0)
+        # strobes seen outside; the others only change what INIT sets again
+        for name in ("FIRE", "CLAMPED", "ACCEPT", "ST_E"):
+            u[name] = u[name] & ~g.boot
+        u["is"] = lambda name: u[name]  # noqa: E731
+        return u
+
+    # -- host side: parameter writes and staging, while the engine idles
+    def _host(self, m, wr, g, u):
+        aw = self._aw
+        second = Signal()                   # a timed target's second word (its time)
+        host_idle = ~second
+        m.d.comb += g.free.eq(u["idle"] & ~g.boot & ~g.pass_pending & host_idle)
         wp, tp, ip = self.write.payload, self.target.payload, self.ik.payload
-        with m.If(free & self.write.valid):
+        staged = Const(1 << (aw - 1), aw)
+        we, addr, value = Signal(), Signal(len(wr.addr)), Signal(aw)
+        with m.If(g.free & self.write.valid):
             m.d.comb += self.write.ready.eq(1)
-            self._param_write(m, wr, wp, g)
-        with m.Elif(free & self.target.valid):
-            timed = tp.time != 0
-            m.d.comb += [wr.en.eq(1), wr.addr.eq(Cat(Const(Word.STAGED, 4), tp.channel)),
-                         wr.data.eq(Cat(tp.pulse, Const(1, 1), timed))]
-            m.d.sync += g.failsafe.eq(0)
-            with m.If(timed):
-                m.d.sync += state.eq(1)
-            with m.Else():
-                m.d.comb += self.target.ready.eq(1)
-        with m.Elif((free | g.ik_open & idle & g.eng_idle) & self.ik.valid):
-            m.d.comb += [self.ik.ready.eq(1), wr.en.eq(1),
-                         wr.addr.eq(Cat(Const(Word.STAGED, 4), ip.channel)),
-                         wr.data.eq(Cat(ip.pulse, Const(1, 1), Const(0, 1)))]
+            ok = self._param_ok(m, wp)
+            m.d.comb += self.bad_write.eq(~ok)
+            # TIMEOUT (8) lands on word 0 of the scratch row
+            m.d.comb += [we.eq(ok), addr.eq(Cat(wp.field[:3], Const(0, 1),
+                                                Mux(wp.field[3], self._c, wp.channel))),
+                         value.eq(wp.value)]
+            with m.If(ok):
+                m.d.sync += g.failsafe.eq(0)
+                with m.If(wp.field == ChannelField.TIMEOUT):
+                    m.d.sync += [g.tvalid.eq(1), g.ka.eq(1), g.fired.eq(0)]
+        with m.Elif(g.free & self.target.valid):
+            # the "timed" flag marks a target (its time, 0 = untimed, follows) from an ik servo
+            m.d.comb += [we.eq(1), addr.eq(Cat(Const(Word.STAGED, 4), tp.channel)),
+                         value.eq(staged | tp.pulse | (1 << (aw - 2)))]
+            m.d.sync += [g.failsafe.eq(0), second.eq(1)]
+        with m.Elif((g.free | g.ik_open & u["idle"] & host_idle) & self.ik.valid):
+            m.d.comb += [self.ik.ready.eq(1), we.eq(1), addr.eq(Cat(Const(Word.STAGED, 4), ip.channel)),
+                         value.eq(staged | ip.pulse)]
             m.d.sync += [g.failsafe.eq(0), g.ik_open.eq(~ip.last)]
             with m.If(ip.last):
                 m.d.sync += g.commit_pending.eq(1)
-        with m.Elif(free & self.read.valid & ~st_valid):
-            m.d.comb += self.read.ready.eq(1)
-            m.d.sync += [state.eq(2), rk.eq(0), ch.eq(self.read.payload)]
-        with m.If(state == 1):
-            m.d.comb += [self.target.ready.eq(1), wr.en.eq(1),
-                         wr.addr.eq(Cat(Const(Word.STAGED_TIME, 4), tp.channel)),
-                         wr.data.eq(tp.time)]
-            m.d.sync += state.eq(0)
-        reads = (Word.TARGET, Word.POS, Word.VEL, Word.ENABLE)
-        with m.If(state == 2):
-            with m.Switch(rk):
-                for i, word in enumerate(reads):
-                    with m.Case(i):
-                        m.d.comb += rd.addr.eq(Cat(Const(word, 4), ch))
-            d = rd.data
-            with m.Switch(rk):
-                with m.Case(1):
-                    m.d.sync += st.target.eq(d[:w])
-                with m.Case(2):
-                    m.d.sync += st.current.eq(d[:w])
-                with m.Case(3):
-                    m.d.sync += st.moving.eq((st.target != st.current) | (d[:w] != 0))
-                with m.Case(4):
-                    m.d.sync += [st.enabled.eq(d[0]), st_valid.eq(1), state.eq(0)]
-            m.d.sync += rk.eq(rk + 1)
-        return idle
+        with m.If(second):
+            m.d.comb += [self.target.ready.eq(1), we.eq(1),
+                         addr.eq(Cat(Const(Word.STAGED_TIME, 4), tp.channel)), value.eq(tp.time)]
+            m.d.sync += second.eq(0)
+        m.d.comb += [g.host_we.eq(we), g.host_addr.eq(addr), g.host_data.eq(value)]
+        return host_idle
 
-    def _param_write(self, m, wr, wp, g):
-        """One :class:`ChannelField` write, refused (``bad_write``) when out of range."""
-        v, f = wp.value, wp.field
-        ok = Signal()
-        with m.Switch(f):
+    def _param_ok(self, m, wp):
+        """Whether a :class:`ChannelField` write is in its field's range."""
+        v, ok = wp.value, Signal()
+        with m.Switch(wp.field):
             with m.Case(ChannelField.TRIM):
                 m.d.comb += ok.eq(1)
             with m.Case(ChannelField.MIN, ChannelField.MAX, ChannelField.SPEED, ChannelField.ACCEL,
@@ -185,288 +251,123 @@ class ServoEngine(wiring.Component):
                 m.d.comb += ok.eq((v >= 0) & (v <= 1))
             with m.Case(ChannelField.FAILSAFE):
                 m.d.comb += ok.eq((v >= 0) & (v <= max(FailsafeAction)))
-        m.d.comb += self.bad_write.eq(~ok)
-        with m.If(ok):
-            m.d.sync += g.failsafe.eq(0)
-            with m.If(f == ChannelField.TIMEOUT):
-                m.d.sync += [g.timeout.eq(v[:self._w]), g.count.eq(0), g.fired.eq(0)]
-            with m.Else():
-                m.d.comb += [wr.en.eq(1), wr.addr.eq(Cat(f[:3], Const(0, 1), wp.channel)),
-                             wr.data.eq(v)]
+        return ok
 
-    # -- the engine
-    def _engine(self, m, rd, wr, g, host_idle):
-        w, c = self._w, self._c
-        r = _Regs(w, self._tb, c)
+    # -- the microprogram's sequencer: conditions, next instruction, operand address
+    def _sequencer(self, m, rp, rd, g, u, host_idle):
+        w, aw, c = self._w, self._aw, self._c
+        d = rd.data
+        le = g.n | g.z
+        base = {"0": Const(0, 1), "n": g.n, "z": g.z, "le": le, "staged": g.commit_now & d[aw - 1],
+                "fs_now": g.fs_now, "D0": d[0], "D1": d[1], "DW": d[w], "tflag": g.tflag,
+                "last": g.ch == c - 1, "ka": g.ka, "nocount": g.z | g.fired | ~g.tvalid,
+                "go": g.pass_pending & host_idle & ~g.ik_open, "rdreq": g.rdreq}
+        m.d.comb += g.rdreq.eq(g.free & self.read.valid & ~g.st_valid)
+        # a binary tree of 2:1 multiplexers (an indexed Array maps to a much larger shifter)
+        level = [base[k] for k in BASE_CONDS]
+        for bit in range(4):
+            level = [Mux(u["cond"][bit], hi, lo) for lo, hi in zip(level[::2], level[1::2])]
+        m.d.comb += g.take.eq(level[0] ^ u["cond"][4])
+        # the fall-through address is a ROM field too: no program counter, no incrementer
+        m.d.comb += rp.addr.eq(Mux(g.boot, 0, Mux(g.take, u["to"], u["nxt"])))
+        opnd = Mux(g.take, u["rdt"], u["rdf"])
+        # the last instruction of a channel already reads the next channel's first operand
+        ch_next = Mux(u["is"]("LOADNEXT") | u["is"]("INITNEXT"), g.ch + 1, g.ch)
+        m.d.comb += rd.addr.eq(Cat(opnd[:4], Mux(opnd[4], c, ch_next)))
+        m.d.comb += self.busy.eq(~u["idle"] | g.pass_pending)
+
+    # -- the single adder, the accumulator, the division register, the memory write
+    def _datapath(self, m, d, wr, g, u):
+        w, aw, c = self._w, self._aw, self._c
+        acc, q = g.acc, g.q
+        deff = Cat(d[:w], Mux(u["mask"], 0, d[w:]))
+        if self._home_rom:
+            m.submodules.home_rom = rom = Memory(shape=unsigned(w), depth=c, init=self._home)
+            hp = rom.read_port()
+            m.d.comb += hp.addr.eq(g.ch)
+            deff = Mux(u["bh"], hp.data, deff)
+        b = Mux(u["ben"], deff, 0)
+        sign = acc[aw - 1]
+        inv, cin = Signal(), Signal()
+        for sig, f in ((inv, u["inv"]), (cin, u["cin"])):
+            m.d.comb += sig.eq(Mux(f[1], Mux(f[0], g.down, ~sign), f[0]))
+        sel = u["asel"]
+        shifted = Cat(q[w - 1], acc[:aw - 1])
+        a = Mux(sel[1], Mux(sel[0], ~acc, shifted), Mux(sel[0], acc, 0))
+        r = Signal(aw)
+        m.d.comb += [r.eq(a + (b ^ inv.replicate(aw)) + cin), g.n.eq(r[aw - 1]), g.z.eq(r == 0)]
+        with m.If(u["accwe"]):
+            m.d.sync += acc.eq(r)
+        with m.Switch(u["q"]):
+            with m.Case(1):
+                m.d.sync += q.eq(acc[:w])
+            with m.Case(2):
+                m.d.sync += q.eq(Cat(~r[aw - 1], q[:w - 1]))
+        # a VEL write carries the direction of the motion at bit W
+        vel = u["ww"] == Word.VEL
+        eng_data = Cat(acc[:w], acc[w] | (g.down & vel), acc[w + 1:])
+        m.d.comb += [wr.en.eq(g.host_we | u["we"]),
+                     wr.addr.eq(Mux(g.host_we, g.host_addr, Cat(u["ww"][:4], Mux(u["ww"][4], c, g.ch)))),
+                     wr.data.eq(Mux(g.host_we, g.host_data, eng_data))]
+        m.d.comb += [self.load.valid.eq(u["is"]("LOADNEXT")), self.load.payload.channel.eq(g.ch),
+                     self.load.payload.width.eq(acc[:w])]
+
+    # -- strobes of the instruction in hand; the controller-wide flags
+    def _specials(self, m, d, g, u):
+        w, aw, s = self._w, self._aw, u["is"]
+        st = g.st
+        m.d.comb += [self.status.valid.eq(g.st_valid), self.status.payload.eq(st),
+                     self.failsafe.eq(g.failsafe), self.read.ready.eq(s("ACCEPT") & g.rdreq)]
+        with m.If(self.status.valid & self.status.ready):
+            m.d.sync += g.st_valid.eq(0)
         with m.If(self.period_start):
             m.d.sync += g.pass_pending.eq(1)
-        m.d.comb += self.busy.eq(~g.eng_idle | g.pass_pending)
         with m.If(self.commit):
             m.d.sync += g.commit_pending.eq(1)
+        m.d.sync += self.clamped.eq(s("CLAMPED"))
+        with m.If(s("CH0")):
+            m.d.sync += g.ch.eq(0)
+        with m.If(s("START")):
+            m.d.sync += [g.pass_pending.eq(0), g.commit_pending.eq(self.commit), g.ch.eq(0),
+                         g.commit_now.eq(g.commit_pending), g.fs_now.eq(0)]
+        with m.If(s("CLRKA")):
+            m.d.sync += g.ka.eq(0)
+        with m.If(s("FIRE")):
+            m.d.sync += [g.fs_now.eq(1), g.fired.eq(1), g.failsafe.eq(1)]
+        with m.If(s("TCAP")):
+            m.d.sync += g.tflag.eq(d[aw - 2])
+        with m.If(s("CAPTURE")):
+            m.d.sync += g.down.eq(g.take)
+        with m.If(s("LOADNEXT") | s("INITNEXT")):
+            m.d.sync += g.ch.eq(g.ch + 1)
+        with m.If(s("ACCEPT") & g.rdreq):
+            m.d.sync += g.ch.eq(self.read.payload)
+        with m.If(s("ST_T")):
+            m.d.sync += st.target.eq(d[:w])
+        with m.If(s("ST_C")):
+            m.d.sync += [st.current.eq(d[:w]), st.moving.eq(~g.z)]
+        with m.If(s("ST_M") & ~g.z):
+            m.d.sync += st.moving.eq(1)
+        with m.If(s("ST_E")):
+            m.d.sync += [st.enabled.eq(d[0]), g.st_valid.eq(1)]
+        # a keepalive restarts the count at the next pass and wins over a firing in this cycle
         with m.If(self.keepalive):
-            m.d.sync += [g.count.eq(0), g.fired.eq(0)]
-        m.d.comb += self.failsafe.eq(g.failsafe)
-        addr = lambda word: Cat(Const(word, 4), r.ch)  # noqa: E731
-        issue = lambda word: m.d.comb.__iadd__(rd.addr.eq(addr(word)))  # noqa: E731
-        put = lambda word, value: m.d.comb.__iadd__(  # noqa: E731
-            [wr.en.eq(1), wr.addr.eq(addr(word)), wr.data.eq(value)])
-        with m.FSM(init="INIT"):
-            self._init_states(m, wr, r)
-            with m.State("IDLE"):
-                m.d.comb += g.eng_idle.eq(1)
-                with m.If(g.pass_pending & host_idle & ~g.ik_open):
-                    self._start_pass(m, g, r)
-                    m.next = "BEGIN"
-            with m.State("BEGIN"):
-                issue(Word.STAGED)
-                m.next = "STAGED"
-            self._commit_states(m, rd, r, g, issue, put)
-            self._read_states(m, rd, r, g, issue)
-            self._motion_states(m, r)
-            with m.State("WB"):
-                self._writeback(m, r, put)
-        return m
-
-    def _init_states(self, m, wr, r):
-        """Every word to its reset value (the memory keeps its contents through a reset)."""
-        w = self._w
-        n = WORDS_PER_CHANNEL * self._c
-        home = Signal(w)
-        if self._home is not None and any(self._home):
-            m.submodules.home_rom = rom = Memory(shape=unsigned(w), depth=self._c, init=self._home)
-            rp = rom.read_port()
-            nxt = r.init_addr + 1
-            m.d.comb += [rp.addr.eq(nxt[4:]), home.eq(rp.data)]
-        with m.State("INIT"):
-            word = r.init_addr[:4]
-            value = Signal(self._mw)
-            with m.Switch(word):
-                with m.Case(Word.HOME, Word.TARGET, Word.POS):
-                    m.d.comb += value.eq(home)
-                with m.Case(Word.MAX):
-                    m.d.comb += value.eq((1 << w) - 1)
-                with m.Case(Word.ENABLE):
-                    m.d.comb += value.eq(int(self._home is not None))
-            m.d.comb += [wr.en.eq(r.init_started), wr.addr.eq(r.init_addr), wr.data.eq(value)]
-            # the first cycle only reads the home ROM's first word
-            m.d.sync += r.init_started.eq(1)
-            with m.If(r.init_started):
-                m.d.sync += r.init_addr.eq(r.init_addr + 1)
-                with m.If(r.init_addr == n - 1):
-                    m.next = "IDLE"
-
-    def _start_pass(self, m, g, r):
-        # a commit strobe in this very cycle counts for the next pass; a keepalive restarts
-        # the count without this pass counting
-        counting = (g.timeout != 0) & ~g.fired & ~self.keepalive
-        expire = counting & (g.count + 1 >= g.timeout)
-        m.d.sync += [g.pass_pending.eq(0), g.commit_pending.eq(self.commit),
-                     g.commit_now.eq(g.commit_pending), r.ch.eq(0), g.fs_now.eq(expire)]
-        with m.If(counting):
-            m.d.sync += g.count.eq(g.count + 1)
-        with m.If(expire):
-            m.d.sync += [g.fired.eq(1), g.failsafe.eq(1)]
-
-    def _commit_states(self, m, rd, r, g, issue, put):
-        w = self._w
-        d = rd.data
-        with m.State("STAGED"):
-            m.d.sync += [r.t.eq(d[:w]), r.timed.eq(d[w + 1]), r.rk.eq(0)]
-            with m.If(g.commit_now & d[w]):
-                put(Word.STAGED, 0)
-                issue(Word.TRIM)
-                m.next = "TRIM"
-            with m.Else():
-                m.next = "READ"
-        with m.State("TRIM"):
-            m.d.sync += [r.t.eq(r.t + d[:w + 1].as_signed()), r.cl.eq(0)]
-            issue(Word.MIN)
-            m.next = "MIN"
-        with m.State("MIN"):
-            with m.If(r.t < d[:w]):
-                m.d.sync += [r.t.eq(d[:w]), r.cl.eq(1)]
-            issue(Word.MAX)
-            m.next = "MAX"
-        with m.State("MAX"):
-            over = r.t > d[:w]
-            put(Word.TARGET, Mux(over, d[:w], r.t[:w]))
-            m.d.comb += self.clamped.eq(r.cl | over)
-            issue(Word.STAGED_TIME)
-            m.next = "TIME"
-        with m.State("TIME"):
-            put(Word.TIMED, Mux(r.timed, d[:self._tb], 0))
-            m.next = "READ"
-
-    def _read_states(self, m, rd, r, g, issue):
-        w, d = self._w, rd.data
-        with m.State("READ"):
-            with m.Switch(r.rk):
-                for i, word in enumerate(_READS):
-                    with m.Case(i):
-                        issue(word)
-            capture = {
-                Word.FAILSAFE: [r.act.eq(d[:2])],
-                Word.ENABLE: [r.en.eq(d[0])],
-                Word.HOME: [r.x.eq(d[:w])],
-                Word.POS: [r.p.eq(d[:w])],
-                Word.VEL: [r.u.eq(d[:w]), r.down.eq(d[w])],
-                Word.TIMED: [r.n.eq(d[:self._tb])],
-                Word.SPEED: [r.sm.eq(d[:w])],
-                Word.ACCEL: [r.a.eq(d[:w])],
-                Word.STOP: [r.s.eq(d[:w])],
-            }
-            with m.Switch(r.rk):
-                for i, word in enumerate(_READS):
-                    with m.Case(i + 1):
-                        if word == Word.TARGET:
-                            with m.If(~(g.fs_now & (r.act == FailsafeAction.HOME))):
-                                m.d.sync += r.x.eq(d[:w])
-                        elif word == Word.ACT_ACCEL:
-                            # a hold stops the profile: the new acceleration applies at once
-                            with m.If((r.u != 0) & ~(g.fs_now & (r.act == FailsafeAction.HOLD))):
-                                m.d.sync += r.a.eq(d[:w])
-                        else:
-                            m.d.sync += capture[word]
-            m.d.sync += r.rk.eq(r.rk + 1)
-            with m.If(r.rk == len(_READS)):
-                m.next = "FAILSAFE"
-        with m.State("FAILSAFE"):
-            with m.If(g.fs_now):
-                with m.Switch(r.act):
-                    with m.Case(FailsafeAction.HOLD):
-                        m.d.sync += [r.x.eq(r.p), r.u.eq(0), r.s.eq(0), r.n.eq(0)]
-                    with m.Case(FailsafeAction.RELAX):
-                        m.d.sync += r.en.eq(0)
-                    with m.Case(FailsafeAction.HOME):
-                        m.d.sync += r.n.eq(0)
-            m.next = "DECIDE"
-
-    def _motion_states(self, m, r):
-        w, dw = self._w, max(self._w, self._tb)
-        rest = [r.u.eq(0), r.s.eq(0)]
-        with m.State("DECIDE"):
-            m.d.sync += [r.dn.eq(Mux(r.x < r.p, r.p - r.x, r.x - r.p)), r.dd.eq(r.n), r.dr.eq(0),
-                         r.dcnt.eq(0), r.div_timed.eq(1), r.wk.eq(0)]
-            with m.If(~r.en):
-                m.d.sync += rest + [r.n.eq(0)]
-                m.next = "WB"
-            with m.Elif(r.p == 0):
-                m.d.sync += rest + [r.n.eq(0), r.p.eq(r.x)]
-                m.next = "WB"
-            with m.Elif(r.n != 0):
-                m.d.sync += r.down.eq(r.x < r.p)
-                m.next = "DIV"
-            with m.Else():
-                with m.If(r.u == 0):
-                    m.d.sync += r.down.eq(r.x < r.p)
-                with m.If(r.a == 0):
-                    m.next = "UNLIMITED"
-                with m.Elif((r.u == 0) & (r.sm != 0)):
-                    m.d.sync += [r.dn.eq(r.sm - 1), r.dd.eq(r.a), r.div_timed.eq(0)]
-                    m.next = "DIV"
-                with m.Else():
-                    m.d.sync += r.dr.eq(r.a - 1)
-                    m.next = "PROFILE"
-        with m.State("DIV"):
-            # restoring division, one quotient bit per cycle shifted into dn
-            trial = Cat(r.dn[w - 1], r.dr)
-            fits = trial >= r.dd
-            m.d.sync += [r.dr.eq(Mux(fits, trial - r.dd, trial)[:dw]), r.dn.eq(Cat(fits, r.dn[:w - 1])),
-                         r.dcnt.eq(r.dcnt + 1)]
-            with m.If(r.dcnt == w - 1):
-                with m.If(r.div_timed):
-                    m.next = "TIMED_STEP"
-                with m.Else():
-                    m.next = "PROFILE"
-        # one adder moves the pulse for every kind of step, one subtractor gives the distance
-        # along the motion: p - s = ~(~p + s), p - x = ~p - ~x
-        flip = r.down.replicate(w)
-        mv_step, p_next = Signal(w), Signal(w)
-        m.d.comb += p_next.eq(((r.p ^ flip) + mv_step)[:w] ^ flip)
-        remaining = Signal(signed(w + 2))
-        m.d.comb += remaining.eq((r.x ^ flip) - (r.p ^ flip))
-        with m.State("TIMED_STEP"):
-            m.d.comb += mv_step.eq(r.dn)
-            m.d.sync += rest + [r.n.eq(r.n - 1), r.p.eq(p_next)]
-            m.next = "WB"
-        with m.State("UNLIMITED"):
-            m.d.comb += mv_step.eq(Mux((r.sm != 0) & (remaining > r.sm), r.sm, remaining[:w]))
-            m.d.sync += rest + [r.p.eq(p_next)]
-            m.next = "WB"
-        with m.State("PROFILE"):
-            step, stop = self._profile(m, r, remaining)
-            m.d.comb += mv_step.eq(step)
-            m.d.sync += [r.u.eq(step), r.s.eq(stop), r.p.eq(p_next)]
-            m.next = "WB"
-
-    def _profile(self, m, r, remaining):
-        """The step and stop distance of ``profile_step`` (``sim/servo_model.py``)."""
-        w = self._w
-        free = r.sm == 0
-        rem_ok = remaining >= 0
-        first = r.dr[:w] + 1
-        up = Signal(w + 1)
-        up_stop = Signal(w + 2)
-        m.d.comb += [up.eq(Mux(r.u == 0, first, r.u + r.a)),
-                     up_stop.eq(up + Mux(r.u == 0, 0, r.s))]
-        land = rem_ok & (remaining <= r.a) & (remaining + r.a >= r.u) & (free | (remaining <= r.sm))
-        go_up = rem_ok & (free | (up <= r.sm)) & (up_stop <= remaining)
-        hold = (r.u != 0) & rem_ok & (free | (r.u <= r.sm)) & (r.s <= remaining)
-        nxt = Mux(r.u > r.a, r.u - r.a, 0)
-        step, stop = Signal(w), Signal(w)
-        with m.If(land):
-            m.d.comb += [step.eq(remaining[:w]), stop.eq(remaining[:w])]
-        with m.Elif(go_up):
-            m.d.comb += [step.eq(up[:w]), stop.eq(up_stop[:w])]
-        with m.Elif(hold):
-            m.d.comb += [step.eq(r.u), stop.eq(r.s)]
-        with m.Else():
-            m.d.comb += [step.eq(nxt[:w]), stop.eq(Mux((nxt == 0) | (r.s <= r.u), 0, r.s - r.u))]
-        return step, stop
-
-    def _writeback(self, m, r, put):
-        values = {Word.ENABLE: r.en, Word.TARGET: r.x, Word.POS: r.p, Word.VEL: Cat(r.u, r.down),
-                  Word.STOP: r.s, Word.ACT_ACCEL: r.a, Word.TIMED: r.n}
-        with m.Switch(r.wk):
-            for i, word in enumerate(_WRITES):
-                with m.Case(i):
-                    put(word, values[word])
-        with m.If(r.wk == 0):
-            m.d.comb += [self.load.valid.eq(1), self.load.payload.channel.eq(r.ch),
-                         self.load.payload.width.eq(Mux(r.en, r.p, 0))]
-        m.d.sync += r.wk.eq(r.wk + 1)
-        with m.If(r.wk == len(_WRITES) - 1):
-            m.d.sync += r.ch.eq(r.ch + 1)
-            m.next = "BEGIN"
-            with m.If(r.ch == self._c - 1):
-                m.next = "IDLE"
+            m.d.sync += [g.ka.eq(1), g.fired.eq(0)]
 
 
 class _Globals:
-    """Controller-wide registers (failsafe, commit, pass handshake)."""
+    """Controller-wide registers and the engine's wires between its parts."""
 
-    def __init__(self, w):
-        self.timeout, self.count = Signal(w), Signal(w)
-        self.fired, self.failsafe = Signal(), Signal()
+    def __init__(self, eng):
+        w, aw, c = eng._w, eng._aw, eng._c
+        self.boot = Signal(init=1)
+        self.ch = Signal(range(c + 1))
+        self.acc, self.q = Signal(aw), Signal(w)
+        self.n, self.z, self.take = Signal(), Signal(), Signal()
+        self.tflag, self.down = Signal(), Signal()
+        self.fired, self.failsafe, self.tvalid, self.ka = Signal(), Signal(), Signal(), Signal()
         self.commit_pending, self.commit_now, self.fs_now = Signal(), Signal(), Signal()
-        self.pass_pending, self.eng_idle, self.ik_open = Signal(), Signal(), Signal()
-
-
-class _Regs:
-    """The engine's working registers for the channel in hand."""
-
-    def __init__(self, w, tb, c):
-        dw = max(w, tb)
-        self.ch = Signal(range(c))
-        self.init_addr = Signal(range(WORDS_PER_CHANNEL * c))
-        self.init_started = Signal()
-        self.t = Signal(signed(w + 2))
-        self.timed, self.cl = Signal(), Signal()
-        self.rk = Signal(range(len(_READS) + 1))
-        self.wk = Signal(range(len(_WRITES)))
-        self.act, self.en, self.down = Signal(2), Signal(), Signal()
-        self.x, self.p, self.u, self.s, self.a, self.sm = (Signal(w) for _ in range(6))
-        self.n = Signal(tb)
-        self.dn, self.dr, self.dd = Signal(w), Signal(dw), Signal(dw)
-        self.dcnt = Signal(range(w))
-        self.div_timed = Signal()
+        self.pass_pending, self.ik_open, self.free, self.rdreq = Signal(), Signal(), Signal(), Signal()
+        self.host_we, self.host_addr = Signal(), Signal(4 + (c).bit_length())
+        self.host_data = Signal(aw)
+        self.st, self.st_valid = Signal(eng.status_layout), Signal()

@@ -1,7 +1,7 @@
 """8N1 UART receiver and transmitter with an integer clock divisor (cycles per bit)."""
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -60,6 +60,10 @@ class UARTRx(wiring.Component):
         is still not taken is lost and pulses ``overrun``.
     framing_error, overrun : Out(1)
         One-cycle pulses, registered.
+    idle_tick : Out(1)
+        A one-cycle pulse, registered, every ``divisor`` cycles while the receiver waits for a
+        start bit (the first one bit time after a stop bit's middle; none during a break): a
+        pause between bytes in bit times, for :class:`~ikseries.hdl.link.FrameReceiver`'s timeout.
 
     Latency
     -------
@@ -76,7 +80,7 @@ class UARTRx(wiring.Component):
         _check_divisor(divisor)
         self._divisor = divisor
         super().__init__({"rx": In(1, init=1), "o": Out(stream.Signature(8)),
-                          "framing_error": Out(1), "overrun": Out(1)})
+                          "framing_error": Out(1), "overrun": Out(1), "idle_tick": Out(1)})
 
     @property
     def divisor(self) -> int:
@@ -93,32 +97,33 @@ class UARTRx(wiring.Component):
         m.d.sync += pins.eq(Cat(self.rx, pins[0]))
         line = pins[1]
         timer = Signal(range(d))
+        tick = timer == 0
         bit = Signal(range(8))
         shift = Signal(8)
-        m.d.sync += [self.framing_error.eq(0), self.overrun.eq(0)]
+        # free-running between bytes too, so that idle_tick measures pauses in bit times
+        m.d.sync += [timer.eq(Mux(tick, d - 1, timer - 1)), self.framing_error.eq(0), self.overrun.eq(0),
+                     self.idle_tick.eq(0)]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
         with m.FSM():
             with m.State("idle"):
+                m.d.sync += self.idle_tick.eq(tick)
                 with m.If(~line):
                     m.d.sync += timer.eq((d - 1) // 2 - 1)
                     m.next = "start"
             with m.State("start"):
-                m.d.sync += timer.eq(timer - 1)
-                with m.If(timer == 0):
-                    m.d.sync += [timer.eq(d - 1), bit.eq(0)]
+                with m.If(tick):
+                    m.d.sync += bit.eq(0)
                     m.next = "data"
                     with m.If(line):        # the start bit did not last half a bit: a glitch
                         m.next = "idle"
             with m.State("data"):
-                m.d.sync += timer.eq(timer - 1)
-                with m.If(timer == 0):
-                    m.d.sync += [timer.eq(d - 1), shift.eq(Cat(shift[1:], line)), bit.eq(bit + 1)]
+                with m.If(tick):
+                    m.d.sync += [shift.eq(Cat(shift[1:], line)), bit.eq(bit + 1)]
                     with m.If(bit == 7):
                         m.next = "stop"
             with m.State("stop"):
-                m.d.sync += timer.eq(timer - 1)
-                with m.If(timer == 0):
+                with m.If(tick):
                     with m.If(~line):
                         m.d.sync += self.framing_error.eq(1)
                         m.next = "break"
@@ -137,6 +142,9 @@ class UARTRx(wiring.Component):
 class UARTTx(wiring.Component):
     """8N1 UART transmitter.
 
+    The byte is sent straight from ``i.payload``, which a stream holds until it is taken: the
+    transmitter takes it when its stop bit starts, so it needs no shift register of its own.
+
     Parameters
     ----------
     divisor : int
@@ -145,17 +153,19 @@ class UARTTx(wiring.Component):
     Attributes
     ----------
     i : In(stream.Signature(8))
-        Bytes to send; ready when idle and in the last cycle of a stop bit.
+        Bytes to send; a byte is taken in the first cycle of its stop bit.
     tx : Out(1)
         The serial output, registered; high (idle) from reset.
 
     Latency
     -------
-    The start bit begins one cycle after a byte is taken.
+    The start bit begins one cycle after a byte is valid while the line is idle, or right after
+    the previous stop bit.
 
     Throughput
     ----------
-    One byte per ``10 * divisor`` cycles when offered back to back.
+    One byte per ``10 * divisor`` cycles when offered back to back (the next byte valid before
+    the stop bit ends).
     """
 
     def __init__(self, divisor: int):
@@ -172,21 +182,20 @@ class UARTTx(wiring.Component):
         d = self._divisor
         busy = Signal()
         timer = Signal(range(d))
-        left = Signal(range(10))        # bits after the one on the line
-        shift = Signal(9)               # data bits, then the stop bit
+        bit = Signal(range(10))         # the bit on the line: 0 start, 1 .. 8 data, 9 stop
         tick = timer == 0
-        done = busy & tick & (left == 0)
-        # taking the next byte in the stop bit's last cycle keeps back-to-back bytes 10 bits apart
-        m.d.comb += self.i.ready.eq(~busy | done)
         with m.If(busy):
             m.d.sync += timer.eq(timer - 1)
             with m.If(tick):
-                m.d.sync += timer.eq(d - 1)
-                with m.If(left == 0):
+                m.d.sync += [timer.eq(d - 1), bit.eq(bit + 1)]
+                with m.If(bit == 8):
+                    m.d.sync += self.tx.eq(1)
+                    m.d.comb += self.i.ready.eq(1)
+                with m.Elif(bit == 9):
                     m.d.sync += busy.eq(0)
                 with m.Else():
-                    m.d.sync += [self.tx.eq(shift[0]), shift.eq(shift >> 1), left.eq(left - 1)]
-        with m.If(self.i.valid & self.i.ready):
-            m.d.sync += [busy.eq(1), timer.eq(d - 1), left.eq(9), self.tx.eq(0),
-                         shift.eq(Cat(self.i.payload, 1))]
+                    m.d.sync += self.tx.eq(self.i.payload.bit_select(bit, 1))
+        # the next byte starts right where the stop bit ends (or at once on an idle line)
+        with m.If(self.i.valid & (~busy | (tick & (bit == 9)))):
+            m.d.sync += [busy.eq(1), timer.eq(d - 1), bit.eq(0), self.tx.eq(0)]
         return m

@@ -11,18 +11,20 @@ import random
 from amaranth.sim import Simulator
 
 from .hdl import protocol as P
-from .hdl.link import FrameReceiver
+from .hdl.link import FrameReceiver, SerialCRC
 from .host.protocol import encode, field_bounds, request_parser
 
-__all__ = ["random_values", "random_request", "mixed_stream", "model_receiver", "simulate_receiver",
-           "frame_gap"]
+__all__ = ["random_values", "random_request", "mixed_stream", "random_pauses", "model_receiver",
+           "simulate_receiver", "frame_gap"]
 
 
 def frame_gap(shape: P.Shape) -> int:
     """Cycles between bytes fed to the receiver so that the bench's consumer (reading a payload
-    byte a cycle, then taking the frame) is done before the shortest next frame (5 bytes) ends.
-    A UART delivers a byte only every 10 bit times, far slower."""
-    return -(-(P.max_request_payload(shape) + 4) // 5)
+    byte a cycle, then taking the frame) is done before the shortest next frame (5 bytes) ends;
+    the receiver itself holds each byte after SYNC for the CRC's steps. A UART delivers a byte
+    only every 10 bit times, far slower."""
+    held = 4 * (SerialCRC.cycles_per_byte - 1)
+    return max(1, -(-(P.max_request_payload(shape) + 4 - held) // 5))
 
 
 def _value(rng: random.Random, f: P.Field, shape: P.Shape, corner: bool):
@@ -79,45 +81,80 @@ def mixed_stream(rng: random.Random, shape: P.Shape, nbytes: int) -> bytes:
     return bytes(out)
 
 
-def model_receiver(shape: P.Shape, data: bytes) -> tuple[list[tuple[int, bytes]], dict]:
-    """The frames and counters the protocol's rules give for ``data`` (the host parser)."""
+def random_pauses(rng: random.Random, nbytes: int, every: int) -> list[int]:
+    """Sorted distinct byte positions of ``nbytes``, about one per ``every``: a pause longer than
+    the receive timeout comes before each."""
+    return sorted(rng.sample(range(nbytes), nbytes // every))
+
+
+def model_receiver(shape: P.Shape, data: bytes, pauses=()) -> tuple[list[tuple[int, bytes]], dict]:
+    """The frames and counters the protocol's rules give for ``data`` with a timeout pause before
+    each byte position in ``pauses`` (the host parser)."""
     parser = request_parser(shape)
-    frames = parser.feed(data)
+    frames, last = [], 0
+    for k in [*pauses, len(data)]:
+        frames += parser.feed(data[last:k])
+        if k < len(data):
+            parser.pause()
+        last = k
     return frames, {k: v for k, v in parser.counters.items() if k != "garbage"}
 
 
 def simulate_receiver(shape: P.Shape, data: bytes, gap: int | None = None, framing_pulses: int = 0,
-                      overrun_pulses: int = 0, hold: bool = False, counter_bits: int = P.COUNTER_BITS) -> dict:
+                      overrun_pulses: int = 0, hold: bool = False, counter_bits: int = P.COUNTER_BITS,
+                      pauses=()) -> dict:
     """Feed ``data`` to a :class:`~ikseries.hdl.link.FrameReceiver` one byte every ``gap``
-    cycles (default :func:`frame_gap`) while a consumer reads each frame's payload through ``rd_addr``/``rd_data`` and takes
-    it (``hold``: never takes one). Pulses the UART error inputs as asked. ``counter_bits``: the
-    receiver's counter width.
+    cycles (default :func:`frame_gap`) while a consumer reads each frame's payload through
+    ``rd_addr``/``rd_data`` and takes it (``hold``: never takes one). Before each byte position
+    in ``pauses`` the receiver's ``tick`` is held high for its ``timeout_ticks`` cycles (a pause
+    that ends a frame); it is low otherwise. Then pulses the UART error inputs as asked, 8
+    cycles apart. ``counter_bits``: the receiver's counter width.
 
-    Returns ``frames`` ([(command, payload)], in order), ``counters`` (name -> value) and ``cycles``.
+    Returns ``frames`` ([(command, payload)], in order), ``counters`` (name -> value, read
+    through ``counter_addr``/``counter_data``) and ``cycles``.
     """
     dut = FrameReceiver(shape, counter_bits)
     gap = frame_gap(shape) if gap is None else gap
+    pauses = set(pauses)
     frames, result = [], {}
     sim = Simulator(dut)
     sim.add_clock(1e-6)
 
     async def producer(ctx):
-        for b in data:
+        cycles = 0
+        for k, b in enumerate(data):
+            if k in pauses:
+                ctx.set(dut.tick, 1)
+                await ctx.tick().repeat(dut.timeout_ticks)
+                ctx.set(dut.tick, 0)
+                cycles += dut.timeout_ticks
             ctx.set(dut.i.payload, b)
             ctx.set(dut.i.valid, 1)
-            await ctx.tick().until(dut.i.ready)
+            while True:
+                *_, ready = await ctx.tick().sample(dut.i.ready)
+                cycles += 1
+                if ready:
+                    break
             ctx.set(dut.i.valid, 0)
             if gap > 1:
                 await ctx.tick().repeat(gap - 1)
+                cycles += gap - 1
         for k in range(max(framing_pulses, overrun_pulses)):
             ctx.set(dut.framing_error, k < framing_pulses)
             ctx.set(dut.overrun, k < overrun_pulses)
             await ctx.tick()
-        ctx.set(dut.framing_error, 0)
-        ctx.set(dut.overrun, 0)
-        await ctx.tick().repeat(4 * gap)
-        result["counters"] = {name: ctx.get(dut.counters[name]) for name in P.RECEIVER_COUNTERS}
-        result["cycles"] = len(data) * gap + 4 * gap
+            ctx.set(dut.framing_error, 0)
+            ctx.set(dut.overrun, 0)
+            await ctx.tick().repeat(7)
+            cycles += 8
+        await ctx.tick().repeat(4 * gap + 16)      # the counters: at most 10 cycles behind
+        counters = {}
+        for k, name in enumerate(P.RECEIVER_COUNTERS):
+            ctx.set(dut.counter_addr, k)
+            await ctx.tick()
+            counters[name] = ctx.get(dut.counter_data)
+        result["counters"] = counters
+        result["cycles"] = cycles + 4 * gap + 16 + len(P.RECEIVER_COUNTERS)
 
     async def consumer(ctx):
         while not hold and "counters" not in result:

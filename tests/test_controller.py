@@ -9,7 +9,7 @@ from ikseries.host.protocol import encode, frame
 
 CLOCK = 48_000_000
 BAUD = 12e6          # divisor 4: the smallest the UART takes, for a short simulation
-PERIOD = 640         # >= 16 * channels + pass_cycles + 2 for two legs of three servos
+PERIOD = 640         # >= init_cycles + pass_cycles + 2 for two legs of three servos
 MANIFEST = bytes(range(0xA0, 0xA8))
 REF = (240, 100, 160)        # a target inside the workspace; the others are near it
 T1, T2, T3 = REF, (242, 96, 161), (238, 104, 159)
@@ -61,29 +61,50 @@ def test_identity_moves_pulses_trims_and_limits_reach_the_pins(two_legs, small_p
         msg, _ = await host.request(ctx, encode("set_limits", shape, channel=0, min=10, max=9))
         seen["bad_limits"] = msg
 
-    host = run(dut, script)
+    commits = []
+
+    async def commit_probe(ctx):
+        cycle = 0
+        while True:
+            if ctx.get(dut.dispatcher.commit):
+                commits.append(cycle)
+            cycle += 1
+            await ctx.tick()
+
+    host = run(dut, script, probes=[commit_probe])
+
+    def shown_by(sent, legs):
+        """The second period start after the request's commit (when its widths are on the pins
+        at the latest), the commit within the dispatcher's bound of the frame's end."""
+        commit = next(c for c in commits if c >= sent)
+        assert commit - sent <= dut.link.latency + dut.dispatcher.move_cycles(legs), (sent, commit)
+        return [p for p in host.period_starts if p > commit][1]
+
     ident = seen["identity"]
     assert ident.command == "identity" and ident.fields == {
         "version": P.PROTOCOL_VERSION, "clock_hz": CLOCK, "pwm_period": PERIOD, "legs": 2,
         "coords": len(plan.inputs), "channels": 2 * k, "manifest": MANIFEST, "name": "two-leg test"}
     want1 = [w + t for w, t in zip(g1, trims)]
-    period = PERIOD
-    # move_leg: leg 0 shows T1's golden pulses within two period starts of the request; leg 1 nothing
+    # move_leg: leg 0 shows T1's golden pulses by the second period start after its commit,
+    # the commit within the dispatcher's bound of the request; leg 1 nothing
     firsts = [host.first_pulse(c, seen["t1"], want1[c]) for c in range(k)]
-    assert all(f is not None and f - seen["t1"] <= 2 * period for f in firsts), (firsts, host.pulses[:k])
+    shown = shown_by(seen["t1"], 1)
+    assert all(f is not None and f <= shown for f in firsts), (firsts, shown, host.pulses[:k])
     assert len(set(firsts)) == 1
     # move_legs: both legs change at the same period start
     want23 = [w + t for w, t in zip(g2 + g3, trims)]
     firsts = [host.first_pulse(c, seen["t23"], want23[c]) for c in range(2 * k)]
-    assert all(f is not None and f - seen["t23"] <= 2 * period for f in firsts), firsts
+    shown = shown_by(seen["t23"], 2)
+    assert all(f is not None and f <= shown for f in firsts), (firsts, shown)
     assert len(set(firsts)) == 1, firsts
     before = [w for t, w in host.pulses[0] if seen["t23"] <= t < firsts[0]]
     assert before and set(before) == {want1[0]}
     # set_pulse acts on its channel alone (trim added); set_limits clamps the next move
-    assert host.widths_after(4, seen["pulse"] + 2 * period)[:2] == [seen["pulse_w"]] * 2
+    assert host.widths_after(4, shown_by(seen["pulse"], 0))[:2] == [seen["pulse_w"]] * 2
     assert host.widths_after(3, seen["pulse"])[:3] == [want23[3]] * 3
-    assert host.widths_after(0, seen["limited"] + 2 * period)[:2] == [seen["max"]] * 2
-    assert host.widths_after(1, seen["limited"] + 2 * period)[:2] == [want23[1]] * 2
+    shown = shown_by(seen["limited"], 1)
+    assert host.widths_after(0, shown)[:2] == [seen["max"]] * 2
+    assert host.widths_after(1, shown)[:2] == [want23[1]] * 2
     assert seen["bad_limits"].nack and seen["bad_limits"].fields == {"reason": "bad_value"}
     assert seen["bad_limits"].command == "set_limits"
 

@@ -7,15 +7,16 @@ from pathlib import Path
 
 import pytest
 from amaranth.back import verilog
+from amaranth.hdl import Module, ResetInserter, Signal
 from amaranth.lib import crc as amaranth_crc
 from amaranth.sim import Simulator
 
 from ikseries.hdl import protocol as P
-from ikseries.hdl.link import FrameReceiver, FrameTransmitter, Link
-from ikseries.hdl.uart import BAUD_TOLERANCE, UARTRx, UARTTx, uart_divisor
+from ikseries.hdl.link import FrameReceiver, FrameTransmitter, Link, SerialCRC
+from ikseries.hdl.uart import BAUD_TOLERANCE, MIN_DIVISOR, UARTRx, UARTTx, uart_divisor
 from ikseries.host.protocol import (Decoder, Message, crc, decode_request, encode, encode_answer, field_bounds,
                                     frame, request_parser)
-from ikseries.linkcheck import mixed_stream, model_receiver, random_values, simulate_receiver
+from ikseries.linkcheck import mixed_stream, model_receiver, random_pauses, random_values, simulate_receiver
 
 ROOT = Path(__file__).resolve().parent.parent
 HEXAPOD = P.Shape(legs=6, coords=3, channels=18)
@@ -61,6 +62,9 @@ def test_doc_tables_are_rendered_from_the_table():
     assert m.group(1) == P.markdown_tables(), "docs/protocol.md is stale: re-render markdown_tables()"
     for c in P.COMMANDS:    # the prose's figures come from the same table
         assert f"| 0x{c.code:02X} | `{c.name}` |" in m.group(1)
+    t = P.RX_TIMEOUT_BYTES
+    assert f"more than {t} byte times ({t * P.BYTE_BITS} bit times of idle line)" in doc.replace("\n", " ")
+    assert f"quiet for {t + 1} byte times or more is always received whole" in doc.replace("\n", " ")
     move = 3 + P.max_request_payload(HEXAPOD) + 2
     assert f"{move} bytes, {move * 10} µs, so {int(1e6 / (10 * move))} updates per second" in doc.replace("\n", " ")
 
@@ -85,6 +89,45 @@ def test_protocol_crc_is_the_named_one():
     a = amaranth_crc.catalog.CRC16_CCITT_FALSE
     assert (a.crc_width, a.polynomial, a.initial_crc, a.reflect_input, a.reflect_output, a.xor_output) == \
         (P.CRC.width, P.CRC.polynomial, P.CRC.initial, P.CRC.reflect_input, P.CRC.reflect_output, P.CRC.xor_output)
+
+
+def test_serial_crc_equals_the_host_crc():
+    rng = random.Random(11)
+    messages = [bytes(rng.randrange(256) for _ in range(n)) for n in (9, 0, 3, 1)]
+    messages[0] = b"123456789"
+    dut = SerialCRC()
+    got = []
+    sim = Simulator(dut)
+    sim.add_clock(1e-6)
+
+    async def bench(ctx):
+        for message in messages:        # each restarts the CRC: start wins over a step
+            ctx.set(dut.start, 1)
+            ctx.set(dut.step, 1)
+            await ctx.tick()
+            ctx.set(dut.start, 0)
+            for b in message:
+                ctx.set(dut.byte, b)
+                for k in range(8):
+                    assert ctx.get(dut.last) == (k == 7)
+                    await ctx.tick()
+                ctx.set(dut.step, 0)    # a pause between bytes changes nothing
+                await ctx.tick()
+                ctx.set(dut.step, 1)
+            got.append(ctx.get(dut.crc))
+    sim.add_testbench(bench)
+    sim.run()
+    assert got == [crc(m) for m in messages] and got[0] == P.CRC.check
+    with pytest.raises(ValueError, match=r"^params must be an MSB-first CRC of whole bytes without output "
+                                         r"reflection or xor, not 'KERMIT'$"):
+        k = amaranth_crc.catalog.CRC16_KERMIT
+        SerialCRC(P.CRCParameters("KERMIT", 16, k.polynomial, k.initial_crc, True, True, 0, check=0))
+
+
+def test_min_divisor_leaves_a_byte_time_for_the_serial_crc():
+    """A UART byte (10 bit times) outlasts the receiver's slowest byte: the CRC's steps, the
+    frame check, then SYNC hunted at once; so the UART's byte is always taken before the next."""
+    assert P.BYTE_BITS * MIN_DIVISOR >= SerialCRC.cycles_per_byte + 2
 
 
 def _normal(v):
@@ -179,14 +222,16 @@ def test_uart_divisor():
         UARTTx(4.0)
 
 
-def _line_levels(data: bytes, cycles_per_bit: float, idle: int, stop_bits=None) -> list[int]:
+def _line_levels(data: bytes, cycles_per_bit: float, idle: int, stop_bits=None, pauses=None) -> list[int]:
     """The rx pin, one level per clock cycle, for ``data`` sent 8N1 at ``cycles_per_bit``
-    (a stop bit of byte k is low when ``stop_bits[k]`` is 0)."""
+    (a stop bit of byte k is low when ``stop_bits[k]`` is 0; ``pauses[k]`` idle bit times
+    before byte k)."""
     bits = [1] * idle
     t = float(idle)
     levels = []
     for k, b in enumerate(data):
-        frame_bits = [0] + [(b >> i) & 1 for i in range(8)] + [1 if stop_bits is None else stop_bits[k]]
+        frame_bits = [1] * (pauses or {}).get(k, 0)
+        frame_bits += [0] + [(b >> i) & 1 for i in range(8)] + [1 if stop_bits is None else stop_bits[k]]
         for v in frame_bits:
             t += cycles_per_bit
             levels += [v] * (round(t) - len(bits) - len(levels))
@@ -329,12 +374,62 @@ def test_receiver_counts_each_kind_of_bad_frame_by_construction():
 
 @pytest.mark.parametrize("shape, seed, nbytes", [(HEXAPOD, 1, 2500), (SMALL, 2, 1200)], ids=["hexapod", "small"])
 def test_receiver_equals_the_protocol_model_on_mixed_traffic(shape, seed, nbytes):
-    data = mixed_stream(random.Random(seed), shape, nbytes)
-    frames, counters = model_receiver(shape, data)
-    got = simulate_receiver(shape, data)
+    rng = random.Random(seed)
+    data = mixed_stream(rng, shape, nbytes)
+    pauses = random_pauses(rng, len(data), 40)
+    frames, counters = model_receiver(shape, data, pauses)
+    got = simulate_receiver(shape, data, pauses=pauses)
     assert len(frames) > 30 and all(counters.values())      # every kind of error did occur
+    assert (frames, counters) != model_receiver(shape, data)    # and the pauses changed the verdict
     assert got["frames"] == frames
     assert got["counters"] == {**counters, "framing": 0, "overrun": 0, "dropped": 0}
+
+
+def test_a_pause_resynchronises_after_garbage_that_looks_like_a_header():
+    good = encode("set_pulse", HEXAPOD, channel=1, pulse=2000)
+    ghost = bytes((P.SYNC, 37, 0x11, 0x3F))     # a move_legs header: 37 more bytes would be its payload
+    data = ghost + good + good
+    # without a pause the ghost swallows the first good frame (and the second's start)
+    assert model_receiver(HEXAPOD, data)[0] == []
+    for pauses in ([], [len(ghost)]):
+        frames, counters = model_receiver(HEXAPOD, data, pauses)
+        got = simulate_receiver(HEXAPOD, data, pauses=pauses)
+        assert got["frames"] == frames and got["counters"] == {**counters, "framing": 0, "overrun": 0, "dropped": 0}
+    assert got["frames"] == [(0x12, good[3:-2])] * 2 and got["counters"]["crc"] == 0   # abandoned: uncounted
+
+
+def test_receiver_counters_are_cleared_by_reset():
+    rst = Signal()
+    dut = FrameReceiver(HEXAPOD)
+    top = Module()
+    top.submodules.dut = ResetInserter(rst)(dut)
+    seen = []
+    sim = Simulator(top)
+    sim.add_clock(1e-6)
+
+    async def read(ctx):
+        values = []
+        for k in range(len(P.RECEIVER_COUNTERS)):
+            ctx.set(dut.counter_addr, k)
+            await ctx.tick()
+            values.append(ctx.get(dut.counter_data))
+        return values
+
+    async def bench(ctx):
+        for _ in range(3):
+            ctx.set(dut.framing_error, 1)
+            await ctx.tick()
+            ctx.set(dut.framing_error, 0)
+            await ctx.tick().repeat(8)
+        seen.append(await read(ctx))
+        ctx.set(rst, 1)
+        await ctx.tick()
+        ctx.set(rst, 0)
+        await ctx.tick().repeat(8)      # the first scan after reset writes zeros
+        seen.append(await read(ctx))
+    sim.add_testbench(bench)
+    sim.run()
+    assert seen == [[0, 3, 0, 0, 0, 0], [0] * 6]
 
 
 def test_receiver_resynchronises_on_a_refused_sync_byte():
@@ -422,6 +517,30 @@ def test_transmitter_frames_decode_with_the_host_decoder():
     assert decoder.feed(sent) == expect and decoder.counters["crc"] == 0
 
 
+def test_transmitter_throughput_is_as_documented():
+    dut = FrameTransmitter()
+    cycles = []
+    sim = Simulator(dut)
+    sim.add_clock(1e-6)
+
+    async def bench(ctx):
+        ctx.set(dut.o.ready, 1)
+        ctx.set(dut.data.valid, 1)
+        for n in (0, 3):
+            ctx.set(dut.i.payload.length, n)
+            ctx.set(dut.i.valid, 1)
+            await ctx.tick().until(dut.i.ready)
+            ctx.set(dut.i.valid, 0)
+            taken = count = 0
+            while taken < n + 5:
+                *_, valid = await ctx.tick().sample(dut.o.valid)
+                taken, count = taken + valid, count + 1
+            cycles.append(count)
+    sim.add_testbench(bench)
+    sim.run()
+    assert cycles == [9 * (n + 3) + 2 for n in (0, 3)]
+
+
 def test_transmitter_refuses_a_bad_size():
     with pytest.raises(ValueError, match=r"^max_payload must be an integer in \[1, 64\], not 65$"):
         FrameTransmitter(65)
@@ -486,6 +605,62 @@ def test_link_answers_a_request_end_to_end():
     assert bytes(received) == answer
     assert Decoder().feed(bytes(received)) == [Message("channel_status", {
         "channel": 3, "commanded": 123456, "current": 65432, "moving": 1, "enabled": 1})]
+
+
+def _link_receive(shape, d, levels):
+    """Requests the Link takes from rx ``levels`` (each taken at once), then its counters."""
+    dut = Link(shape, d)
+    got, counters = [], []
+    sim = Simulator(dut)
+    sim.add_clock(1e-6)
+
+    async def host(ctx):
+        for v in levels:
+            ctx.set(dut.rx, v)
+            await ctx.tick()
+        await ctx.tick().repeat(16)
+        for k in range(len(P.RECEIVER_COUNTERS)):
+            ctx.set(dut.counter_addr, k)
+            await ctx.tick()
+            counters.append(ctx.get(dut.counter_data))
+
+    async def controller(ctx):
+        while len(counters) < len(P.RECEIVER_COUNTERS):
+            await ctx.tick()
+            if ctx.get(dut.request.valid):
+                payload = bytearray()
+                for a in range(ctx.get(dut.request.payload.length)):
+                    ctx.set(dut.rd_addr, a)
+                    await ctx.tick()
+                    payload.append(ctx.get(dut.rd_data))
+                got.append((ctx.get(dut.request.payload.command), bytes(payload)))
+                ctx.set(dut.request.ready, 1)
+                await ctx.tick()
+                ctx.set(dut.request.ready, 0)
+    sim.add_testbench(host)
+    sim.add_testbench(controller)
+    sim.run()
+    return got, dict(zip(P.RECEIVER_COUNTERS, counters))
+
+
+def test_link_timeout_is_in_byte_times_and_counters_are_read_through_the_link():
+    """At the fastest divisor: a pause of RX_TIMEOUT_BYTES byte times inside a frame is harmless,
+    one byte time more abandons it (uncounted) and resynchronises after a ghost header."""
+    d, t = MIN_DIVISOR, P.RX_TIMEOUT_BYTES * P.BYTE_BITS
+    frames = [encode("set_pulse", SMALL, channel=k, pulse=1000 + 7 * k) for k in range(4)]
+    assert all(P.SYNC not in f[1:] for f in frames)     # an abandoned frame's rest is hunted over
+    ghost = bytes((P.SYNC, 5, 0x11))                    # a move_legs header of SMALL
+    data = frames[0] + ghost + frames[1] + frames[2] + frames[3] + b"\x00" + frames[0]
+    starts = [0, len(frames[0]), len(frames[0]) + 3]
+    pauses = {5: t, starts[2]: t + P.BYTE_BITS, starts[2] + 9 + 4: t + P.BYTE_BITS, len(data) - 9: 2}
+    stop_bits = [1] * len(data)
+    stop_bits[len(data) - 10] = 0       # the 0x00 with a low stop bit: a framing error
+    got, counters = _link_receive(SMALL, d, _line_levels(data, d, idle=6, stop_bits=stop_bits, pauses=pauses))
+    assert got == [(0x12, f[3:-2]) for f in (frames[0], frames[1], frames[3], frames[0])]
+    assert counters == {**dict.fromkeys(P.RECEIVER_COUNTERS, 0), "framing": 1}
+    for pause in (t, t + P.BYTE_BITS):     # the same edges at a divisor where no tick precedes the take
+        mid = _line_levels(frames[0], 12, idle=6, pauses={5: pause})
+        assert _link_receive(SMALL, 12, mid)[0] == ([(0x12, frames[0][3:-2])] if pause == t else [])
 
 
 def test_link_verilog_is_deterministic():

@@ -8,6 +8,7 @@ from amaranth.back import verilog
 from amaranth.lib import data
 
 from ikseries.hdl.servo import ChannelField as F, FailsafeAction as A, ServoController
+from ikseries.hdl.servo_microcode import Ins, assemble
 from ikseries.sim.servo_model import ServoModel, profile_step
 from tests.servo_bench import run
 
@@ -55,7 +56,7 @@ def check(dut, model, schedule, periods, reset=None):
     assert got["bad"][:n - 1] == exp["bad"][:n - 1]
     assert [bool(f) for f in got["failsafe"][:n]] == exp["failsafe"][:n]
     assert got["status"] == exp["status"][:len(got["status"])]
-    assert got["busy_max"] <= 16 * dut.channels + dut.pass_cycles
+    assert got["busy_max"] <= dut.init_cycles + dut.pass_cycles
     return exp["widths"][:n], exp
 
 
@@ -282,7 +283,8 @@ def test_parameter_errors(args, kw, msg):
 
 
 def test_period_must_hold_the_initialisation_and_a_pass():
-    least = 16 * 2 + ServoController(2, 8, 10 ** 6).pass_cycles + 2
+    probe = ServoController(2, 8, 10 ** 6)
+    least = probe.init_cycles + probe.pass_cycles + 2
     ServoController(2, 8, least)
     with pytest.raises(ValueError, match=f"period must be >= {least} cycles for 2 channels of 8 bits, "
                                          f"not {least - 1}"):
@@ -294,3 +296,21 @@ def test_verilog_is_deterministic():
         return verilog.convert(ServoController(3, W, 400, home_at_reset=[1, 2, 3], ik_layout=ik_layout(1, 3),
                                                ik_legs=1), name="servo", emit_src=False)
     assert make() == make()
+
+
+def test_microprogram_assembler_refuses_a_read_of_the_word_just_written():
+    word, back = (0, 3), Ins(cond="always", to="L")
+    assemble([Ins("LD", (0, 1), st=word, label="L"), Ins("ADD", (0, 2)), back])   # another word: fine
+    with pytest.raises(ValueError, match=r"instruction 1 reads \(0, 3\) that 0 writes in the same cycle"):
+        assemble([Ins("LD", (0, 1), st=word, label="L"), Ins("ADD", word), back])
+    with pytest.raises(ValueError, match="uses D but names no word"):
+        assemble([Ins("ADD", label="L"), back])
+    with pytest.raises(ValueError, match="must jump, not fall off the program"):
+        assemble([Ins("LD", (0, 1))])
+
+
+def test_a_hexapod_pass_takes_well_under_a_millisecond_at_12_mhz():
+    ik = data.StructLayout({"leg": range(6), "widths": data.StructLayout({f"s{j}": 16 for j in range(3)})})
+    ctl = ServoController(18, 16, 240000, ik_layout=ik)
+    assert ctl.init_cycles == 16 * 18 + 1
+    assert ctl.pass_cycles < 12000 // 4

@@ -253,6 +253,8 @@ class FrameParser:
     ``lengths`` maps each accepted CMD to its payload lengths. :meth:`feed` returns the good
     ``(code, payload)`` frames; ``counters`` counts ``garbage`` (bytes skipped while hunting for
     SYNC), ``bad_length``, ``unknown_command`` and ``crc`` exactly as the hardware does.
+    :meth:`pause` is the receive timeout: call it when the line was quiet for more than
+    :data:`~ikseries.hdl.protocol.RX_TIMEOUT_BYTES` byte times.
     """
 
     def __init__(self, lengths: Mapping[int, frozenset[int]]):
@@ -264,6 +266,10 @@ class FrameParser:
     def _reject(self, counter: str, b: int) -> None:
         self.counters[counter] += 1
         self._state = "len" if b == P.SYNC else "hunt"
+
+    def pause(self) -> None:
+        """A pause longer than the receive timeout: a frame in progress is abandoned, uncounted."""
+        self._state = "hunt"
 
     def feed(self, data: Iterable[int]) -> list[tuple[int, bytes]]:
         out, crc_bytes = [], P.CRC.width // 8
@@ -321,6 +327,10 @@ class Decoder:
     @property
     def counters(self) -> dict:
         return self._parser.counters
+
+    def pause(self) -> None:
+        """The line was quiet for longer than the receive timeout (see :meth:`FrameParser.pause`)."""
+        self._parser.pause()
 
     def feed(self, data: Iterable[int]) -> list[Message]:
         return [decode_answer(code, payload) for code, payload in self._parser.feed(data)]
