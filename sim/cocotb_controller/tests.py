@@ -45,17 +45,17 @@ async def test_identity_and_status(dut):
     first = await host.request("status")
     await host.periods(5)
     second = await host.request("status")
-    a1, a2 = (host.pwm.index(c) for c, _ in host.acked[-3::2])
+    a1, a2 = (host.pwm.index(c) for c, _ in host.acked[-2:])
     since_reset = a1 - host.pwm.index(host.reset_at)
     assert second.fields["uptime"] - first.fields["uptime"] == a2 - a1, (first, second, a1, a2)
     assert abs(first.fields["uptime"] - since_reset) <= 1, (first.fields["uptime"], since_reset)
     for st in (first, second):
-        assert all(st.fields[n] == 0 for n in P.ERROR_COUNTERS), st
+        assert all(st.fields[n] == 0 for n, _ in P.ERROR_COUNTERS), st
         assert st.fields["enabled"] == (1 << host.shape.channels) - 1 and st.fields["moving"] == 0, st
     final_checks(host)
 
 
-async def _move_and_check(host, scene, command: str, legs: list[int], **fields):
+async def _move_and_check(host, scene, command: str, moved: list[int], **fields):
     """Send a move, wait, and check its channels change together exactly at the second period
     start after its answer began (the servo controller's pass, then its load) and stay."""
     await host.request(command, **fields)
@@ -63,8 +63,8 @@ async def _move_and_check(host, scene, command: str, legs: list[int], **fields):
     await host.periods(4)
     measured = final_checks(host)
     targets = [fields["target"]] if "target" in fields else fields["targets"]
-    chans = [c for leg in legs for c in _leg(host, leg)]
-    want = [w for leg, t in zip(legs, targets) for w in scene.pins(leg, t)]
+    chans = [c for leg in moved for c in _leg(host, leg)]
+    want = [w for leg, t in zip(moved, targets) for w in scene.pins(leg, t)]
     k = host.pwm.index(ack) + 2
     assert first_period_with(measured, chans, want, host.pwm.index(ack) - 1) == k, (k, measured)
     assert all([measured[j][c] for c in chans] == want for j in measured if j >= k), measured
