@@ -7,12 +7,16 @@ request, pulses on the period grid. On top of that each test checks its own prop
 """
 from __future__ import annotations
 
+import json
+import os
 import random
+from pathlib import Path
 
 import cocotb
 
 from ikseries.hdl import protocol as P
 
+from ..cocotb_leg.config import ENV_CONFIG
 from .checker import first_period_with
 from .host import Host, parse_requests
 from .scene import Scene, final_checks
@@ -164,12 +168,15 @@ async def test_fuzz(dut):
     for seg in traffic.segments:
         await host.send(seg)
     await host.periods(3)
-    final_checks(host)
+    measured = final_checks(host)
     whole = parse_requests(host.shape, b"".join(traffic.segments))
     assert [m for _, m in host.acked[before:]] == whole, "segments framed differently from the whole stream"
     assert whole[-1].command == "status"
     got = host.rx.answers[-1].message.fields
     assert {k: got[k] for k in traffic.counters} == traffic.counters, (got, traffic.counters)
     assert all(got[k] == 0 for k in ("framing", "overrun", "dropped", "clamped")), got
-    dut._log.info(f"fuzz: {traffic.nbytes} bytes, {len(host.acked) - before} good frames, "
-                  f"{traffic.resyncs} after bad pieces, counters {traffic.counters}")
+    summary = {"bytes": traffic.nbytes, "good_frames": len(host.acked) - before, "after_bad": traffic.resyncs,
+               "counters": traffic.counters, "cycles": host.cycle(), "periods_checked": len(measured)}
+    dut._log.info(f"fuzz: {summary}")
+    # the bench script's figures, next to the run configuration
+    Path(os.environ[ENV_CONFIG]).with_name("fuzz.json").write_text(json.dumps(summary) + "\n")
