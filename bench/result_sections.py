@@ -247,6 +247,23 @@ def link_fuzz(res: dict) -> list[str]:
     return lines
 
 
+def controller_fuzz(res: dict) -> list[str]:
+    """Lines of the ``bench/controller_fuzz.py`` section from its JSON ``res``."""
+    f = res["fuzz"] or {}
+    c = f.get("counters", {})
+    verdict = "passed" if res["passed"] else f"FAILED: {res['message']}"
+    return [f"{res['legs']} legs, PWM period {res['period']} cycles, UART divisor "
+            f"{round(res['clock_hz'] / res['baud'])}, {res['simulator']}, seed {res['seed']}: {verdict}. Every "
+            "answer against the receiver model's good frames, every PWM period's widths against the model, "
+            "the status counters against the model's.", "",
+            *table(("bytes", "good frames", "after a bad piece", "periods checked", "cycles", "crc", "bad_length",
+                    "unknown_command", "build s", "simulation s"),
+                   [(f"{f.get('bytes', 0):,}", f"{f.get('good_frames', 0):,}", f"{f.get('after_bad', 0):,}",
+                     f"{f.get('periods_checked', 0):,}", f"{f.get('cycles', 0):,}", c.get("crc", "–"),
+                     c.get("bad_length", "–"), c.get("unknown_command", "–"), num(res["build_s"], ".1f"),
+                     num(res["simulation_s"], ".1f"))])]
+
+
 def servo_cells(res: dict) -> list[str]:
     """Lines of the ``bench/servo_cells.py`` section from its JSON ``res``."""
     rows = [(name, *(res[key].get(k, 0) for k in ("LUT", "FF", "carry", "BRAM")))
@@ -293,6 +310,8 @@ SECTIONS = {
                "baseline and the hexapod core on iCE40UP5K and ECP5-25F.", pareto),
     "link_fuzz": ("Host link: receiver fuzz and area", "The frame receiver against the protocol model on a "
                   "long seeded mix of good, corrupted and garbage bytes; Yosys counts of the link.", link_fuzz),
+    "controller_fuzz": ("Robot controller: fuzz at the UART pin", "The exported controller in cocotb under a "
+                        "long seeded mix of good, corrupted and garbage bytes.", controller_fuzz),
     "servo_cells": ("Servo controller area", "Yosys iCE40 counts of the per-channel servo controller "
                     "(speed, acceleration, timed moves, failsafe) for a hexapod.", servo_cells),
     "controller_cells": ("Robot controller area", "Yosys iCE40 counts of the hexapod robot controller, "

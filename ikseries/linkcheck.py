@@ -14,7 +14,7 @@ from .hdl import protocol as P
 from .hdl.link import FrameReceiver, SerialCRC
 from .host.protocol import encode, field_bounds, request_parser
 
-__all__ = ["random_values", "random_request", "mixed_stream", "random_pauses", "model_receiver",
+__all__ = ["random_values", "random_request", "corrupt", "mixed_stream", "random_pauses", "model_receiver",
            "simulate_receiver", "frame_gap"]
 
 
@@ -53,7 +53,8 @@ def random_request(rng: random.Random, shape: P.Shape) -> bytes:
     return encode(cmd.name, shape, **random_values(rng, cmd, shape, corner=rng.random() < 0.2))
 
 
-def _corrupt(rng: random.Random, frame: bytes, shape: P.Shape) -> bytes:
+def corrupt(rng: random.Random, frame: bytes, shape: P.Shape) -> bytes:
+    """``frame`` with a flipped bit, truncated, with another LEN or with a CMD that is no request code."""
     kind = rng.randrange(4)
     if kind == 0:       # a flipped bit anywhere after SYNC
         i = rng.randrange(1, len(frame))
@@ -75,7 +76,7 @@ def mixed_stream(rng: random.Random, shape: P.Shape, nbytes: int) -> bytes:
         if r < 0.5:
             out += random_request(rng, shape)
         elif r < 0.85:
-            out += _corrupt(rng, random_request(rng, shape), shape)
+            out += corrupt(rng, random_request(rng, shape), shape)
         else:
             out += bytes(rng.randrange(256) for _ in range(rng.randrange(1, 12)))
     return bytes(out)

@@ -34,7 +34,7 @@ from .cocotb_leg.config import CLOCK_NS, ENV_CONFIG, RunConfig
 
 __all__ = ["SIMULATORS", "TEST_MODULE", "TOPLEVEL", "ENV_CONFIG", "VERILATOR_OPT", "verilator_tools", "BenchClock", "BenchRobot",
            "default_n_random",
-           "Result", "simulator_available", "verilator_bin_dir", "verilator_path", "verilator_make_fixes",
+           "Result", "Simulation", "simulate", "simulator_available", "verilator_bin_dir", "verilator_path", "verilator_make_fixes",
            "export", "bench_manifest", "run"]
 
 SIMULATORS = ("icarus", "verilator")
@@ -341,6 +341,52 @@ def _selection(testcase: str | None, test_module: str) -> tuple[str, ...] | None
     return tests
 
 
+@dataclasses.dataclass(frozen=True)
+class Simulation:
+    """What one cocotb build and run of a test module gave (see :func:`simulate`)."""
+    tests: dict          # test name -> (passed: bool, message: str)
+    results_xml: Path
+    build_s: float
+    test_s: float
+    exit_code: int
+    waves: Path | None
+
+
+def simulate(simulator: str, build_dir: Path, name: str, vfile: Path, test_module: str, config: Path,
+             testcase: str | None = None, waves: bool = False,
+             verilator_opt: str | None = VERILATOR_OPT, icarus_args: tuple[str, ...] = ()) -> Simulation:
+    """Build ``vfile`` (top module ``name``) on ``simulator`` in ``build_dir`` and run the cocotb
+    ``test_module`` on it, the run configuration file ``config`` named in :data:`ENV_CONFIG`;
+    does not raise on test failures (they are in the returned tests). ``icarus_args``: more
+    iverilog arguments (after the runner's own)."""
+    from cocotb_tools.runner import get_runner
+
+    sources, build_args, env = _simulator_settings(simulator, build_dir, name, vfile, waves, verilator_opt)
+    if simulator == "icarus":
+        build_args = [*build_args, *icarus_args]
+    xml = build_dir / "results.xml"
+    exit_code = 0
+    with _env(**env):
+        r = get_runner(simulator)
+        t0 = time.monotonic()
+        # Icarus: our own VCD dump module, not cocotb's FST one (waves stays False for it)
+        r.build(sources=sources, hdl_toplevel=name, build_dir=build_dir, build_args=build_args,
+                timescale=("1ns", "1ps"), always=True, waves=waves and simulator == "verilator")
+        t1 = time.monotonic()
+        try:
+            # under pytest the cocotb runner calls sys.exit() on a failing test; we report instead
+            r.test(hdl_toplevel=name, test_module=test_module, build_dir=build_dir, test_dir=build_dir,
+                   results_xml=str(xml), extra_env={ENV_CONFIG: str(config)}, testcase=testcase,
+                   waves=waves and simulator == "verilator")
+        except SystemExit as e:
+            exit_code = e.code if isinstance(e.code, int) else 1
+        t2 = time.monotonic()
+    wave_file = None
+    if waves:
+        wave_file = build_dir / (f"{name}.vcd" if simulator == "icarus" else "dump.vcd")
+    return Simulation(_parse_results(xml), xml, t1 - t0, t2 - t1, exit_code or 0, wave_file)
+
+
 def run(plan_path, period: int, simulator: str, build_dir, *, manifest=None, waves: bool = False,
         seed: int = 1, n_random: int | None = None, latency: int | None = None,
         testcase: str | None = None, test_module: str = TEST_MODULE, name: str | None = None,
@@ -376,8 +422,6 @@ def run(plan_path, period: int, simulator: str, build_dir, *, manifest=None, wav
         ``LegCore`` or a ``RobotCore``; None: the pipelined ``LegCore(plan, period)``.
     initiation_interval : initiation interval told to the bench instead of the manifest's.
     """
-    from cocotb_tools.runner import get_runner
-
     if simulator not in SIMULATORS:
         raise ValueError(f"simulator must be one of {SIMULATORS}, not {simulator!r}")
     ok, why = simulator_available(simulator)
@@ -393,27 +437,7 @@ def run(plan_path, period: int, simulator: str, build_dir, *, manifest=None, wav
     ii = man["initiation_interval"]
     n_random = default_n_random(ii) if n_random is None else n_random
     config = RunConfig(str(man_path), str(plan_used), seed, n_random, tests).write(build_dir / "bench.json")
-    sources, build_args, env = _simulator_settings(simulator, build_dir, name, vfile, waves, verilator_opt)
-    xml = build_dir / "results.xml"
-    exit_code = 0
-    with _env(**env):
-        r = get_runner(simulator)
-        t0 = time.monotonic()
-        # Icarus: our own VCD dump module, not cocotb's FST one (waves stays False for it)
-        r.build(sources=sources, hdl_toplevel=name, build_dir=build_dir, build_args=build_args,
-                timescale=("1ns", "1ps"), always=True, waves=waves and simulator == "verilator")
-        t1 = time.monotonic()
-        try:
-            # under pytest the cocotb runner calls sys.exit() on a failing test; we report instead
-            r.test(hdl_toplevel=name, test_module=test_module, build_dir=build_dir, test_dir=build_dir,
-                   results_xml=str(xml), extra_env={ENV_CONFIG: str(config)}, testcase=testcase,
-                   waves=waves and simulator == "verilator")
-        except SystemExit as e:
-            exit_code = e.code if isinstance(e.code, int) else 1
-        t2 = time.monotonic()
-    wave_file = None
-    if waves:
-        wave_file = build_dir / (f"{name}.vcd" if simulator == "icarus" else "dump.vcd")
-    return Result(simulator, build_dir, xml, _parse_results(xml), man["latency_cycles"], t1 - t0, t2 - t1,
-                  exit_code or 0, wave_file, ii, "robot" if "period_start" in man else "leg", man["legs"],
+    sim = simulate(simulator, build_dir, name, vfile, test_module, config, testcase, waves, verilator_opt)
+    return Result(simulator, build_dir, sim.results_xml, sim.tests, man["latency_cycles"], sim.build_s, sim.test_s,
+                  sim.exit_code, sim.waves, ii, "robot" if "period_start" in man else "leg", man["legs"],
                   n_random, man["stream_rule"], man_path)

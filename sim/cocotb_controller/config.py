@@ -1,0 +1,88 @@
+"""What a cocotb run of the controller bench is told (no cocotb import, so the runner can write it).
+
+The runner (:func:`ikseries.sim.controller_runner.run_controller`) exports a
+:class:`~ikseries.hdl.controller.RobotController`, writes a :class:`ControllerConfig` JSON with
+what the bench cannot read off the pins (the plan, the shape, the divisor, the identity) and
+names it in the same one environment variable as the leg bench,
+:data:`~ikseries.sim.cocotb_leg.config.ENV_CONFIG`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+
+from ..cocotb_leg.config import ENV_CONFIG
+
+__all__ = ["TESTS", "ControllerConfig"]
+
+#: the cocotb tests of :mod:`ikseries.sim.cocotb_controller.tests`
+TESTS = ("test_identity_and_status", "test_move_leg", "test_move_legs", "test_speed_limit",
+         "test_timed_move", "test_failsafe", "test_fuzz")
+
+
+@dataclasses.dataclass(frozen=True)
+class ControllerConfig:
+    """One run of the controller bench.
+
+    Attributes
+    ----------
+    plan : str
+        Path of the plan JSON the controller was built from (the golden model's input).
+    legs, period, clock_hz, divisor : int
+        The controller's legs, PWM period (cycles), identity clock and UART divisor.
+    name : str
+        Robot name of the identity answer.
+    manifest : str
+        The identity answer's manifest bytes, as hex.
+    seed : int
+        Seed of the fuzz stream.
+    fuzz_bytes : int
+        Bytes of mixed traffic the fuzz test sends.
+    tests : tuple of str, or None
+        The selected tests (None: all).
+    """
+    plan: str
+    legs: int
+    period: int
+    clock_hz: int
+    divisor: int
+    name: str
+    manifest: str
+    seed: int = 1
+    fuzz_bytes: int = 300
+    tests: tuple[str, ...] | None = None
+
+    def __post_init__(self):
+        for what in ("legs", "period", "clock_hz", "divisor", "fuzz_bytes"):
+            v = getattr(self, what)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{what} must be a positive integer, not {v!r}")
+        if self.tests is not None and not set(self.tests) <= set(TESTS):
+            raise ValueError(f"tests must be names from {', '.join(TESTS)}, not {self.tests!r}")
+
+    @property
+    def manifest_bytes(self) -> bytes:
+        return bytes.fromhex(self.manifest)
+
+    def write(self, path) -> Path:
+        path = Path(path)
+        rec = dataclasses.asdict(self)
+        rec["tests"] = None if self.tests is None else list(self.tests)
+        path.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
+        return path
+
+    @classmethod
+    def read(cls, path) -> "ControllerConfig":
+        rec = json.loads(Path(path).read_text())
+        tests = rec.pop("tests")
+        return cls(**rec, tests=None if tests is None else tuple(tests))
+
+    @classmethod
+    def from_environment(cls) -> "ControllerConfig":
+        path = os.environ.get(ENV_CONFIG)
+        if not path:
+            raise RuntimeError(f"{ENV_CONFIG} is not set: start the bench with "
+                               "ikseries.sim.controller_runner.run_controller")
+        return cls.read(path)
