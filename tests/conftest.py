@@ -19,19 +19,29 @@ from helpers import shared_fit
 def pytest_addoption(parser):
     parser.addoption("--all-hashes", action="store_true",
                      help="check the Verilog hash of every recorded configuration (fits five more plans)")
+    parser.addoption("--long", action="store_true",
+                     help="also the long runs that repeat a check on a second simulator (the default "
+                          "suite stays within 10 minutes on 2 cores)")
+
+
+#: marker -> (option that runs it, reason it is skipped without)
+_OPTIONAL = {"all_hashes": ("--all-hashes", "needs --all-hashes (fits another plan)"),
+             "long": ("--long", "needs --long (a second simulator's long run)")}
 
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "all_hashes: runs only with --all-hashes (long fits)")
+    config.addinivalue_line("markers", "long: runs only with --long")
 
 
 def pytest_collection_modifyitems(config, items):
-    if config.getoption("--all-hashes"):
-        return
-    skip = pytest.mark.skip(reason="needs --all-hashes (fits another plan)")
-    for item in items:
-        if "all_hashes" in item.keywords:
-            item.add_marker(skip)
+    for marker, (option, reason) in _OPTIONAL.items():
+        if config.getoption(option):
+            continue
+        skip = pytest.mark.skip(reason=reason)
+        for item in items:
+            if marker in item.keywords:
+                item.add_marker(skip)
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -1,4 +1,4 @@
-"""cocotb tests of the exported robot controller at its pins, on Icarus and on Verilator.
+"""cocotb tests of the exported robot controller at its pins, on Icarus (and on Verilator with --long).
 
 One build per simulator of ``RobotController(small_plan, 2 legs, period 640, 48 MHz, divisor 4)``
 runs every test of :mod:`ikseries.sim.cocotb_controller.tests` (identity and status, move_leg,
@@ -17,7 +17,8 @@ from ikseries.sim.controller_runner import run_controller
 CLOCK, BAUD, PERIOD = 48_000_000, 12e6, 640     # divisor 4; the shortest period for 2 legs of 3 servos
 
 
-@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+# Verilator's run (a 40 s C++ build) with --long; bench/controller_fuzz.py runs it at length
+@pytest.mark.parametrize("simulator", ["icarus", pytest.param("verilator", marks=pytest.mark.long)])
 def test_controller_cocotb(simulator, small_plan_file, tmp_path_factory):
     _skip_unless_available(simulator)
     res = run_controller(small_plan_file, 2, PERIOD, CLOCK, BAUD, simulator,
