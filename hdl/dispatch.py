@@ -140,7 +140,7 @@ class Dispatcher(wiring.Component):
     ``stage_cycles + pass_cycles`` for the staging window and ``stage_cycles`` to stage and
     commit, ``stage_cycles = channels * (1 + target_cycles) + 2``), the header 1 cycle later.
     The widths reach the pins at the second period start after the commit at the latest (the
-    servo controller's latency). An answer byte is on ``answer_data`` 2 cycles after
+    servo controller's latency). An answer byte is on ``answer_data`` the cycle after
     ``answer_index`` names it. A request waits in the link while the previous answer's payload
     is still being sent.
 
