@@ -7,7 +7,7 @@ from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 
 from . import protocol as P
-from .answers import answer_bytes, field_value, has_targets, head_bytes, pack_answer
+from .answers import answer_byte_map, answer_bytes, answer_constant, has_targets, scalar_offsets
 from .bram import falling_edge_write_port
 from .servo_fields import ChannelField, FailsafeAction
 
@@ -15,25 +15,22 @@ __all__ = ["Dispatcher"]
 
 _C = {c.name: c for c in P.COMMANDS}
 _REASON = {name: i + 1 for i, (name, _) in enumerate(P.NACK_REASONS)}
-_STATUS_FIELDS = _C["status"].answer
-_CHANNEL_FIELDS = _C["channel_status"].answer
-
-
-def _field_word(fields, name: str) -> int:
-    """Index of answer field ``name`` in its payload counted in link counter words (the status
-    answer's counters are consecutive words of that size)."""
-    bits = 0
-    for f in fields:
-        if f.name == name:
-            assert bits % P.COUNTER_BITS == 0 and 8 * P.KINDS[f.kind][0] == P.COUNTER_BITS
-            return bits // P.COUNTER_BITS
-        bits += 8 * f.group_bytes(None)
-    raise ValueError(f"no answer field {name!r}")
-
-
-def _saturating_increment(m, counter, event):
-    with m.If(event & (counter != (1 << len(counter)) - 1)):
-        m.d.sync += counter.eq(counter + 1)
+#: the request field a parameter write carries as its value, and its servo field
+_WRITES = {"set_trim": ("trim", ChannelField.TRIM), "set_limits": ("max", ChannelField.MIN),
+           "set_speed": ("speed", ChannelField.SPEED), "set_accel": ("accel", ChannelField.ACCEL),
+           "set_home": ("pulse", ChannelField.HOME), "set_failsafe": ("periods", ChannelField.TIMEOUT),
+           "set_failsafe_action": ("action", ChannelField.FAILSAFE)}
+#: request fields that are pulse widths or periods of the servo controller (``width_bits`` wide)
+_WIDE = {"set_pulse": ("pulse",), "set_trim": ("trim",), "set_limits": ("min", "max"), "set_speed": ("speed",),
+         "set_accel": ("accel",), "set_home": ("pulse",), "set_failsafe": ("periods",)}
+#: answers the dispatcher builds in its scratch memory, in the order of their kind code
+_BUILT = (_C["status"].answer, _C["channel_status"].answer, P.NACK_FIELDS)
+_STATUS, _CHANNEL, _NACK = range(len(_BUILT))
+#: cycles to read one request field: the payload memory's latency, then a byte a cycle into
+#: the 32-bit field register (every field is at most a u32)
+_LOAD_CYCLES = 5
+#: cycles per coordinate: its load, then the two bound comparisons and the saturated store
+_COORD_CYCLES = _LOAD_CYCLES + 3
 
 
 class _Regs:
@@ -41,43 +38,55 @@ class _Regs:
 
     def __init__(self, d):
         self.cmd = Signal(8)
-        self.length = Signal(range(d._max_request + 1))
-        self.ra = Signal(range(d._max_request + 2))         # payload byte being read
-        self.args = Signal(8 * d._head)                     # the request's leading bytes
-        self.tgt = Signal(16 * d._coords)                   # one leg's target, as sent
-        self.legs = Signal(d._legs)                         # legs of a move still to do
+        self.ra = Signal(range(d._max_request + 1))         # next payload byte to read
+        self.bcnt = Signal(range(_LOAD_CYCLES))             # cycle of the field load
+        self.nb = Signal(range(5))                          # bytes of the field being loaded
+        self.sgn = Signal()                                 # ... and whether it is signed
+        self.step = Signal(range(4))                        # fields of the request loaded
+        self.val = Signal(32)                               # the field, extended to 32 bits
+        self.lim = Signal(signed(d._w + 1))                 # value of a parameter write
+        self.w_ch = Signal(range(d._channels))
+        self.w_more = Signal()                              # set_limits: MAX follows MIN
+        self.legs = Signal(d._legs)                         # legs of a move
         self.leg = Signal(range(d._legs + 1))
         self.j = Signal(range(d._servos))
+        self.k = Signal(range(d._coords))
         self.ch = Signal(range(d._channels + 1))
-        self.pending = Signal(d._channels)                  # channels with a staged width
-        self.mask = Signal(d._channels)                     # enable/relax channels
-        self.level = Signal()                               # enable (1) or relax (0)
-        self.moving, self.enabled = Signal(d._channels), Signal(d._channels)
+        self.tgt = [Signal(signed(16)) for _ in range(d._coords)]   # one leg's target, saturated
+        self.below, self.above, self.outside = Signal(), Signal(), Signal()
+        self.legs_phase = Signal()                          # the fields being read are coordinates
         self.move_time = Signal(d._time_bits)
-        self.w_ch = Signal(range(d._channels))
-        self.w_field = Signal(4)
-        self.w_value, self.w_then = Signal(signed(d._w + 1)), Signal(signed(d._w + 1))
-        self.w_more = Signal()                              # set_limits: MAX follows MIN
-        self.buf = Signal(8 * d._buf_bytes)                 # a computed answer's payload
-        self.ans_code = Signal(8)
-        self.ans_len = Signal(range(d._max_answer + 1))
-        self.ans_ident = Signal()                           # the payload is the identity constant
+        self.kind = Signal(range(len(_BUILT)))              # the answer being built
+        self.fid, self.fk = Signal(range(d._max_fields)), Signal(range(4))  # its field and byte
+        self.b = Signal(range(d._region))                   # its byte
+        self.settle = Signal()                              # a counter read is under way
+        self.unsupported = Signal()                         # NACK reason
+        self.nack, self.ident = Signal(), Signal()
+        self.ans_len = Signal(range(d._region + 1))
         self.sending = Signal()                             # answer payload still being pulled
+        self.rd_idx = Signal(range(d._region))              # answer byte the memory now shows
+        self.moving, self.enabled = Signal(d._channels), Signal(d._channels)
         self.uptime = Signal(32)
         self.since = Signal(range(d._period + 1))           # cycles since the last period start
         self.clamped = Signal(P.COUNTER_BITS)
-        self.cnt = Signal(range(len(P.RECEIVER_COUNTERS) + 1))   # link counter being read
+
+
+def _saturating_increment(m, counter, event):
+    with m.If(event & (counter != (1 << len(counter)) - 1)):
+        m.d.sync += counter.eq(counter + 1)
 
 
 class Dispatcher(wiring.Component):
     """Executes the link's requests (``docs/protocol.md``) on an IK core and a servo controller.
 
-    A request is read from the link's payload memory, checked, executed, then answered: an
-    acknowledgement, an answer, or NACK ``bad_value`` for a field out of range for this robot
-    (a channel, a leg, a leg or channel mask, a pulse, trim, speed, acceleration, home or
-    failsafe timeout that does not fit ``width_bits``, limits with min > max, an unknown
-    failsafe action). A NACKed request changes nothing. Every request taken pulses
-    ``keepalive``.
+    A request is read from the link's payload memory a field at a time (each into one 32-bit
+    register, zero- or sign-extended), checked, executed, then answered: an acknowledgement,
+    an answer, or NACK ``bad_value`` for a field out of range for this robot (a channel, a
+    leg, a leg or channel mask, a pulse, trim, speed, acceleration, home or failsafe timeout
+    that does not fit ``width_bits``, limits with min > max, an unknown failsafe action). A
+    NACKed request changes nothing. Every request taken pulses ``keepalive``. Requests arrive
+    at the line rate, thousands of cycles apart, so everything is byte-serial: one field
+    register, one comparator for the target bounds, answers built a byte a cycle in block RAM.
 
     Moves: each leg of a ``move_leg``/``move_legs`` target goes through the IK core, one leg at
     a time; a coordinate is saturated to the plan input's ``[lo, hi]`` first (``status`` counts
@@ -88,6 +97,9 @@ class Dispatcher(wiring.Component):
     channels of one request always change together, at one period start. Leg ``l`` servo ``j``
     is channel ``l * servos + j``. ``set_pulse`` takes the same path for one channel, so a
     move time applies to it as well.
+
+    One block RAM holds the width buffer, the answer being built (status, channel_status,
+    NACK) and the identity answer (its initial contents); the link pulls answer bytes from it.
 
     Parameters
     ----------
@@ -112,25 +124,30 @@ class Dispatcher(wiring.Component):
     write, target, commit, read, status, keepalive, busy, period_start
         To the servo controller's ports of the same names.
 
+    Reset state: idle, no answer pending, move time 0, counters (``uptime``, ``clamped``) 0.
+
     Latency
     -------
-    Cycles from ``request.valid`` to the answer header: identity, set_move_time: ``H + 2``
-    (``H`` payload bytes read, at most :func:`~ikseries.hdl.answers.head_bytes`); parameter
-    writes and enable/relax: ``H + 3`` plus a cycle per channel scanned, plus any wait for the
-    engine's pass (``pass_cycles`` at most); channel_status and status: ``H + 8`` cycles per
-    channel read, for status after ``len(RECEIVER_COUNTERS) + 1`` cycles reading the link's
-    counters (each as it was up to 10 cycles before); moves: per leg ``2 C + 3`` cycles, the core's latency and ``servos`` cycles,
-    then a wait of at most ``stage_cycles + pass_cycles`` for the staging window (the end of
-    a period, the pass) and ``stage_cycles`` to stage and commit (``stage_cycles = channels *
-    (1 + target_cycles) + 2``, the servo controller's ``target_cycles``); :meth:`move_cycles`
-    adds these up. The widths reach the pins at the second period start after the commit at
-    the latest (the servo controller's latency). A request
-    waits in the link while the previous answer's payload is still being sent.
+    Cycles from ``request.valid`` to the answer header, with ``F`` the request's scalar fields
+    read (``_LOAD_CYCLES + 1`` = 6 cycles each): identity 2, set_move_time ``2 + 6 F``;
+    parameter writes ``3 + 6 F`` (set_limits one more), enable/relax ``3 + 6 F`` plus a cycle
+    per channel, each plus any wait for the engine's pass (``pass_cycles`` at most);
+    channel_status ``2 + 6 F`` and the servo controller's read, then 2 cycles per answer byte;
+    status: for each channel a read of the servo controller, then 2 cycles per answer byte
+    (the link's counters read as they are then); a NACK ``2 + 6 F + 4``. Moves:
+    :meth:`move_cycles` to the commit strobe (per selected leg ``C`` coordinates of
+    ``_COORD_CYCLES`` = 8 cycles, the core's latency and ``servos`` cycles; a wait of at most
+    ``stage_cycles + pass_cycles`` for the staging window and ``stage_cycles`` to stage and
+    commit, ``stage_cycles = channels * (1 + target_cycles) + 2``), the header 1 cycle later.
+    The widths reach the pins at the second period start after the commit at the latest (the
+    servo controller's latency). An answer byte is on ``answer_data`` the cycle after
+    ``answer_index`` names it. A request waits in the link while the previous answer's payload
+    is still being sent.
 
     Throughput
     ----------
     One request at a time. A full ``move_legs`` takes at most ``move_cycles(legs)``, about
-    ``legs * (2 C + latency + servos + 3) + pass_cycles + 2 * stage_cycles`` cycles, far below
+    ``legs * (8 C + latency + servos + 2) + pass_cycles + 2 * stage_cycles`` cycles, far below
     the line time of its frame at the rates :func:`~ikseries.hdl.uart.uart_divisor` allows for
     a clock of tens of MHz (see ``tests/test_controller.py``, which measures it): the UART
     is the limit.
@@ -143,12 +160,12 @@ class Dispatcher(wiring.Component):
         self._time_bits = len(servo.target.payload.time)
         self._shape = P.Shape(legs, self._coords, self._channels)
         self._max_request = P.max_request_payload(self._shape)
-        self._head = head_bytes(self._shape)
-        self._identity = pack_answer(_C["identity"].answer, identity)
-        self._identity_len = len(self._identity) // 8
-        self._buf_bytes = max(answer_bytes(_STATUS_FIELDS), answer_bytes(_CHANNEL_FIELDS),
-                              answer_bytes(P.NACK_FIELDS))
-        self._max_answer = max(self._identity_len, self._buf_bytes)
+        self._identity = answer_constant(_C["identity"].answer, identity)
+        self._max_fields = max(len(f) for f in _BUILT)
+        # three regions of one size in the memory: widths, the answer being built, identity;
+        # an address is the region above the offset, so no adder
+        biggest = max([self._channels, len(self._identity)] + [answer_bytes(f) for f in _BUILT])
+        self._region = 1 << (biggest - 1).bit_length()
         # the pass starts at a period start, and may start between two targets: the whole group
         # (a read cycle and a target transfer per channel) and its commit strobe must fit before
         # the next period start, counted from the cycle STAGE_WAIT decides
@@ -176,234 +193,280 @@ class Dispatcher(wiring.Component):
 
     def move_cycles(self, legs: int) -> int:
         """Most cycles from ``request.valid`` of a move of ``legs`` legs to its commit strobe:
-        fetch and decode, each leg through the core (unselected legs a cycle each), a wait for
-        the staging window (it may just have closed: the rest of the period and a pass), and
-        the staging itself. A ``set_pulse`` is a move of no legs."""
-        per_leg = 2 * self._coords + 3 + self._core_latency + self._servos
-        return 5 + (self._legs - legs) + legs * per_leg + self._pass_cycles + 2 * self._stage_cycles
+        the command and the leg field, each leg through the core (unselected legs a cycle
+        each), a wait for the staging window (it may just have closed: the rest of the period
+        and a pass), and the staging itself. A ``set_pulse`` is a move of no legs."""
+        fetch = 2 + 2 * (_LOAD_CYCLES + 1)          # set_pulse's two fields, more than a leg mask
+        per_leg = 2 + self._coords * _COORD_CYCLES + self._core_latency + self._servos
+        return fetch + (self._legs - legs) + legs * per_leg + self._pass_cycles + 2 * self._stage_cycles
 
     def elaborate(self, platform):
         m = Module()
         r = _Regs(self)
-        m.submodules.widths = mem = Memory(shape=self._w, depth=self._channels, init=[])
+        m.submodules.mem = mem = Memory(shape=self._w, depth=3 * self._region,
+                                        init=[0] * (2 * self._region) + list(self._identity))
         wr, rd = falling_edge_write_port(m, mem), mem.read_port()
-        self._always(m, r)
-        m.d.comb += rd.addr.eq(r.ch)
+        self._always(m, r, rd)
         with m.FSM():
             self._receive_states(m, r)
-            with m.State("DECODE"):
-                self._decode(m, r, wr)
+            with m.State("CHECK"):
+                self._check(m, r, wr)
             self._move_states(m, r, wr)
-            self._stage_states(m, r, rd)
+            self._stage_states(m, r)
             self._write_states(m, r)
             self._read_states(m, r)
-            self._answer_states(m, r)
+            with m.State("BUILD"):
+                self._build(m, r, wr)
+            with m.State("ANSWER"):
+                m.d.comb += [self.answer.valid.eq(1), self.answer.payload.length.eq(r.ans_len),
+                             self.answer.payload.command.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT))]
+                with m.If(self.answer.ready):
+                    m.d.sync += r.sending.eq(r.ans_len != 0)
+                    m.next = "IDLE"
+        m.d.comb += self.target.payload.pulse.eq(rd.data)
         return m
 
+    def _region_addr(self, region: int, offset):
+        return Cat(offset[:(self._region - 1).bit_length()], Const(region, 2))
+
     # -- always on: counters, the answer payload, keepalive
-    def _always(self, m, r):
+    def _always(self, m, r, rd):
         m.d.sync += r.since.eq(Mux(self.period_start, 0, Mux(r.since == self._period, r.since, r.since + 1)))
         _saturating_increment(m, r.uptime, self.period_start)
         m.d.comb += self.keepalive.eq(self.request.valid & self.request.ready)
         idx = self.answer_index
-        m.d.comb += [self.answer_data.valid.eq(r.sending),
-                     self.answer_data.payload.eq(Mux(r.ans_ident, self._identity.word_select(idx, 8),
-                                                     r.buf.word_select(idx, 8)))]
+        # the read port serves the answer being sent or else the staging of widths; a byte is
+        # valid once the memory shows the one the link names (the index just moved: not yet)
+        shown = Signal()
+        m.d.sync += [r.rd_idx.eq(idx), shown.eq(r.sending)]
+        m.d.comb += [rd.addr.eq(Mux(r.sending, Mux(r.ident, self._region_addr(2, idx), self._region_addr(1, idx)),
+                                    r.ch)),
+                     self.answer_data.valid.eq(r.sending & shown & (r.rd_idx == idx)),
+                     self.answer_data.payload.eq(rd.data[:8])]
         with m.If(self.answer_data.valid & self.answer_data.ready & (idx == r.ans_len - 1)):
             m.d.sync += r.sending.eq(0)
 
     def _receive_states(self, m, r):
         with m.State("IDLE"):
             with m.If(self.request.valid & ~r.sending):
-                m.d.sync += [r.cmd.eq(self.request.payload.command), r.length.eq(self.request.payload.length),
-                             r.ra.eq(0)]
-                m.next = "FETCH"
-        with m.State("FETCH"):
-            # the leading bytes into args (a move's targets are read leg by leg later)
-            moves = Cat(*(r.cmd == c.code for c in P.COMMANDS if has_targets(c))).any()
-            n = Mux(moves, 1, r.length)
-            m.d.comb += self.rd_addr.eq(r.ra)
-            with m.If(r.ra != 0):
-                m.d.sync += r.args.word_select((r.ra - 1)[:len(r.ra)], 8).eq(self.rd_data)
-            with m.If(r.ra == n):
+                m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.w_ch.eq(0), r.nack.eq(0),
+                             r.ident.eq(0), r.unsupported.eq(0), r.bcnt.eq(0), r.legs_phase.eq(0)]
                 m.next = "DECODE"
-            with m.Else():
+        with m.State("DECODE"):
+            with m.Switch(r.cmd):
+                with m.Case(_C["identity"].code):
+                    m.d.comb += self.request.ready.eq(1)
+                    m.d.sync += [r.ident.eq(1), r.ans_len.eq(len(self._identity))]
+                    m.next = "ANSWER"
+                with m.Case(_C["status"].code):
+                    m.d.comb += self.request.ready.eq(1)
+                    m.d.sync += r.ch.eq(0)
+                    m.next = "STATUS_READ"
+                for c in P.COMMANDS:
+                    if scalar_offsets(c):
+                        with m.Case(c.code):
+                            self._load(m, r, c, 0)
+                with m.Default():   # the receiver passes request codes only: kept for a defined state
+                    m.d.sync += r.unsupported.eq(1)
+                    self._nack(m, r)
+        with m.State("LOAD"):
+            # a byte a cycle, the payload memory a cycle behind the address; the bytes past the
+            # field's end are its extension, so every check sees one 32-bit integer
+            m.d.comb += self.rd_addr.eq(r.ra)
+            with m.If(r.bcnt < r.nb):
                 m.d.sync += r.ra.eq(r.ra + 1)
+            fill = Mux(r.sgn & r.val[-1], 0xFF, 0)
+            with m.If(r.bcnt != 0):
+                m.d.sync += r.val.eq(Cat(r.val[8:], Mux(r.bcnt <= r.nb, self.rd_data, fill)))
+            m.d.sync += r.bcnt.eq(r.bcnt + 1)
+            with m.If(r.bcnt == _LOAD_CYCLES - 1):
+                m.d.sync += r.bcnt.eq(0)
+                with m.If(r.legs_phase):
+                    m.next = "CLAMP_LO"
+                with m.Else():
+                    m.next = "CHECK"
 
-    # -- answers
-    def _ack(self, m, r):
-        m.d.sync += [r.ans_code.eq(P.ANSWER_BIT | r.cmd), r.ans_len.eq(0), r.ans_ident.eq(0)]
-        m.next = "ANSWER"
+    def _load(self, m, r, cmd, i: int):
+        """Go and read the ``i``-th scalar field of ``cmd`` (fields are read in order)."""
+        _, nbytes, signed_ = list(scalar_offsets(cmd).values())[i]
+        m.d.sync += [r.nb.eq(nbytes), r.sgn.eq(signed_), r.step.eq(i)]
+        m.next = "LOAD"
 
-    def _nack(self, m, r, reason: str):
-        self._answer_buffer(m, r, P.NACK, P.NACK_FIELDS, {"request": r.cmd, "reason": _REASON[reason]})
-
-    def _answer_buffer(self, m, r, code, fields, values):
-        bits = pack_answer(fields, values)
-        m.d.sync += [r.buf.eq(bits), r.ans_code.eq(code), r.ans_len.eq(len(bits) // 8), r.ans_ident.eq(0)]
-        m.next = "ANSWER"
-
-    def _answer_states(self, m, r):
-        with m.State("ANSWER"):
-            m.d.comb += [self.answer.valid.eq(1), self.answer.payload.command.eq(r.ans_code),
-                         self.answer.payload.length.eq(r.ans_len)]
-            with m.If(self.answer.ready):
-                m.d.sync += r.sending.eq(r.ans_len != 0)
-                m.next = "IDLE"
-
-    # -- checking a request and starting its execution
-    def _decode(self, m, r, wr):
-        code = {name: c.code for name, c in _C.items()}
-        arg = lambda name, field: field_value(r.args, _C[name], field)  # noqa: E731
-        top = (1 << self._w) - 1
+    def _nack(self, m, r):
+        """Refuse the request (still offered by the link): build the NACK answer."""
         m.d.comb += self.request.ready.eq(1)
+        m.d.sync += r.nack.eq(1)
+        self._start_build(m, r, _NACK)
+
+    def _start_build(self, m, r, kind: int):
+        m.d.sync += [r.kind.eq(kind), r.fid.eq(0), r.fk.eq(0), r.b.eq(0), r.settle.eq(0)]
+        m.next = "BUILD"
+
+    def _ack(self, m, r):
+        m.d.sync += r.ans_len.eq(0)
+        m.next = "ANSWER"
+
+    # -- checking each field as it is read, then executing the request
+    def _checks(self, m, r):
+        """Each range check, once, on the field register (a field's kind and rule pick one)."""
+        v, top = r.val, self._w
+        named = {"channel": v < self._channels, "leg": v < self._legs,
+                 "leg_mask": (v != 0) & (v >> self._legs == 0), "channel_mask": v >> self._channels == 0,
+                 "failsafe_action": v <= max(FailsafeAction),
+                 # a signed width is in [-2**top, 2**top): its bits from top up are its sign
+                 "signed_width": (v[top:] == 0) | (v[top:] == (1 << (32 - top)) - 1),
+                 "width": v >> top == 0, "max": (v >> top == 0) & (r.lim.as_unsigned() <= v[:top + 1])}
+        out = {}
+        for name, expr in named.items():
+            out[name] = Signal(name=f"ok_{name}")
+            m.d.comb += out[name].eq(expr)
+        return out
+
+    def _field_ok(self, ok, cmd, name: str):
+        field = next(f for f in cmd.request if f.name == name)
+        if field.values is not None:
+            return ok[field.values]
+        if name not in _WIDE.get(cmd.name, ()):
+            return Const(1)
+        if cmd.name == "set_limits" and name == "max":
+            return ok["max"]
+        return ok["signed_width" if P.KINDS[field.kind][1] else "width"]
+
+    def _check(self, m, r, wr):
+        ok = self._checks(m, r)
         with m.Switch(r.cmd):
-            with m.Case(code["identity"]):
-                m.d.sync += [r.ans_code.eq(P.answer_code(_C["identity"])), r.ans_len.eq(self._identity_len),
-                             r.ans_ident.eq(1)]
-                m.next = "ANSWER"
-            with m.Case(code["status"]):
-                m.d.sync += [r.ch.eq(0), r.cnt.eq(0)]
-                m.next = "STATUS_COUNT"
-            with m.Case(code["channel_status"]):
-                self._channel_checked(m, r, arg("channel_status", "channel"), "CHANNEL_READ")
-            with m.Case(code["move_leg"]):
-                leg = arg("move_leg", "leg")
-                self._move_start(m, r, leg < self._legs, Const(1, self._legs) << leg[:max(1, (self._legs - 1).bit_length())])
-            with m.Case(code["move_legs"]):
-                mask = arg("move_legs", "legs")
-                self._move_start(m, r, (mask != 0) & (mask >> self._legs == 0), mask[:self._legs])
-            with m.Case(code["set_pulse"]):
-                ch, pulse = arg("set_pulse", "channel"), arg("set_pulse", "pulse")
-                with m.If((ch >= self._channels) | (pulse > top)):
-                    self._nack(m, r, "bad_value")
-                with m.Else():
-                    m.d.comb += [wr.en.eq(1), wr.addr.eq(ch), wr.data.eq(pulse)]
-                    m.d.sync += [r.pending.eq(0), r.pending.bit_select(ch[:len(r.w_ch)], 1).eq(1)]
-                    m.next = "STAGE_WAIT"
-            with m.Case(code["set_move_time"]):
-                m.d.sync += r.move_time.eq(arg("set_move_time", "periods"))
-                self._ack(m, r)
-            self._decode_writes(m, r, arg, code, top)
+            for c in P.COMMANDS:
+                names = list(scalar_offsets(c))
+                if not names:
+                    continue
+                with m.Case(c.code):
+                    with m.Switch(r.step):
+                        for i, name in enumerate(names):
+                            with m.Case(i):
+                                with m.If(~self._field_ok(ok, c, name)):
+                                    self._nack(m, r)
+                                with m.Else():
+                                    self._keep(m, r, c, name)
+                                    if i + 1 < len(names):
+                                        self._load(m, r, c, i + 1)
+                                    else:
+                                        self._execute(m, r, c, wr)
 
-    def _decode_writes(self, m, r, arg, code, top):
-        """The requests that become servo parameter writes."""
-        fields = {"set_trim": ("trim", ChannelField.TRIM), "set_speed": ("speed", ChannelField.SPEED),
-                  "set_accel": ("accel", ChannelField.ACCEL), "set_home": ("pulse", ChannelField.HOME),
-                  "set_failsafe_action": ("action", ChannelField.FAILSAFE)}
-        highest = {"set_trim": top, "set_failsafe_action": max(FailsafeAction)}
-        for name, (field, cf) in fields.items():
-            with m.Case(code[name]):
-                v = arg(name, field)
-                bad = (v > highest.get(name, top)) | (v < -(1 << self._w) if name == "set_trim" else 0)
-                self._write_checked(m, r, arg(name, "channel"), bad, cf, v)
-        with m.Case(code["set_limits"]):
-            lo, hi = arg("set_limits", "min"), arg("set_limits", "max")
-            self._write_checked(m, r, arg("set_limits", "channel"), (hi > top) | (lo > hi), ChannelField.MIN, lo,
-                                then=hi)
-        with m.Case(code["set_failsafe"]):
-            v = arg("set_failsafe", "periods")
-            self._write_checked(m, r, Const(0, 8), v > top, ChannelField.TIMEOUT, v)
-        for name, level in (("enable", 1), ("relax", 0)):
-            with m.Case(code[name]):
-                mask = arg(name, "channels")
-                with m.If(mask >> self._channels != 0):
-                    self._nack(m, r, "bad_value")
-                with m.Else():
-                    m.d.sync += [r.mask.eq(mask[:self._channels]), r.level.eq(level), r.ch.eq(0)]
-                    m.next = "MASK"
-        with m.Default():       # the receiver passes request codes only: kept for a defined state
-            self._nack(m, r, "unsupported")
+    def _keep(self, m, r, cmd, name: str):
+        """A checked field that later states read from its own register."""
+        if name == "channel":
+            m.d.sync += r.w_ch.eq(r.val[:len(r.w_ch)])
+        elif cmd.name == "set_limits" and name == "min":
+            m.d.sync += r.lim.eq(r.val[:len(r.lim)])
 
-    def _channel_checked(self, m, r, ch, state):
-        with m.If(ch >= self._channels):
-            self._nack(m, r, "bad_value")
-        with m.Else():
-            m.d.sync += r.w_ch.eq(ch)
-            m.next = state
-
-    def _write_checked(self, m, r, ch, bad, field, value, then=None):
-        with m.If((ch >= self._channels) | bad):
-            self._nack(m, r, "bad_value")
-        with m.Else():
-            m.d.sync += [r.w_ch.eq(ch), r.w_field.eq(field), r.w_value.eq(value), r.w_more.eq(then is not None)]
-            if then is not None:
-                m.d.sync += r.w_then.eq(then)
+    def _execute(self, m, r, cmd, wr):
+        name = cmd.name
+        if has_targets(cmd):        # its targets are still to be read: the request stays offered
+            legs = Const(1, self._legs) << r.val[:max(1, (self._legs - 1).bit_length())] if name == "move_leg" \
+                else r.val[:self._legs]
+            m.d.sync += [r.legs.eq(legs), r.leg.eq(0), r.ch.eq(0)]
+            m.next = "LEG_NEXT"
+            return
+        m.d.comb += self.request.ready.eq(1)
+        if name == "channel_status":
+            m.next = "CHANNEL_READ"
+        elif name == "set_pulse":
+            m.d.comb += [wr.en.eq(1), wr.addr.eq(r.w_ch), wr.data.eq(r.val)]
+            m.next = "STAGE_WAIT"
+        elif name == "set_move_time":
+            m.d.sync += r.move_time.eq(r.val)
+            self._ack(m, r)
+        elif name in ("enable", "relax"):
+            m.d.sync += [r.lim.eq(name == "enable"), r.ch.eq(0)]
+            m.next = "MASK"
+        else:
+            assert name in _WRITES, name
+            if name == "set_limits":
+                m.d.sync += r.w_more.eq(1)      # lim holds MIN, val MAX
+            else:
+                m.d.sync += [r.lim.eq(r.val[:len(r.lim)]), r.w_more.eq(0)]
             m.next = "WRITE"
 
-    # -- moves: each leg of the mask through the core into the width buffer
-    def _move_start(self, m, r, ok, legs):
-        with m.If(ok):
-            m.d.comb += self.request.ready.eq(0)     # its targets are still to be read
-            m.d.sync += [r.legs.eq(legs), r.leg.eq(0), r.pending.eq(0), r.ra.eq(1)]
-            m.next = "LEG_NEXT"
-        with m.Else():
-            self._nack(m, r, "bad_value")
-
-    def _clamped_target(self, tgt):
-        """The target register saturated to the plan's input ranges, and whether it was outside."""
-        values, outside = {}, []
-        for k, inp in enumerate(self._plan.inputs):
-            v = tgt[16 * k:16 * (k + 1)].as_signed()
-            values[inp.name] = Mux(v < inp.lo, inp.lo, Mux(v > inp.hi, inp.hi, v))
-            outside.append((v < inp.lo) | (v > inp.hi))
-        return values, Cat(*outside).any()
+    # -- moves: each coordinate saturated, each leg of the mask through the core into the buffer
+    def _bound(self, m, r, high):
+        """The plan input bound of coordinate ``k``: its ``hi`` if ``high`` else its ``lo``."""
+        bnd = Signal(signed(17))
+        with m.Switch(r.k):
+            for k, inp in enumerate(self._plan.inputs):
+                with m.Case(k):
+                    m.d.comb += bnd.eq(Mux(high, inp.hi, inp.lo))
+        return bnd
 
     def _move_states(self, m, r, wr):
-        nbytes = 2 * self._coords
+        coord = next(f for f in _C["move_legs"].request if f.count == "coords")
         with m.State("LEG_NEXT"):
             with m.If(r.leg == self._legs):
                 m.d.comb += self.request.ready.eq(1)
                 m.next = "STAGE_WAIT"
             with m.Elif(r.legs.bit_select(r.leg, 1)):
-                m.d.sync += r.j.eq(0), r.ch.eq(0)
-                m.next = "LEG_FETCH"
+                m.d.sync += [r.k.eq(0), r.j.eq(0), r.outside.eq(0), r.legs_phase.eq(1),
+                             r.nb.eq(P.KINDS[coord.kind][0]), r.sgn.eq(P.KINDS[coord.kind][1])]
+                m.next = "LOAD"
             with m.Else():
-                m.d.sync += r.leg.eq(r.leg + 1)
-        with m.State("LEG_FETCH"):
-            # r.ch counts the target's bytes; the payload memory answers a cycle later
-            m.d.comb += self.rd_addr.eq(r.ra)
-            with m.If(r.ch != 0):
-                m.d.sync += r.tgt.word_select((r.ch - 1)[:len(r.ch)], 8).eq(self.rd_data)
-            with m.If(r.ch == nbytes):
+                m.d.sync += [r.leg.eq(r.leg + 1), r.ch.eq(r.ch + self._servos)]
+        # one subtractor against the bound: its sign says below, sign and zero say above
+        v = r.val[:17].as_signed()
+        diff = Signal(signed(18))
+        with m.State("CLAMP_LO"):
+            m.d.comb += diff.eq(v - self._bound(m, r, 0))
+            m.d.sync += r.below.eq(diff < 0)
+            m.next = "CLAMP_HI"
+        with m.State("CLAMP_HI"):
+            m.d.comb += diff.eq(v - self._bound(m, r, 1))
+            m.d.sync += r.above.eq((diff >= 0) & (diff != 0))
+            m.next = "CLAMP_SET"
+        with m.State("CLAMP_SET"):
+            bnd = self._bound(m, r, r.above)
+            saturated = Mux(r.below | r.above, bnd, v)
+            for k, t in enumerate(r.tgt):
+                with m.If(r.k == k):
+                    m.d.sync += t.eq(saturated)
+            m.d.sync += [r.outside.eq(r.outside | r.below | r.above), r.k.eq(r.k + 1)]
+            m.next = "LOAD"
+            with m.If(r.k == self._coords - 1):
                 m.next = "LEG_OFFER"
-            with m.Else():
-                m.d.sync += [r.ch.eq(r.ch + 1), r.ra.eq(r.ra + 1)]
         with m.State("LEG_OFFER"):
-            values, outside = self._clamped_target(r.tgt)
             m.d.comb += [self.ik_i.valid.eq(1), self.ik_i.payload.leg.eq(r.leg)]
-            m.d.comb += [self.ik_i.payload.target[n].eq(v) for n, v in values.items()]
-            _saturating_increment(m, r.clamped, self.ik_i.ready & outside)
+            m.d.comb += [self.ik_i.payload.target[inp.name].eq(t) for inp, t in zip(self._plan.inputs, r.tgt)]
+            _saturating_increment(m, r.clamped, self.ik_i.ready & r.outside)
             with m.If(self.ik_i.ready):
+                m.d.sync += r.legs_phase.eq(0)
                 m.next = "LEG_STORE"
         with m.State("LEG_STORE"):
-            channel = r.leg * self._servos + r.j
             with m.Switch(r.j):
                 for j, name in enumerate(self._servo_names):
                     with m.Case(j):
                         m.d.comb += wr.data.eq(self.ik_o.payload.widths[name])
-            m.d.comb += [wr.addr.eq(channel), wr.en.eq(self.ik_o.valid)]
+            m.d.comb += [wr.addr.eq(r.ch), wr.en.eq(self.ik_o.valid)]
             with m.If(self.ik_o.valid):
-                m.d.sync += [r.pending.bit_select(channel, 1).eq(1), r.j.eq(r.j + 1)]
+                m.d.sync += [r.ch.eq(r.ch + 1), r.j.eq(r.j + 1)]
                 with m.If(r.j == self._servos - 1):
                     m.d.comb += self.ik_o.ready.eq(1)
                     m.d.sync += r.leg.eq(r.leg + 1)
                     m.next = "LEG_NEXT"
 
     # -- staging the buffered widths, all in one window between passes
-    def _stage_states(self, m, r, rd):
+    def _stage_states(self, m, r):
         with m.State("STAGE_WAIT"):
             with m.If(~self.busy & (r.since < self._period - self._stage_cycles)):
-                m.d.sync += r.ch.eq(0)
+                m.d.sync += [r.ch.eq(0), r.j.eq(0), r.leg.eq(0)]
                 m.next = "STAGE_READ"
         with m.State("STAGE_READ"):
             m.next = "STAGE_SEND"
         with m.State("STAGE_SEND"):
-            pend = r.pending.bit_select(r.ch, 1)
+            # a move stages the channels of its legs, set_pulse its one channel
+            pend = Mux(r.cmd == _C["set_pulse"].code, r.ch == r.w_ch, r.legs.bit_select(r.leg, 1))
             m.d.comb += [self.target.valid.eq(pend), self.target.payload.channel.eq(r.ch),
-                         self.target.payload.pulse.eq(rd.data), self.target.payload.time.eq(r.move_time)]
+                         self.target.payload.time.eq(r.move_time)]
             with m.If(~pend | self.target.ready):
-                m.d.sync += r.ch.eq(r.ch + 1)
+                m.d.sync += [r.ch.eq(r.ch + 1), r.j.eq(r.j + 1)]
+                with m.If(r.j == self._servos - 1):
+                    m.d.sync += [r.j.eq(0), r.leg.eq(r.leg + 1)]
                 m.next = "STAGE_READ"
                 with m.If(r.ch == self._channels - 1):
                     m.next = "COMMIT"
@@ -414,19 +477,24 @@ class Dispatcher(wiring.Component):
     # -- parameter writes
     def _write_states(self, m, r):
         with m.State("WRITE"):
+            field = Signal(4)
+            with m.Switch(r.cmd):
+                for name, (_, cf) in _WRITES.items():
+                    with m.Case(_C[name].code):
+                        m.d.comb += field.eq(Mux(r.w_more, cf, ChannelField.MAX) if name == "set_limits" else cf)
             m.d.comb += [self.write.valid.eq(1), self.write.payload.channel.eq(r.w_ch),
-                         self.write.payload.field.eq(r.w_field), self.write.payload.value.eq(r.w_value)]
+                         self.write.payload.field.eq(field), self.write.payload.value.eq(r.lim)]
             with m.If(self.write.ready):
                 with m.If(r.w_more):
-                    m.d.sync += [r.w_more.eq(0), r.w_field.eq(ChannelField.MAX), r.w_value.eq(r.w_then)]
+                    m.d.sync += [r.w_more.eq(0), r.lim.eq(r.val[:len(r.lim)])]
                 with m.Else():
                     self._ack(m, r)
         with m.State("MASK"):
             with m.If(r.ch == self._channels):
                 self._ack(m, r)
-            with m.Elif(r.mask.bit_select(r.ch, 1)):
+            with m.Elif(r.val.bit_select(r.ch, 1)):
                 m.d.comb += [self.write.valid.eq(1), self.write.payload.channel.eq(r.ch),
-                             self.write.payload.field.eq(ChannelField.ENABLE), self.write.payload.value.eq(r.level)]
+                             self.write.payload.field.eq(ChannelField.ENABLE), self.write.payload.value.eq(r.lim)]
                 with m.If(self.write.ready):
                     m.d.sync += r.ch.eq(r.ch + 1)
             with m.Else():
@@ -440,35 +508,58 @@ class Dispatcher(wiring.Component):
             with m.If(self.read.ready):
                 m.next = "CHANNEL_WAIT"
         with m.State("CHANNEL_WAIT"):
-            m.d.comb += self.status.ready.eq(1)
+            # the status stays offered while its answer is built from it
             with m.If(self.status.valid):
-                self._answer_buffer(m, r, P.answer_code(_C["channel_status"]), _CHANNEL_FIELDS, {
-                    "channel": r.w_ch, "commanded": st.target, "current": st.current,
-                    "moving": st.moving, "enabled": st.enabled})
-        # the link's counters, read one a cycle (a block RAM), go straight to their place in the
-        # answer buffer: no second copy of them in registers
-        first = _field_word(_STATUS_FIELDS, P.RECEIVER_COUNTERS[0])
-        counted = {name: r.buf.word_select(first + i, P.COUNTER_BITS) for i, name in enumerate(P.RECEIVER_COUNTERS)}
-        with m.State("STATUS_COUNT"):
-            m.d.comb += self.counter_addr.eq(r.cnt)
-            with m.If(r.cnt != 0):
-                m.d.sync += r.buf.word_select((first - 1) + r.cnt, P.COUNTER_BITS).eq(self.counter_data)
-            with m.If(r.cnt == len(P.RECEIVER_COUNTERS)):
-                m.next = "STATUS_READ"
-            with m.Else():
-                m.d.sync += r.cnt.eq(r.cnt + 1)
+                self._start_build(m, r, _CHANNEL)
         with m.State("STATUS_READ"):
             with m.If(r.ch == self._channels):
-                self._answer_buffer(m, r, P.answer_code(_C["status"]), _STATUS_FIELDS, {
-                    "uptime": r.uptime, **counted, "clamped": r.clamped,
-                    "moving": r.moving, "enabled": r.enabled})
+                self._start_build(m, r, _STATUS)
             with m.Else():
                 m.d.comb += [self.read.valid.eq(1), self.read.payload.eq(r.ch)]
                 with m.If(self.read.ready):
                     m.next = "STATUS_WAIT"
         with m.State("STATUS_WAIT"):
+            # shifted in from the top: after the last channel, channel c is bit c
             m.d.comb += self.status.ready.eq(1)
             with m.If(self.status.valid):
-                m.d.sync += [r.moving.bit_select(r.ch, 1).eq(st.moving), r.enabled.bit_select(r.ch, 1).eq(st.enabled),
+                m.d.sync += [r.moving.eq(Cat(r.moving[1:], st.moving)), r.enabled.eq(Cat(r.enabled[1:], st.enabled)),
                              r.ch.eq(r.ch + 1)]
                 m.next = "STATUS_READ"
+
+    # -- answers built a byte at a time in the memory's answer region
+    def _sources(self, r):
+        """Per answer kind, the signal each answer field's bytes come from."""
+        st = self.status.payload
+        reason = Mux(r.unsupported, _REASON["unsupported"], _REASON["bad_value"])
+        return {_STATUS: {"uptime": r.uptime, **{n: self.counter_data for n in P.RECEIVER_COUNTERS},
+                          "clamped": r.clamped, "moving": r.moving, "enabled": r.enabled},
+                _CHANNEL: {"channel": r.w_ch, "commanded": st.target, "current": st.current,
+                           "moving": st.moving, "enabled": st.enabled},
+                _NACK: {"request": r.cmd, "reason": reason}}
+
+    def _build(self, m, r, wr):
+        byte, field_end, answer_end = Signal(8), Signal(), Signal()
+        sources = self._sources(r)
+        fid_bits = len(r.fid)
+        with m.Switch(Cat(r.fid, r.kind)):
+            for kind, fields in enumerate(_BUILT):
+                for i, f in enumerate(fields):
+                    n, sig = f.group_bytes(None), sources[kind][f.name]
+                    assert len(answer_byte_map((f,))) == n and len(sig) <= 8 * n, f.name
+                    with m.Case(kind << fid_bits | i):
+                        m.d.comb += [byte.eq(Cat(sig, Const(0, 8 * n - len(sig))).word_select(r.fk, 8)),
+                                     field_end.eq(r.fk == n - 1), answer_end.eq(i == len(fields) - 1)]
+                        if f.name in P.RECEIVER_COUNTERS:
+                            m.d.comb += self.counter_addr.eq(P.RECEIVER_COUNTERS.index(f.name))
+        # each byte is written a cycle after its field is selected: the counters are a memory
+        with m.If(~r.settle):
+            m.d.sync += r.settle.eq(1)
+        with m.Else():
+            m.d.comb += [wr.en.eq(1), wr.addr.eq(self._region_addr(1, r.b)), wr.data.eq(byte)]
+            m.d.sync += [r.settle.eq(0), r.b.eq(r.b + 1), r.fk.eq(r.fk + 1)]
+            with m.If(field_end):
+                m.d.sync += [r.fk.eq(0), r.fid.eq(r.fid + 1)]
+                with m.If(answer_end):
+                    m.d.comb += self.status.ready.eq(r.kind == _CHANNEL)
+                    m.d.sync += r.ans_len.eq(r.b + 1)
+                    m.next = "ANSWER"
