@@ -3,7 +3,7 @@ and the servo controller, its answer back to the link."""
 from __future__ import annotations
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
-from amaranth.lib import wiring
+from amaranth.lib import stream, wiring
 from amaranth.lib.memory import Memory
 
 from . import protocol as P
@@ -69,6 +69,19 @@ class _Regs:
         self.uptime = Signal(32)
         self.since = Signal(range(d._period + 1))           # cycles since the last period start
         self.clamped = Signal(P.COUNTER_BITS)
+        # the states' side of the ``write`` and ``target`` register slices
+        self.write = stream.Signature(d.write.payload.shape()).create(path=("w_in",))
+        self.target = stream.Signature(d.target.payload.shape()).create(path=("t_in",))
+
+
+def _register_slice(m, inner, outer):
+    """A stream register from ``inner`` (the states offer) to ``outer`` (the port): payload
+    and valid registered, so no path runs combinationally from the states into the servo
+    controller; a transfer a cycle (``inner.ready`` while the register is empty or being taken)."""
+    take = ~outer.valid | outer.ready
+    m.d.comb += inner.ready.eq(take)
+    with m.If(take):
+        m.d.sync += [outer.valid.eq(inner.valid), outer.payload.eq(inner.payload)]
 
 
 def _saturating_increment(m, counter, event):
@@ -84,7 +97,10 @@ class Dispatcher(wiring.Component):
     an answer, or NACK ``bad_value`` for a field out of range for this robot (a channel, a
     leg, a leg or channel mask, a pulse, trim, speed, acceleration, home or failsafe timeout
     that does not fit ``width_bits``, limits with min > max, an unknown failsafe action). A
-    NACKed request changes nothing. Every request taken pulses ``keepalive``. Requests arrive
+    NACKed request changes nothing. Every request taken pulses ``keepalive``. ``write``,
+    ``target`` and ``commit`` are registered (a register slice on each stream), so no path runs
+    combinationally from the dispatcher's states into the servo controller; an answer header
+    waits until the servo controller has taken all three. Requests arrive
     at the line rate, thousands of cycles apart, so everything is byte-serial: one field
     register, one comparator for the target bounds, answers built a byte a cycle in block RAM.
 
@@ -130,7 +146,7 @@ class Dispatcher(wiring.Component):
     -------
     Cycles from ``request.valid`` to the answer header, with ``F`` the request's scalar fields
     read (``_LOAD_CYCLES + 1`` = 6 cycles each): identity 2, set_move_time ``2 + 6 F``;
-    parameter writes ``3 + 6 F`` (set_limits one more), enable/relax ``3 + 6 F`` plus a cycle
+    parameter writes ``4 + 6 F`` (set_limits one more), enable/relax ``3 + 6 F`` plus a cycle
     per channel, each plus any wait for the engine's pass (``pass_cycles`` at most);
     channel_status ``2 + 6 F`` and the servo controller's read, then 2 cycles per answer byte;
     status: for each channel a read of the servo controller, then 2 cycles per answer byte
@@ -138,7 +154,7 @@ class Dispatcher(wiring.Component):
     :meth:`move_cycles` to the commit strobe (per selected leg ``C`` coordinates of
     ``_COORD_CYCLES`` = 8 cycles, the core's latency and ``servos`` cycles; a wait of at most
     ``stage_cycles + pass_cycles`` for the staging window and ``stage_cycles`` to stage and
-    commit, ``stage_cycles = channels * (1 + target_cycles) + 2``), the header 1 cycle later.
+    commit, ``stage_cycles = channels * (1 + target_cycles) + 3``), the header 1 cycle later.
     The widths reach the pins at the second period start after the commit at the latest (the
     servo controller's latency). An answer byte is on ``answer_data`` the cycle after
     ``answer_index`` names it. A request waits in the link while the previous answer's payload
@@ -168,8 +184,9 @@ class Dispatcher(wiring.Component):
         self._region = 1 << (biggest - 1).bit_length()
         # the pass starts at a period start, and may start between two targets: the whole group
         # (a read cycle and a target transfer per channel) and its commit strobe must fit before
-        # the next period start, counted from the cycle STAGE_WAIT decides
-        self._stage_cycles = self._channels * (1 + servo.target_cycles) + 2
+        # the next period start, counted from the cycle STAGE_WAIT decides; the last cycle is
+        # the commit register's (the port strobes the cycle after the COMMIT state)
+        self._stage_cycles = self._channels * (1 + servo.target_cycles) + 3
         self._pass_cycles, self._core_latency = servo.pass_cycles, core.latency
         ls, cs, ss = link.signature.members, core.signature.members, servo.signature.members
         super().__init__({
@@ -207,6 +224,9 @@ class Dispatcher(wiring.Component):
                                         init=[0] * (2 * self._region) + list(self._identity))
         wr, rd = falling_edge_write_port(m, mem), mem.read_port()
         self._always(m, r, rd)
+        for inner, outer in ((r.write, self.write), (r.target, self.target)):
+            _register_slice(m, inner, outer)
+        m.d.sync += self.commit.eq(0)
         with m.FSM():
             self._receive_states(m, r)
             with m.State("CHECK"):
@@ -218,12 +238,14 @@ class Dispatcher(wiring.Component):
             with m.State("BUILD"):
                 self._build(m, r, wr)
             with m.State("ANSWER"):
-                m.d.comb += [self.answer.valid.eq(1), self.answer.payload.length.eq(r.ans_len),
+                # only once the servo controller has taken every write, target and commit
+                done = ~self.write.valid & ~self.target.valid & ~self.commit
+                m.d.comb += [self.answer.valid.eq(done), self.answer.payload.length.eq(r.ans_len),
                              self.answer.payload.command.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT))]
-                with m.If(self.answer.ready):
+                with m.If(done & self.answer.ready):
                     m.d.sync += r.sending.eq(r.ans_len != 0)
                     m.next = "IDLE"
-        m.d.comb += self.target.payload.pulse.eq(rd.data)
+        m.d.comb += r.target.payload.pulse.eq(rd.data)
         return m
 
     def _region_addr(self, region: int, offset):
@@ -461,9 +483,9 @@ class Dispatcher(wiring.Component):
         with m.State("STAGE_SEND"):
             # a move stages the channels of its legs, set_pulse its one channel
             pend = Mux(r.cmd == _C["set_pulse"].code, r.ch == r.w_ch, r.legs.bit_select(r.leg, 1))
-            m.d.comb += [self.target.valid.eq(pend), self.target.payload.channel.eq(r.ch),
-                         self.target.payload.time.eq(r.move_time)]
-            with m.If(~pend | self.target.ready):
+            m.d.comb += [r.target.valid.eq(pend), r.target.payload.channel.eq(r.ch),
+                         r.target.payload.time.eq(r.move_time)]
+            with m.If(~pend | r.target.ready):
                 m.d.sync += [r.ch.eq(r.ch + 1), r.j.eq(r.j + 1)]
                 with m.If(r.j == self._servos - 1):
                     m.d.sync += [r.j.eq(0), r.leg.eq(r.leg + 1)]
@@ -471,7 +493,7 @@ class Dispatcher(wiring.Component):
                 with m.If(r.ch == self._channels - 1):
                     m.next = "COMMIT"
         with m.State("COMMIT"):
-            m.d.comb += self.commit.eq(1)
+            m.d.sync += self.commit.eq(1)       # registered: on the port the next cycle
             self._ack(m, r)
 
     # -- parameter writes
@@ -482,9 +504,9 @@ class Dispatcher(wiring.Component):
                 for name, (_, cf) in _WRITES.items():
                     with m.Case(_C[name].code):
                         m.d.comb += field.eq(Mux(r.w_more, cf, ChannelField.MAX) if name == "set_limits" else cf)
-            m.d.comb += [self.write.valid.eq(1), self.write.payload.channel.eq(r.w_ch),
-                         self.write.payload.field.eq(field), self.write.payload.value.eq(r.lim)]
-            with m.If(self.write.ready):
+            m.d.comb += [r.write.valid.eq(1), r.write.payload.channel.eq(r.w_ch),
+                         r.write.payload.field.eq(field), r.write.payload.value.eq(r.lim)]
+            with m.If(r.write.ready):
                 with m.If(r.w_more):
                     m.d.sync += [r.w_more.eq(0), r.lim.eq(r.val[:len(r.lim)])]
                 with m.Else():
@@ -493,9 +515,9 @@ class Dispatcher(wiring.Component):
             with m.If(r.ch == self._channels):
                 self._ack(m, r)
             with m.Elif(r.val.bit_select(r.ch, 1)):
-                m.d.comb += [self.write.valid.eq(1), self.write.payload.channel.eq(r.ch),
-                             self.write.payload.field.eq(ChannelField.ENABLE), self.write.payload.value.eq(r.lim)]
-                with m.If(self.write.ready):
+                m.d.comb += [r.write.valid.eq(1), r.write.payload.channel.eq(r.ch),
+                             r.write.payload.field.eq(ChannelField.ENABLE), r.write.payload.value.eq(r.lim)]
+                with m.If(r.write.ready):
                     m.d.sync += r.ch.eq(r.ch + 1)
             with m.Else():
                 m.d.sync += r.ch.eq(r.ch + 1)
