@@ -97,10 +97,11 @@ class Dispatcher(wiring.Component):
     an answer, or NACK ``bad_value`` for a field out of range for this robot (a channel, a
     leg, a leg or channel mask, a pulse, trim, speed, acceleration, home or failsafe timeout
     that does not fit ``width_bits``, limits with min > max, an unknown failsafe action). A
-    NACKed request changes nothing. Every request taken pulses ``keepalive``. ``write``,
-    ``target`` and ``commit`` are registered (a register slice on each stream), so no path runs
-    combinationally from the dispatcher's states into the servo controller; an answer header
-    waits until the servo controller has taken all three. Requests arrive
+    NACKed request changes nothing. Every request taken pulses ``keepalive`` (the cycle
+    after). ``write``, ``target`` (a register slice on each stream), ``commit`` and
+    ``keepalive`` are registered, so no path runs combinationally from the dispatcher's states
+    into the servo controller; an answer header waits until the servo controller has taken
+    the writes, targets and commit. Requests arrive
     at the line rate, thousands of cycles apart, so everything is byte-serial: one field
     register, one comparator for the target bounds, answers built a byte a cycle in block RAM.
 
@@ -255,7 +256,8 @@ class Dispatcher(wiring.Component):
     def _always(self, m, r, rd):
         m.d.sync += r.since.eq(Mux(self.period_start, 0, Mux(r.since == self._period, r.since, r.since + 1)))
         _saturating_increment(m, r.uptime, self.period_start)
-        m.d.comb += self.keepalive.eq(self.request.valid & self.request.ready)
+        # registered too: the request's acceptance depends on the field checks
+        m.d.sync += self.keepalive.eq(self.request.valid & self.request.ready)
         idx = self.answer_index
         # the read port serves the answer being sent or else the staging of widths; a byte is
         # valid once the memory shows the one the link names (the index just moved: not yet)
