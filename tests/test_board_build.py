@@ -60,3 +60,16 @@ def test_host_drives_the_build_behind_serve(board_build, tmp_path):
         want = [p * 0.5 for p in load_preset("hexapod").pulses_pu(70.0, 0.0, 0.0)]
         got = [w * 1e6 / clock for w in widths[6:9]]
         assert all(abs(g - w) <= 0.25 for g, w in zip(got, want)), (got, want)    # ±0.5 pu of 0.5 µs
+
+
+def test_hexapod_on_the_icebreaker_meets_its_clock(tmp_path):
+    """The issue's command: the hexapod's whole top on the iCE40UP5K at its 24 MHz clock."""
+    out = tmp_path / "build"
+    assert main(["build", "--preset", "hexapod", "--board", "icebreaker", "--no-synth", "--cocotb", "none",
+                 "-q", "-o", str(out)]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    b = rep["board"]
+    assert b["board"] == "icebreaker" and b["meets_clock"] and b["fmax_mhz"] >= 24.0
+    assert b["utilisation"]["LC"]["used"] <= b["utilisation"]["LC"]["available"]
+    assert (out / "bitstream" / "hexapod_core.bin").stat().st_size > 100_000
+    assert [c["pin"] for c in b["channels"][:2]] == ["pmod_0:1", "pmod_0:2"]
