@@ -17,7 +17,6 @@ process group, killed with the staging directory on any exception.
 """
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
 import os
@@ -26,12 +25,10 @@ import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
-from .buildrecord import BuildRecordError, OutputDirError, add_to_record, check_output_dir, recorded_files, \
-    remove_created
+from .buildrecord import BuildRecordError, OutputDirError, add_to_record, check_output_dir, recorded_files, staging
 from .constraints.boards import Board
 from .constraints.devices import PNR_DEVICES
 from .constraints.pll import ClockPlan
@@ -224,28 +221,6 @@ def _warm_tools(family: str, env: dict) -> None:
     warm(TOOL_ENV[packer], [env[packer], "--help" if family == "ecp5" else "-h"])
 
 
-@contextlib.contextmanager
-def _staging(outdir: Path, created: Path | None):
-    """A hidden directory in ``outdir`` (made with it if need be) for the build; removed on
-    leaving, and with it the directories made for it unless the body completed."""
-    try:
-        outdir.mkdir(parents=True, exist_ok=True)
-        stage = Path(tempfile.mkdtemp(prefix=".ikseries-bitstream-", dir=outdir))
-    except OSError as e:
-        remove_created(outdir, created)
-        raise BitstreamError(f"cannot create the output directory {str(outdir)!r}: {e.strerror}") from None
-    done = False
-    try:
-        yield stage
-        done = True
-    except OSError as e:
-        raise BitstreamError(f"cannot write the bitstream build to {str(outdir)!r}: {e}") from None
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
-        if not done:
-            remove_created(outdir, created)
-
-
 def _install(staged: dict[str, Path], outdir: Path) -> None:
     """Move the staged outputs into ``outdir``; recorded first, so an interrupted move leaves
     only files the record names."""
@@ -295,7 +270,7 @@ def build_bitstream(board: Board, design, clock_plan: ClockPlan, servo_pins=None
                           synth_opts="-dsp" if board.family == "ice40" else "",
                           nextpnr_opts=f"--report report.json --seed {NEXTPNR_SEED} --timing-allow-fail")
     names = output_names(board, name)
-    with _staging(outdir, created) as stage:
+    with staging(outdir, created, ".ikseries-bitstream-", BitstreamError, "bitstream build") as stage:
         build_dir = Path(plan.extract(stage / "build"))
         log = stage / "build.log"
         try:

@@ -1,16 +1,14 @@
 """``ikseries build``: robot description -> fit -> plan -> Verilog, manifest, report."""
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import shutil
-import tempfile
 from pathlib import Path
 
 from . import steps
 from .boardbuild import BITSTREAM_DIR, BoardBuildError, BoardSpec, board_build, controller_module, robot_on_board
-from .buildrecord import (BuildRecordError, OutputDirError, check_output_dir, recorded_files, remove_created,
+from .buildrecord import (BuildRecordError, OutputDirError, check_output_dir, recorded_files, staging,
                           write_record)
 from .constraints.timing import clock_sdc
 from .hdl.export import manifest, module_name
@@ -88,29 +86,6 @@ def _install(tmp: Path, out_dir: Path) -> list[str]:
     return written
 
 
-@contextlib.contextmanager
-def _staging(out_dir: Path, created: Path | None):
-    """A hidden temporary directory inside ``out_dir`` (made with it if need be) for the
-    build's files; removed on leaving, and with it the directories the build created unless
-    the body completed (a failure or an interrupt leaves nothing behind)."""
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=".ikseries-tmp-", dir=out_dir))
-    except OSError as e:
-        remove_created(out_dir, created)
-        raise BuildError(f"cannot create the output directory {str(out_dir)!r}: {e.strerror}") from None
-    done = False
-    try:
-        yield tmp
-        done = True
-    except OSError as e:
-        raise BuildError(f"cannot write the build output to {str(out_dir)!r}: {e}") from None
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-        if not done:
-            remove_created(out_dir, created)
-
-
 def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print,
           board: BoardSpec | None = None) -> BuildReport:
     """Run the whole pipeline (:mod:`ikseries.steps`) and write every artifact into ``out_dir``.
@@ -140,7 +115,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     try:
         fitted = steps.fit(robot, progress)
         core = steps.core(robot, fitted.plan, progress)
-        with _staging(out_dir, created) as tmp:
+        with staging(out_dir, created, ".ikseries-tmp-", BuildError, "build output") as tmp:
             report = _write_outputs(robot, fitted, core, tmp, synth=synth, vcd=vcd, cocotb=cocotb,
                                     progress=progress, board=board)
             written = _install(tmp, out_dir)

@@ -7,13 +7,16 @@ outputs in; ``ikseries report --pnr`` adds ``pnr.json`` to it.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 from .atomic import atomic_write
 
-__all__ = ["RECORD_NAME", "RECORD_FORMAT", "BuildRecordError", "OutputDirError", "check_output_dir", "remove_created", "recorded_files",
+__all__ = ["staging", "RECORD_NAME", "RECORD_FORMAT", "BuildRecordError", "OutputDirError", "check_output_dir", "remove_created", "recorded_files",
            "write_record", "add_to_record"]
 
 RECORD_NAME = ".ikseries-build.json"
@@ -110,3 +113,27 @@ def write_record(build_dir, names) -> None:
 def add_to_record(build_dir, *names: str) -> None:
     """Add ``names`` to the record of ``build_dir`` (created if missing)."""
     write_record(build_dir, recorded_files(build_dir) | set(names))
+
+
+@contextlib.contextmanager
+def staging(out_dir: Path, created: Path | None, prefix: str, error: type, what: str):
+    """A hidden temporary directory (``prefix``...) inside ``out_dir`` (made with it if need be)
+    for a build's files; removed on leaving, and with it the directories the build created
+    (``created``, from :func:`check_output_dir`) unless the body completed, so a failure or an
+    interrupt leaves nothing behind. An OSError becomes ``error`` naming ``what`` was written."""
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=prefix, dir=out_dir))
+    except OSError as e:
+        remove_created(out_dir, created)
+        raise error(f"cannot create the output directory {str(out_dir)!r}: {e.strerror}") from None
+    done = False
+    try:
+        yield tmp
+        done = True
+    except OSError as e:
+        raise error(f"cannot write the {what} to {str(out_dir)!r}: {e}") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if not done:
+            remove_created(out_dir, created)

@@ -9,7 +9,7 @@ import textwrap
 
 import pytest
 
-import ikseries.build as build_mod
+import ikseries.buildrecord as buildrecord_mod
 import ikseries.steps as steps_mod
 from ikseries.build import BuildError, build, planned_outputs
 from ikseries.buildrecord import RECORD_NAME, add_to_record, recorded_files
@@ -91,12 +91,12 @@ def test_rebuild_replaces_only_what_a_build_wrote(fast_fit, monkeypatch, tmp_pat
     (out / "pnr.json").write_text("user pnr")
     (out / "notes.txt").write_text("user notes")
     made_in = []
-    real_mkdtemp = build_mod.tempfile.mkdtemp
+    real_mkdtemp = buildrecord_mod.tempfile.mkdtemp     # the staging of every build
 
     def spy(*args, **kwargs):
         made_in.append(kwargs.get("dir"))
         return real_mkdtemp(*args, **kwargs)
-    monkeypatch.setattr(build_mod.tempfile, "mkdtemp", spy)
+    monkeypatch.setattr(buildrecord_mod.tempfile, "mkdtemp", spy)
     say = lambda m: None   # noqa: E731
     build(small_robot, out, synth=False, vcd=True, cocotb=[], progress=say)
     assert made_in == [out]
