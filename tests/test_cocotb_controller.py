@@ -26,3 +26,23 @@ def test_controller_cocotb(simulator, small_plan_file, tmp_path_factory):
     print(res.summary())
     assert set(res.tests) == set(TESTS), res.summary()
     assert res.ok, res.summary()
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_fuzz_traffic_counters_are_the_receiver_models_over_the_stream_sent(seed):
+    # the counters the fuzz test expects in its final status answer: a fresh receiver model fed
+    # exactly the bytes sent (the bad pieces before the resynchronising tail counted once)
+    import random
+
+    from ikseries.hdl import protocol as P
+    from ikseries.host.protocol import request_parser
+    from ikseries.sim.cocotb_controller.scene import HALF, REF
+    from ikseries.sim.cocotb_controller.stream import fuzz_traffic
+
+    shape = P.Shape(2, 3, 6)
+    box = [(r - h, r + h) for r, h in zip(REF, HALF)]
+    traffic = fuzz_traffic(random.Random(seed), shape, 3000, box, [(100, 400)] * shape.channels)
+    parser = request_parser(shape)
+    parser.feed(b"".join(traffic.segments))
+    assert traffic.counters == {k: v for k, v in parser.counters.items() if k != "garbage"}
+    assert traffic.nbytes == sum(map(len, traffic.segments))

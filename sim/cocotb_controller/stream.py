@@ -80,10 +80,10 @@ def fuzz_traffic(rng: random.Random, shape: P.Shape, nbytes: int, box, pulses) -
             segments.append(bytes(current))
             current = bytearray()
         after_bad = kind != "good" or (not frames and after_bad)
-    tail = bytes(current) + bytes(RESYNC) + encode("status", shape)
-    frames = parser.feed(tail)
+    resync = bytes(RESYNC) + encode("status", shape)
+    frames = parser.feed(resync)      # ``current`` is in the parser already, piece by piece
     assert [decode_request(c, p, shape).command for c, p in frames] == ["status"], \
         f"the resynchronising tail gave {frames}"
-    segments.append(tail)
+    segments.append(bytes(current) + resync)
     counters = {k: v for k, v in parser.counters.items() if k != "garbage"}
     return Traffic(segments, counters, resyncs, sum(map(len, segments)))
