@@ -1,9 +1,9 @@
-"""Yosys iCE40 counts of the robot controller for a hexapod (6 legs of the small plan's 3
-servos, 18 channels) and of its parts, and what it adds beyond its IK core (issue 13's budget:
-at most 600 logic cells on the iCE40UP5K for everything but the core).
+"""Yosys counts of the robot controller for a hexapod (6 legs of the small plan's 3 servos,
+18 channels) and of its parts, and what it adds beyond its IK core, per device family (the
+budget: at most 600 logic cells on the iCE40UP5K for everything but the core).
 
     python bench/controller_cells.py [--legs 6] [--clock 12e6] [--baud 1e6] [--period-us 20000]
-                                     [--tolerance-pu 4] [--workdir DIR]
+                                     [--tolerance-pu 4] [--families ice40 ecp5] [--workdir DIR]
                                      [--json docs/results/controller_cells.json]
 
 The core inside the controller leaves its own PWM bank unconnected (synthesis removes it), so
@@ -15,28 +15,19 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import runpy
 import tempfile
 from pathlib import Path
 
-from amaranth.back import verilog
-
+from ikseries.constraints.devices import FAMILIES
 from ikseries.fit.fitter import fit_robot
 from ikseries.hdl.controller import RobotController
 from ikseries.hdl.pwmbank import ServoPWMBank
 from ikseries.robot import load_preset
-from ikseries.synth import synth_counts
+from ikseries.synth import component_counts
 from ikseries.threads import single_threaded_blas
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
-
-
-def counts(component, name, workdir: Path) -> dict:
-    d = workdir / name
-    d.mkdir(parents=True, exist_ok=True)
-    (d / "top.v").write_text(verilog.convert(component, name="top", emit_src=False))
-    return synth_counts(d / "top.v", "top", ["ice40"], workdir=d)["ice40"]["counts"]
 
 
 def minus(a: dict, b: dict) -> dict:
@@ -50,6 +41,8 @@ def main(argv=None):
     ap.add_argument("--baud", type=float, default=1e6)
     ap.add_argument("--period-us", type=float, default=20000.0)
     ap.add_argument("--tolerance-pu", type=float, default=4.0, help="the fit's tolerance (a small plan)")
+    ap.add_argument("--families", nargs="+", choices=FAMILIES, default=["ice40", "ecp5"],
+                    help="Yosys targets of the device registry (default: the issue's two boards' families)")
     ap.add_argument("--workdir", type=Path)
     ap.add_argument("--json", default=FACTS["default_json"]("controller_cells"))
     a = ap.parse_args(argv)
@@ -64,18 +57,24 @@ def main(argv=None):
     parts = {"link": ctl.link, "dispatcher": ctl.dispatcher, "servo": servo, "core": core,
              "servo_bank": ServoPWMBank(period, ctl.width_bits, servo.channels, 1),
              "core_bank": ServoPWMBank(period, ctl.width_bits, a.legs, len(core.servos))}
+    designs = {"controller": ctl, **parts}
     with tempfile.TemporaryDirectory() as tmp:
         wd = a.workdir or Path(tmp)
-        got = {"controller": counts(ctl, "controller", wd)}
-        got.update({name: counts(c, name, wd) for name, c in parts.items()})
-    core_used = minus(got["core"], got["core_bank"])
+        got = {name: component_counts(c, wd / name, a.families) for name, c in designs.items()}
+    per_family = {}
+    for fam in a.families:
+        c = {name: got[name][fam] for name in designs}
+        core_used = minus(c["core"], c["core_bank"])
+        per_family[fam] = {**c, "servo_without_bank": minus(c["servo"], c["servo_bank"]),
+                           "core_without_bank": core_used, "beyond_core": minus(c["controller"], core_used)}
     payload = {"legs": a.legs, "channels": servo.channels, "width_bits": ctl.width_bits,
                "period": period, "clock_hz": a.clock, "divisor": ctl.divisor,
-               "pass_cycles": servo.pass_cycles, "init_cycles": servo.init_cycles, **got,
-               "servo_without_bank": minus(got["servo"], got["servo_bank"]),
-               "core_without_bank": core_used,
-               "beyond_core": minus(got["controller"], core_used)}
-    print(json.dumps(payload, indent=1))
+               "pass_cycles": servo.pass_cycles, "init_cycles": servo.init_cycles, "families": per_family}
+    for fam, c in per_family.items():
+        print(f"\n{fam}: {'design':<22} {'LUT':>6} {'FF':>6} {'carry':>6} {'DSP':>4} {'BRAM':>5}")
+        for name in (*designs, "servo_without_bank", "core_without_bank", "beyond_core"):
+            print(f"{'':{len(fam) + 2}}{name:<22} " + " ".join(f"{c[name].get(k, 0):>{w}}" for k, w in
+                                                             (("LUT", 6), ("FF", 6), ("carry", 6), ("DSP", 4), ("BRAM", 5))))
     print(f"wrote {FACTS['write_result'](a.json, payload, run)}")
 
 

@@ -264,6 +264,22 @@ def controller_fuzz(res: dict) -> list[str]:
                      num(res["simulation_s"], ".1f"))])]
 
 
+def link_rate(res: dict) -> list[str]:
+    """Lines of the ``bench/link_rate.py`` section from its JSON ``res``."""
+    s, r = res["summary"] or {}, res["rates"] or {}
+    verdict = "passed" if res["passed"] else f"FAILED: {res['message']}"
+    return [f"{res['legs']} legs, {s.get('channels', '–')} channels, {res['clock_hz'] / 1e6:g} MHz, "
+            f"{res['baud']:,.0f} baud (UART divisor {s.get('divisor', '–')}), PWM period {res['period']:,} cycles, "
+            f"{res['simulator']}: {verdict}. Full `move_legs` requests streamed back to back, then one at a "
+            "time waiting for each answer; every one answered, none dropped, the pins then checked against "
+            f"the model. Target: {res['target_hz']:,} full updates a second.", "",
+            *table(("frame bytes", "line cycles", "streamed: cycles/update", "updates/s", "one at a time: "
+                    "cycles/update", "updates/s"),
+                   [(s.get("frame_bytes", "–"), s.get("line_cycles", "–"), num(s.get("streamed_cycles"), ".1f"),
+                     num(r.get("streamed_hz"), ".0f"), num(s.get("lockstep_cycles"), ".1f"),
+                     num(r.get("lockstep_hz"), ".0f"))])]
+
+
 def servo_cells(res: dict) -> list[str]:
     """Lines of the ``bench/servo_cells.py`` section from its JSON ``res``."""
     rows = [(name, *(res[key].get(k, 0) for k in ("LUT", "FF", "carry", "BRAM")))
@@ -275,15 +291,17 @@ def servo_cells(res: dict) -> list[str]:
 
 
 def controller_cells(res: dict) -> list[str]:
-    """Lines of the ``bench/controller_cells.py`` section from its JSON ``res``."""
+    """Lines of the ``bench/controller_cells.py`` section from its JSON ``res``: a table per family."""
     names = (("RobotController", "controller"), ("Link", "link"), ("Dispatcher", "dispatcher"),
              ("ServoController (with its PWM bank)", "servo"), ("ServoController without its bank", "servo_without_bank"),
              ("RobotCore without its unused bank", "core_without_bank"), ("beyond the core", "beyond_core"))
-    rows = [(name, *(res[key].get(k, 0) for k in ("LUT", "FF", "carry", "BRAM"))) for name, key in names]
-    return [f"{res['legs']} legs, {res['channels']} channels, {res['width_bits']}-bit widths, period "
-            f"{res['period']:,} cycles, UART divisor {res['divisor']}; Yosys `synth_ice40 -dsp` counts "
-            "(the budget: 600 logic cells beyond the core).", "",
-            *table(("design", "LUT", "FF", "carry", "BRAM"), rows)]
+    lines = [f"{res['legs']} legs, {res['channels']} channels, {res['width_bits']}-bit widths, period "
+             f"{res['period']:,} cycles, UART divisor {res['divisor']}; Yosys counts per family (`synth_ice40 "
+             "-dsp`, `synth_ecp5`; the budget: 600 iCE40 logic cells beyond the core).", ""]
+    for fam, c in res["families"].items():
+        rows = [(name, *(c[key].get(k, 0) for k in ("LUT", "FF", "carry", "DSP", "BRAM"))) for name, key in names]
+        lines += [f"**{fam}**", "", *table(("design", "LUT", "FF", "carry", "DSP", "BRAM"), rows), ""]
+    return lines[:-1]
 
 
 SECTIONS = {
@@ -312,8 +330,10 @@ SECTIONS = {
                   "long seeded mix of good, corrupted and garbage bytes; Yosys counts of the link.", link_fuzz),
     "controller_fuzz": ("Robot controller: fuzz at the UART pin", "The exported controller in cocotb under a "
                         "long seeded mix of good, corrupted and garbage bytes.", controller_fuzz),
+    "link_rate": ("Robot controller: link rate", "Full hexapod updates through the exported controller "
+                  "at its UART pin.", link_rate),
     "servo_cells": ("Servo controller area", "Yosys iCE40 counts of the per-channel servo controller "
                     "(speed, acceleration, timed moves, failsafe) for a hexapod.", servo_cells),
-    "controller_cells": ("Robot controller area", "Yosys iCE40 counts of the hexapod robot controller, "
+    "controller_cells": ("Robot controller area", "Yosys counts of the hexapod robot controller, "
                          "its parts and what it adds beyond its IK core.", controller_cells),
 }

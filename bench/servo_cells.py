@@ -12,21 +12,17 @@ import runpy
 import tempfile
 from pathlib import Path
 
-from amaranth.back import verilog
 from amaranth.lib import data
 
 from ikseries.hdl.pwmbank import ServoPWMBank
 from ikseries.hdl.servo import ServoController
-from ikseries.synth import synth_counts
+from ikseries.synth import component_counts
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
 
-def counts(core, name, workdir: Path) -> dict:
-    d = workdir / name
-    d.mkdir(parents=True, exist_ok=True)
-    (d / "top.v").write_text(verilog.convert(core, name="top", emit_src=False))
-    return synth_counts(d / "top.v", "top", ["ice40"], workdir=d)["ice40"]["counts"]
+def counts(component, name, workdir: Path) -> dict:
+    return component_counts(component, workdir / name)["ice40"]
 
 
 def main(argv=None):

@@ -48,7 +48,7 @@ from typing import Callable, Iterable, Sequence
 from .constraints import devices
 from .wasm_cache import warm_yosys
 
-__all__ = ["SynthError", "categorise", "synth_counts", "yosys_command"]
+__all__ = ["SynthError", "categorise", "synth_counts", "component_counts", "yosys_command"]
 
 
 class SynthError(RuntimeError):
@@ -217,3 +217,15 @@ def synth_counts(verilog_path: str | os.PathLike | Sequence[str | os.PathLike], 
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
     return {t: r for t, r in zip(targets, results)}
+
+
+def component_counts(component, workdir, targets: Iterable[str] = ("ice40",)) -> dict[str, dict]:
+    """``{target: counts}`` of an Amaranth ``component`` (its ports the top's), exported as
+    ``top`` into ``workdir/top.v`` and synthesised there per target (see :func:`synth_counts`)."""
+    from amaranth.back import verilog
+
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / "top.v").write_text(verilog.convert(component, name="top", emit_src=False))
+    got = synth_counts(workdir / "top.v", "top", targets, workdir=workdir)
+    return {t: r["counts"] for t, r in got.items()}

@@ -19,7 +19,7 @@ __all__ = ["TESTS", "ControllerConfig"]
 
 #: the cocotb tests of :mod:`ikseries.sim.cocotb_controller.tests`
 TESTS = ("test_identity_and_status", "test_move_leg", "test_move_legs", "test_speed_limit",
-         "test_timed_move", "test_failsafe", "test_fuzz")
+         "test_timed_move", "test_failsafe", "test_fuzz", "test_link_rate")
 
 
 @dataclasses.dataclass(frozen=True)

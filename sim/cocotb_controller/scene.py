@@ -28,6 +28,8 @@ class Scene:
         self.trims = [MARGIN - l for l in lo] * legs
         #: set_pulse values (before the trim) whose pins stay inside the period
         self.pulses = [(l, h) for l, h in zip(lo, hi)] * legs
+        #: whether every golden width of the box leaves room before the period's end untrimmed
+        self.fits_untrimmed = max(hi) + ROOM < period
 
     def corner(self, which: int):
         """Corner ``which`` (0 .. 7) of the box."""

@@ -15,6 +15,7 @@ from pathlib import Path
 import cocotb
 
 from ikseries.hdl import protocol as P
+from ikseries.host.protocol import encode
 
 from ..cocotb_leg.config import ENV_CONFIG
 from .checker import first_period_with
@@ -23,12 +24,14 @@ from .scene import Scene, final_checks
 from .stream import fuzz_traffic
 
 
-async def _ready(dut, test: str, trims: bool = True):
+async def _ready(dut, test: str, trims: bool | None = True):
+    """Reset, PWM phase found, the scene's trims set (``trims`` None: only where the box's
+    golden widths do not fit the period untrimmed; a long period saves the requests)."""
     host = Host(dut, test)
     await host.start()
     await host.find_phase(0, host.period // 4)
     scene = Scene(host.plan, host.config.legs, host.period)
-    if trims:
+    if trims or (trims is None and not scene.fits_untrimmed):
         await scene.set_trims(host)
     return host, scene
 
@@ -180,3 +183,39 @@ async def test_fuzz(dut):
     dut._log.info(f"fuzz: {summary}")
     # the bench script's figures, next to the run configuration
     Path(os.environ[ENV_CONFIG]).with_name("fuzz.json").write_text(json.dumps(summary) + "\n")
+
+
+#: full move_legs requests the link-rate test sends, streamed and then one answer at a time
+RATE_FRAMES = 8
+
+
+def _full_moves(host, scene, n: int) -> list[bytes]:
+    legs = host.shape.legs
+    return [encode("move_legs", host.shape, legs=(1 << legs) - 1,
+                   targets=[scene.corner((k + leg) % 8) for leg in range(legs)]) for k in range(n)]
+
+
+@cocotb.test()
+async def test_link_rate(dut):
+    """Full move_legs requests (every leg) back to back at the line rate, then one at a time
+    waiting for each answer: every one answered, none dropped, the last one's widths on the pins;
+    cycles per update measured both ways (``link_rate.json`` beside the run configuration)."""
+    host, scene = await _ready(dut, "test_link_rate", trims=None)
+    frames = _full_moves(host, scene, 2 * RATE_FRAMES)
+    streamed = await host.send(b"".join(frames[:RATE_FRAMES]), aligned=False)
+    t0 = host.cycle()
+    lockstep = [(await host.send(f, aligned=False))[0] for f in frames[RATE_FRAMES:]]
+    lock_cycles = (lockstep[-1].end - t0) / len(lockstep)
+    stream_cycles = (streamed[-1].end - streamed[0].end) / (len(streamed) - 1)
+    assert all(not a.message.nack for a in streamed + lockstep), [a.message for a in streamed + lockstep]
+    status = await host.request("status")
+    assert all(status.fields[n] == 0 for n, _ in P.ERROR_COUNTERS), status
+    await host.periods(3)
+    final_checks(host, unaligned=len(host.acked) - 1)      # the pins after the last move and the status
+    line = host.tx.byte_cycles(len(frames[0]))
+    assert stream_cycles < 1.05 * line, f"streamed updates every {stream_cycles} cycles, the line takes {line}"
+    summary = {"frame_bytes": len(frames[0]), "line_cycles": line, "streamed_cycles": stream_cycles,
+               "lockstep_cycles": lock_cycles, "updates": 2 * RATE_FRAMES, "channels": host.shape.channels,
+               "divisor": host.config.divisor, "clock_hz": host.config.clock_hz}
+    dut._log.info(f"link rate: {summary}")
+    Path(os.environ[ENV_CONFIG]).with_name("link_rate.json").write_text(json.dumps(summary) + "\n")
