@@ -294,12 +294,13 @@ def controller_cells(res: dict) -> list[str]:
     """Lines of the ``bench/controller_cells.py`` section from its JSON ``res``: a table per family."""
     names = (("RobotController", "controller"), ("Link", "link"), ("Dispatcher", "dispatcher"),
              ("ServoController (with its PWM bank)", "servo"), ("ServoController without its bank", "servo_without_bank"),
-             ("RobotCore without its unused bank", "core_without_bank"), ("beyond the core", "beyond_core"))
+             ("RobotCore without its unused bank", "core_without_bank"), ("beyond the bare core", "beyond_core"),
+             ("beyond the core with its own PWM bank", "beyond_core_with_bank"))
     lines = [f"{res['legs']} legs, {res['channels']} channels, {res['width_bits']}-bit widths, period "
              f"{res['period']:,} cycles, UART divisor {res['divisor']}; Yosys counts per family (`synth_ice40 "
              "-dsp`, `synth_ecp5`; the budget: 600 iCE40 logic cells beyond the core).", ""]
     for fam, c in res["families"].items():
-        rows = [(name, *(c[key].get(k, 0) for k in ("LUT", "FF", "carry", "DSP", "BRAM"))) for name, key in names]
+        rows = [(name, *(c[key].get(k, 0) if key in c else "–" for k in ("LUT", "FF", "carry", "DSP", "BRAM"))) for name, key in names]
         lines += [f"**{fam}**", "", *table(("design", "LUT", "FF", "carry", "DSP", "BRAM"), rows), ""]
     return lines[:-1]
 
