@@ -9,11 +9,8 @@ names it in the same one environment variable as the leg bench,
 from __future__ import annotations
 
 import dataclasses
-import json
-import os
-from pathlib import Path
 
-from ..cocotb_leg.config import ENV_CONFIG
+from ..cocotb_leg.config import ConfigFile
 
 __all__ = ["TESTS", "ControllerConfig"]
 
@@ -23,7 +20,7 @@ TESTS = ("test_identity_and_status", "test_move_leg", "test_move_legs", "test_sp
 
 
 @dataclasses.dataclass(frozen=True)
-class ControllerConfig:
+class ControllerConfig(ConfigFile):
     """One run of the controller bench.
 
     Attributes
@@ -54,6 +51,8 @@ class ControllerConfig:
     fuzz_bytes: int = 300
     tests: tuple[str, ...] | None = None
 
+    RUNNER = "ikseries.sim.controller_runner.run_controller"
+
     def __post_init__(self):
         for what in ("legs", "period", "clock_hz", "divisor", "fuzz_bytes"):
             v = getattr(self, what)
@@ -65,24 +64,3 @@ class ControllerConfig:
     @property
     def manifest_bytes(self) -> bytes:
         return bytes.fromhex(self.manifest)
-
-    def write(self, path) -> Path:
-        path = Path(path)
-        rec = dataclasses.asdict(self)
-        rec["tests"] = None if self.tests is None else list(self.tests)
-        path.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
-        return path
-
-    @classmethod
-    def read(cls, path) -> "ControllerConfig":
-        rec = json.loads(Path(path).read_text())
-        tests = rec.pop("tests")
-        return cls(**rec, tests=None if tests is None else tuple(tests))
-
-    @classmethod
-    def from_environment(cls) -> "ControllerConfig":
-        path = os.environ.get(ENV_CONFIG)
-        if not path:
-            raise RuntimeError(f"{ENV_CONFIG} is not set: start the bench with "
-                               "ikseries.sim.controller_runner.run_controller")
-        return cls.read(path)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from .rules import RULES
 
-__all__ = ["ENV_CONFIG", "CLOCK_NS", "TESTS", "RunConfig", "Field", "Design"]
+__all__ = ["ENV_CONFIG", "CLOCK_NS", "TESTS", "ConfigFile", "RunConfig", "Field", "Design"]
 
 #: environment variable holding the path of the run configuration JSON
 ENV_CONFIG = "IKSERIES_BENCH_CONFIG"
@@ -34,8 +34,38 @@ def _positive_int(what: str, v) -> int:
     return v
 
 
+class ConfigFile:
+    """A frozen dataclass run configuration as the JSON file the runner writes and the bench
+    reads (``tests``: a tuple, or None); subclasses name their runner in ``RUNNER``."""
+
+    RUNNER = "ikseries.sim.runner.run"
+
+    def write(self, path) -> Path:
+        """Write the configuration as JSON to ``path``; returns the path."""
+        path = Path(path)
+        rec = dataclasses.asdict(self)
+        rec["tests"] = None if self.tests is None else list(self.tests)
+        path.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
+        return path
+
+    @classmethod
+    def read(cls, path):
+        """The configuration in the JSON file ``path``."""
+        rec = json.loads(Path(path).read_text())
+        tests = rec.pop("tests", None)
+        return cls(**rec, tests=None if tests is None else tuple(tests))
+
+    @classmethod
+    def from_environment(cls):
+        """The configuration named by :data:`ENV_CONFIG` (set by the runner)."""
+        path = os.environ.get(ENV_CONFIG)
+        if not path:
+            raise RuntimeError(f"{ENV_CONFIG} is not set: start the bench with {cls.RUNNER}")
+        return cls.read(path)
+
+
 @dataclasses.dataclass(frozen=True)
-class RunConfig:
+class RunConfig(ConfigFile):
     """One run of the bench.
 
     Attributes
@@ -64,30 +94,6 @@ class RunConfig:
         _positive_int("n_random", self.n_random)
         if self.tests is not None and (not self.tests or not all(isinstance(t, str) and t for t in self.tests)):
             raise ValueError(f"tests must be None or test names, not {self.tests!r}")
-
-    def write(self, path) -> Path:
-        """Write the configuration as JSON to ``path``; returns the path."""
-        path = Path(path)
-        rec = dataclasses.asdict(self)
-        rec["tests"] = None if self.tests is None else list(self.tests)
-        path.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
-        return path
-
-    @classmethod
-    def read(cls, path) -> "RunConfig":
-        """The configuration in the JSON file ``path``."""
-        rec = json.loads(Path(path).read_text())
-        tests = rec.get("tests")
-        return cls(rec["manifest"], rec["plan"], rec["seed"], rec["n_random"],
-                   None if tests is None else tuple(tests))
-
-    @classmethod
-    def from_environment(cls) -> "RunConfig":
-        """The configuration named by :data:`ENV_CONFIG` (set by the runner)."""
-        path = os.environ.get(ENV_CONFIG)
-        if not path:
-            raise RuntimeError(f"{ENV_CONFIG} is not set: start the bench with ikseries.sim.runner.run")
-        return cls.read(path)
 
 
 @dataclasses.dataclass(frozen=True)
