@@ -280,6 +280,22 @@ def link_rate(res: dict) -> list[str]:
                      num(r.get("lockstep_hz"), ".0f"))])]
 
 
+def board_tops(res: dict) -> list[str]:
+    """Lines of the ``bench/board_tops.py`` section from its JSON ``res``."""
+    rows = []
+    for r in res["cases"]:
+        if not r["ok"]:
+            rows.append((r["preset"], r["board"], "FAILED: " + " ".join(r["error"]), *["–"] * 6))
+            continue
+        u = r["utilisation"]
+        rows.append((r["preset"], r["board"], r["channels"], num(r["clock_hz"] / 1e6, ".3f"), num(r["fmax_mhz"], ".3f"),
+                     "yes" if r["meets_clock"] else "**no**", *(f"{u[k]['used']:,} / {u[k]['available']:,}"
+                                                                for k in ("LC", "BRAM", "DSP"))))
+    return ["`ikseries build --preset P --board B`: the robot controller's whole top (PLL, reset, UART, link, "
+            "dispatcher, IK core, servo controller) placed and routed, nextpnr's default seed.", "",
+            *table(("preset", "board", "channels", "clock MHz", "Fmax MHz", "meets clock", "LC", "BRAM", "DSP"), rows)]
+
+
 def servo_cells(res: dict) -> list[str]:
     """Lines of the ``bench/servo_cells.py`` section from its JSON ``res``."""
     rows = [(name, *(res[key].get(k, 0) for k in ("LUT", "FF", "carry", "BRAM")))
@@ -333,6 +349,8 @@ SECTIONS = {
                         "long seeded mix of good, corrupted and garbage bytes.", controller_fuzz),
     "link_rate": ("Robot controller: link rate", "Full hexapod updates through the exported controller "
                   "at its UART pin.", link_rate),
+    "board_tops": ("Board tops: bitstreams", "The whole robot controller top on each board, from the "
+                   "build's own report.", board_tops),
     "servo_cells": ("Servo controller area", "Yosys iCE40 counts of the per-channel servo controller "
                     "(speed, acceleration, timed moves, failsafe) for a hexapod.", servo_cells),
     "controller_cells": ("Robot controller area", "Yosys counts of the hexapod robot controller, "

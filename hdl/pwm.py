@@ -39,7 +39,9 @@ class ServoPWM(wiring.Component):
     Latency
     -------
     The output changes one cycle after the internal counter; a width accepted
-    at cycle c is applied at the first period start after c.
+    at cycle c is applied at the first period start after c + 1 (a width accepted in the
+    last cycle of a period waits one period more: the active width loads only from the
+    stored one, so no multiplexer stands between the input and the comparator).
 
     Throughput
     ----------
@@ -82,8 +84,6 @@ class ServoPWM(wiring.Component):
         last = count == self._period - 1
         with m.If(last):
             m.d.sync += [count.eq(0), active.eq(pending)]
-            with m.If(self.i.valid):
-                m.d.sync += active.eq(self.i.payload)
         with m.Else():
             m.d.sync += count.eq(count + 1)
         # registered output: high for cycles 0 .. active-1 of the counter, one cycle later

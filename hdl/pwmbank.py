@@ -46,7 +46,9 @@ class ServoPWMBank(wiring.Component):
     Latency
     -------
     The outputs follow the counter by one cycle; widths stored at cycle c are applied at
-    the first period start after c (a load in the last cycle of a period is applied at once).
+    the first period start after c + 1: a load in the last cycle of a period waits one period
+    more (the active widths load only from the stored ones, so no multiplexer per bit stands
+    between a transfer and the comparators).
 
     Throughput
     ----------
@@ -104,8 +106,6 @@ class ServoPWMBank(wiring.Component):
                     m.d.sync += pending.eq(new)
                 with m.If(last):
                     m.d.sync += active.eq(pending)
-                    with m.If(load):
-                        m.d.sync += active.eq(new)
                 bit = Signal(name=f"pwm{c}")
                 m.d.sync += bit.eq(count < active)
                 bits.append(bit)

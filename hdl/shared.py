@@ -62,7 +62,8 @@ class RobotCore(wiring.Component):
     Latency
     -------
     ``latency`` cycles from a target transfer on ``i`` to its widths on ``o`` (the
-    evaluator's); the widths reach the servo signals at the next period start.
+    evaluator's); the widths reach the servo signals at the next period start (the one
+    after, for widths that arrive in a period's last cycle; see :class:`~ikseries.hdl.pwmbank.ServoPWMBank`).
 
     Throughput
     ----------

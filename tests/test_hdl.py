@@ -173,10 +173,10 @@ def test_pwm_width_change_applies_at_next_period_only():
     assert pulses(tr) == [(1, 4), (21, 9), (41, 2), (61, 2)]
 
 
-def test_pwm_width_offered_on_the_last_cycle_is_applied():
+def test_pwm_width_offered_on_the_last_cycle_waits_a_period():
     pwm = ServoPWM(period=10, width_bits=4)
-    tr = run_pwm(pwm, 30, [(9, 3)])
-    assert pulses(tr) == [(11, 3), (21, 3)]
+    tr = run_pwm(pwm, 40, [(8, 2), (9, 3)])
+    assert pulses(tr) == [(11, 2), (21, 3), (31, 3)]
 
 
 @pytest.mark.parametrize("kw, msg", [

@@ -10,7 +10,7 @@ from amaranth.lib import data
 from ikseries.hdl.servo import ChannelField as F, FailsafeAction as A, ServoController
 from ikseries.hdl.servo_microcode import Ins, assemble
 from ikseries.sim.servo_model import ServoModel, profile_step
-from tests.servo_bench import run
+from servo_bench import run
 
 W = 8
 FULL = (1 << W) - 1

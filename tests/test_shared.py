@@ -24,7 +24,8 @@ def three_servo_plan():
 
 def expected_pwm(n_cycles, period, per_group, loads, reset):
     """Exact servo signals of a PWM bank: ``loads`` = [(cycle, group, widths)] (a load at
-    cycle t is applied from the first period start after t); output registered."""
+    cycle t is applied from the first period start after t + 1: one in a period's last cycle
+    waits a period more); output registered."""
     n = len(reset)
     trace = np.zeros((n_cycles, n), dtype=np.int64)
     for ch in range(n):
@@ -32,7 +33,7 @@ def expected_pwm(n_cycles, period, per_group, loads, reset):
             start = (c - 1) - (c - 1) % period
             w = reset[ch]
             for t, g, ws in loads:
-                if t < start and g == ch // per_group:
+                if t < start - 1 and g == ch // per_group:
                     w = ws[ch % per_group]
             trace[c, ch] = int((c - 1) % period < w)
     return trace
@@ -122,7 +123,7 @@ def test_hexapod_core_real_plan(plan):
     assert [c for c, _, _ in outs] == [(n + 1) * core.latency for n in range(6)]
 
 
-def test_pwm_bank_load_in_last_cycle_and_reset_widths():
+def test_pwm_bank_load_in_last_cycle_waits_a_period_and_reset_widths():
     bank = ServoPWMBank(period=10, width_bits=4, groups=2, per_group=2, reset_widths=[3, 0, 0, 7])
     loads = [(9, 1, [2, 4]), (14, 0, [5, 1]), (15, 0, [6, 2])]
     trace = []
@@ -145,7 +146,8 @@ def test_pwm_bank_load_in_last_cycle_and_reset_widths():
     sim.run()
     trace = np.array(trace)
     assert np.array_equal(trace, expected_pwm(45, 10, 2, loads, [3, 0, 0, 7]))
-    assert trace[11:21, 2].sum() == 2 and trace[21:31, 0].sum() == 6   # last-cycle load; last load wins
+    # the last-cycle load waits a period; the last of two loads wins
+    assert trace[11:21, 2].sum() == 0 and trace[21:31, 2].sum() == 2 and trace[21:31, 0].sum() == 6
 
 
 @pytest.mark.parametrize("kw, msg", [

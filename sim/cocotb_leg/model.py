@@ -29,15 +29,17 @@ class Model:
 def pwm_wave(transfers, period: int, n_end: int) -> np.ndarray:
     """Expected pwm value after each relative edge 1..n_end for one servo.
 
-    ``transfers``: list of (relative transfer edge, width). The width latched at relative edge
-    k*period (the last transfer at an edge <= k*period; 0 before any) is active in period k,
-    and the registered output is high after edges k*period + 1 .. k*period + width.
+    ``transfers``: list of (relative transfer edge, width). The width stored by relative edge
+    k*period - 1 (the last transfer at an edge < k*period; 0 before any) is active in period k:
+    a transfer at edge k*period itself, in the period's last cycle, waits a period more (see
+    :class:`~ikseries.hdl.pwm.ServoPWM`). The registered output is high after edges
+    k*period + 1 .. k*period + width.
     """
     n = np.arange(1, n_end + 1)
     k_max = (n_end - 1) // period
     active = np.zeros(k_max + 1, dtype=np.int64)
     for k in range(1, k_max + 1):
-        before = [w for t, w in transfers if t <= k * period]
+        before = [w for t, w in transfers if t < k * period]
         active[k] = before[-1] if before else 0
     return ((n - 1) % period < active[(n - 1) // period]).astype(np.int64)
 

@@ -91,7 +91,7 @@ def check_pulses(pulse: Checker, wave: Checker, name: str, rec: list, transfers:
                  n_end: int, first_start: int) -> tuple[list, list]:
     """One servo's recorded (relative edge, value) transitions ``rec`` against the model: the
     exact transition list, rising edges at period starts one period apart, high time == the
-    width last transferred up to that period start, at least 3 pulses. Returns (rises, falls)."""
+    width last transferred before that period's last cycle, at least 3 pulses. Returns (rises, falls)."""
     P = period
     exp_tr = transitions(pwm_wave(transfers, P, n_end))
     wave(rec == exp_tr, lambda: f"{name}: recorded (relative edge, value) {rec[:12]} expected {exp_tr[:12]}")
@@ -103,7 +103,7 @@ def check_pulses(pulse: Checker, wave: Checker, name: str, rec: list, transfers:
     for r in rises:
         k, off = divmod(r - 1, P)
         pulse(off == 0, f"{name}: rising edge at relative edge {r}, not at a period start")
-        last = [wv for t, wv in transfers if t <= k * P]
+        last = [wv for t, wv in transfers if t < k * P]
         want = last[-1] if last else 0
         fall = next((x for x in falls if x > r), None)
         if want < P:
