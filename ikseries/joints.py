@@ -34,8 +34,8 @@ from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 
-__all__ = ["JointConventions", "CONVENTION_FIELDS", "MAX_RANGE_DEG", "ANGLE_SLACK_DEG", "joint_range_checks",
-           "geometry_record"]
+__all__ = ["JointConventions", "CONVENTION_FIELDS", "MAX_RANGE_DEG", "ANGLE_SLACK_DEG", "Check",
+           "joint_range_checks", "geometry_record"]
 
 #: the [geometry] fields of the joint conventions
 CONVENTION_FIELDS = ("joint_ranges", "zero_offsets", "angle_directions")

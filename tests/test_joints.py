@@ -257,3 +257,19 @@ def test_given_conventions_are_recorded_and_read_back():
     only = parse_robot(description(angle_directions=[1, 1, -1], joint_ranges=[[-90, 90], [-90, 90], [-90, 0]]))
     assert set(robot_record(only)["geometry"]) == {"type", "coxa", "femur", "tibia", "body_height",
                                                    "angle_directions", "joint_ranges"}
+
+
+@pytest.mark.long
+def test_mirrored_tibia_with_horn_offsets_fits_and_certifies():
+    """One fit (about 25 s): hexapod-leg with horn offsets femur -3.5, tibia +46.3 deg and the
+    tibia mirrored; the certifier runs the conventions on intervals over the whole box."""
+    from ikseries.accuracy import measure
+    from ikseries.fit.fitter import fit_robot
+    robot = parse_robot(description(zero_offsets=[0, -3.5, 46.3], angle_directions=[1, 1, -1],
+                                    joint_ranges=[[-90, 90], [-90, 90], [-90, 90]]))
+    plan, _ = fit_robot(robot)
+    acc = measure(robot, plan)
+    for s in plan.meta["certificate"]["servos"]:
+        assert s["converged"] and s["total_pu"] <= robot.fit.tolerance_pu, s
+        assert s["approximation_pu"] >= acc["servos"][s["name"]]["approximation"], s
+        assert acc["servos"][s["name"]]["total"] <= robot.fit.tolerance_pu, s
