@@ -113,7 +113,7 @@ class HexapodLeg(JointConventions, Geometry):
         return self.servo_angles((s1, s2, s3))
 
     def ik(self, x, y, z):
-        """Joint angles (s1, s2, s3) in degrees for tip targets (vectorised).
+        """Servo angles (s1, s2, s3) in degrees for tip targets (vectorised).
 
         Raises
         ------

@@ -168,7 +168,7 @@ class QuadrupedHind(JointConventions, Geometry):
         return abs(self.thigh - s) + abs(self.foot - s), self.thigh + self.shin + self.foot
 
     def ik(self, x, y):
-        """Joint angles (s1, s2, s3) in degrees for toe targets (vectorised).
+        """Servo angles (s1, s2, s3) in degrees for toe targets (vectorised).
 
         Raises
         ------
@@ -263,7 +263,7 @@ class QuadrupedFore(JointConventions, Geometry):
         return abs(p - e), p + e
 
     def ik(self, x, y):
-        """Joint angles (s1, s2, s3) in degrees for toe targets (vectorised).
+        """Servo angles (s1, s2, s3) in degrees for toe targets (vectorised).
 
         Raises
         ------
