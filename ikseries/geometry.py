@@ -16,6 +16,11 @@ description (each must be > 0 unless named in ``signed_fields``); its constructo
 Cylindrical geometries (``coordinates = "cylindrical"``) also map their targets to a Cartesian
 frame (:class:`CylindricalGeometry`), which the fit's coordinate stage computes in hardware.
 
+The closed-form geometries also take :class:`ikseries.joints.JointConventions` (the optional
+``joint_ranges``, ``zero_offsets`` and ``angle_directions`` fields): their ``ik``, ``angles`` and
+``fk`` then work in each servo's own angles, and ``joint_ranges`` is what ``ik`` and the
+reachability proof check.
+
 Geometries register under the entry-point group ``ikseries.geometries`` (``pyproject.toml``),
 by the name a robot description gives as ``geometry.type``. Adding a geometry is one module with
 a subclass of :class:`Geometry` plus one line in ``pyproject.toml``; its tests check ``ik``

@@ -12,14 +12,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import Geometry
+from .joints import JointConventions
 from .kinematics import NUMPY_MATH, RAD2DEG
-from .reach import joint_range_checks, raise_first_unreachable
+from .reach import raise_first_unreachable
 
 __all__ = ["HexapodLeg"]
 
 
 @dataclass(frozen=True)
-class HexapodLeg(Geometry):
+class HexapodLeg(JointConventions, Geometry):
     """3-DOF hexapod leg: coxa yaw, femur and tibia pitch; tip target (x, y, z) in mm.
 
     Frame and inputs (origin at the coxa joint, on the body underside):
@@ -52,7 +53,10 @@ class HexapodLeg(Geometry):
     only through ``L``.
 
     Joint ranges (paper, Table 1): coxa -90..90, femur -90..90, tibia 0..90 deg; targets
-    needing a joint outside them are unreachable.
+    needing a joint outside them are unreachable. These are the defaults of the
+    ``joint_ranges`` field; ``zero_offsets`` and ``angle_directions`` (default 0 and +1) turn
+    the angles above into the servos' own (:mod:`ikseries.joints`), which ``ik``, ``angles``
+    and ``fk`` use.
 
     Reconstruction check: the paper zeroes its servos by subtracting 54.85 deg from the
     femur angle and 41.33 deg from the tibia angle at the standing pose. Both numbers are
@@ -83,7 +87,7 @@ class HexapodLeg(Geometry):
     servos = ("s1", "s2", "s3")
     servo_names = ("coxa", "femur", "tibia")
     #: Inclusive joint ranges in degrees, per servo (paper, Table 1).
-    joint_ranges = ((-90.0, 90.0), (-90.0, 90.0), (0.0, 90.0))
+    default_joint_ranges = ((-90.0, 90.0), (-90.0, 90.0), (0.0, 90.0))
 
     # -- inverse kinematics ------------------------------------------------
     def angles(self, xp, x, y, z):
@@ -95,7 +99,8 @@ class HexapodLeg(Geometry):
         Returns
         -------
         s1, s2, s3
-            Coxa, femur and tibia angles in degrees.
+            Coxa, femur and tibia servo angles in degrees (the angles of the class docstring
+            under the joint conventions).
         """
         f, t = self.femur, self.tibia
         rho = xp.sqrt(x * x + y * y) - self.coxa
@@ -105,10 +110,10 @@ class HexapodLeg(Geometry):
         s1 = xp.atan2(y, x) * RAD2DEG
         s2 = 90.0 - (xp.atan2(rho, h) + xp.acos((f * f + d2 - t * t) / (2 * f * d))) * RAD2DEG
         s3 = 90.0 - xp.acos((f * f + t * t - d2) / (2 * f * t)) * RAD2DEG
-        return s1, s2, s3
+        return self.servo_angles((s1, s2, s3))
 
     def ik(self, x, y, z):
-        """Joint angles (s1, s2, s3) in degrees for tip targets (vectorised).
+        """Servo angles (s1, s2, s3) in degrees for tip targets (vectorised).
 
         Raises
         ------
@@ -126,13 +131,14 @@ class HexapodLeg(Geometry):
         raise_first_unreachable(self.inputs, (x, y, z), [
             (reach, lambda i: f"tip distance from the femur axis {d[i]:.6g} mm must be within "
                               f"[{abs(f - t):g}, {f + t:g}] mm"),
-            *joint_range_checks(a, self.servo_names, self.joint_ranges)])
+            *self.range_checks(a)])
         return a
 
     # -- forward kinematics ------------------------------------------------
     def fk(self, s1, s2, s3):
-        """Tip (x, y, z) in mm for joint angles in degrees (the inverse of :meth:`ik`)."""
-        a1, a2, a3 = (np.radians(np.asarray(a, dtype=np.float64)) for a in (s1, s2, s3))
+        """Tip (x, y, z) in mm for servo angles in degrees (the inverse of :meth:`ik`)."""
+        kinematic = self.kinematic_angles((s1, s2, s3))
+        a1, a2, a3 = (np.radians(np.asarray(a, dtype=np.float64)) for a in kinematic)
         # Leg plane: u outwards from the femur axis, v downwards. The femur points a2 below
         # the horizontal; the knee turns the tibia a further 90 deg + a3 downwards.
         knee = a2 + np.pi / 2 + a3

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .geometry import CylindricalGeometry
+from .joints import JointConventions
 
 __all__ = ["UnreachableError", "CylinderLeg", "Calibration", "NUMPY_MATH", "RAD2DEG", "format_point"]
 
@@ -34,7 +35,7 @@ def format_point(names, values):
 
 
 @dataclass(frozen=True)
-class CylinderLeg(CylindricalGeometry):
+class CylinderLeg(JointConventions, CylindricalGeometry):
     """3-DOF coxa-femur-tibia leg with a cylindrical tip target (R, theta, Z).
 
     The coxa (S1) axis is vertical through the origin. The tip's plan position
@@ -45,7 +46,9 @@ class CylinderLeg(CylindricalGeometry):
     ``v = z_datum + Z``, ``d = hypot(u, v)``:
     ``S2 = acos((f^2 + d^2 - t^2) / (2 f d)) - atan2(v, u)`` (femur elevation,
     knee up) and ``S3 = 180 - acos((f^2 + t^2 - d^2) / (2 f t))`` (knee bend,
-    0 = straight).
+    0 = straight). ``ik``, ``angles`` and ``fk`` use these under the joint conventions
+    (:mod:`ikseries.joints`: ``zero_offsets``, ``angle_directions``); the joints have no
+    range unless ``joint_ranges`` gives one.
     """
 
     coxa: float = 30.0
@@ -106,16 +109,18 @@ class CylinderLeg(CylindricalGeometry):
         s1 = xp.atan2(y, x) * RAD2DEG
         s2 = (xp.acos((f * f + d2 - t * t) / (2 * f * d)) - xp.atan2(v, u)) * RAD2DEG
         s3 = 180.0 - xp.acos((f * f + t * t - d2) / (2 * f * t)) * RAD2DEG
-        return s1, s2, s3
+        return self.servo_angles((s1, s2, s3))
 
     def ik_cartesian(self, x, y, z):
-        """Joint angles (S1, S2, S3) in degrees for tip (x, y, Z).
+        """Servo angles (S1, S2, S3) in degrees for tip (x, y, Z).
 
         Raises
         ------
         UnreachableError
-            If any point lies outside the reachable annulus of the femur-tibia pair.
+            Naming the first point (C order) outside the reachable annulus of the femur-tibia
+            pair or needing a joint beyond ``joint_ranges``.
         """
+        from .reach import raise_first_unreachable   # reach imports this module
         x, y, z = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (x, y, z)))
         f, t = self.femur, self.tibia
         s1 = np.degrees(np.arctan2(y, x))
@@ -125,19 +130,18 @@ class CylinderLeg(CylindricalGeometry):
         c2 = (f * f + d * d - t * t) / (2 * f * np.where(d > 0, d, 1.0))
         c3 = (f * f + t * t - d * d) / (2 * f * t)
         bad = (d <= 0) | (np.abs(c2) > 1) | (np.abs(c3) > 1) | ~np.isfinite(d)
-        if np.any(bad):
-            i = np.flatnonzero(np.ravel(bad))[0]
-            pt = [np.ravel(a)[i] for a in (x, y, z)]
-            raise UnreachableError(
-                f"target {format_point(self.cartesian_names, pt)} is unreachable: tip distance "
-                f"from the femur axis {np.ravel(d)[i]:.6g} mm must be within "
-                f"[{abs(f - t):g}, {f + t:g}] mm")
-        s2 = np.degrees(np.arccos(c2) - np.arctan2(v, u))
-        s3 = 180.0 - np.degrees(np.arccos(c3))
-        return s1, s2, s3
+        with np.errstate(invalid="ignore"):
+            s2 = np.degrees(np.arccos(c2) - np.arctan2(v, u))
+            s3 = 180.0 - np.degrees(np.arccos(c3))
+        a = self.servo_angles((s1, s2, s3))
+        raise_first_unreachable(self.cartesian_names, (x, y, z), [
+            (bad, lambda i: f"tip distance from the femur axis {np.ravel(d)[i]:.6g} mm must be within "
+                            f"[{abs(f - t):g}, {f + t:g}] mm"),
+            *self.range_checks(a)])
+        return a
 
     def ik(self, r, theta, z):
-        """Joint angles (S1, S2, S3) in degrees for the cylindrical target (R, theta, Z)."""
+        """Servo angles (S1, S2, S3) in degrees for the cylindrical target (R, theta, Z)."""
         try:
             return self.ik_cartesian(*self.to_cartesian(r, theta, z))
         except UnreachableError:
@@ -155,8 +159,9 @@ class CylinderLeg(CylindricalGeometry):
 
     # -- forward kinematics ------------------------------------------------
     def fk_cartesian(self, s1, s2, s3):
-        """Tip (x, y, Z) for joint angles in degrees."""
-        a1, a2, a3 = (np.radians(np.asarray(a, dtype=np.float64)) for a in (s1, s2, s3))
+        """Tip (x, y, Z) for servo angles in degrees."""
+        kinematic = self.kinematic_angles((s1, s2, s3))
+        a1, a2, a3 = (np.radians(np.asarray(a, dtype=np.float64)) for a in kinematic)
         # In the leg plane: u outwards from the femur axis, v downwards.
         u = self.femur * np.cos(-a2) + self.tibia * np.cos(a3 - a2)
         v = self.femur * np.sin(-a2) + self.tibia * np.sin(a3 - a2)
@@ -164,16 +169,18 @@ class CylinderLeg(CylindricalGeometry):
         return rho * np.cos(a1), rho * np.sin(a1), v - self.z_datum
 
     def fk(self, s1, s2, s3):
-        """Cylindrical tip target (R, theta, Z) for joint angles in degrees."""
+        """Cylindrical tip target (R, theta, Z) for servo angles in degrees."""
         return self.from_cartesian(*self.fk_cartesian(s1, s2, s3))
 
 
 @dataclass(frozen=True)
 class Calibration:
-    """Servo calibration: joint angle (deg) -> pulse width (pulse units).
+    """Servo calibration: servo angle (deg) -> pulse width (pulse units).
 
     ``pulse = neutral_pulse + direction * pu_per_degree * (angle - neutral_angle)``
-    where ``neutral_angle`` is the joint angle at the neutral pose.
+    where ``angle`` is the servo angle a geometry's ``ik`` gives (its kinematic angle under
+    the joint conventions of :mod:`ikseries.joints`) and ``neutral_angle`` that angle at the
+    neutral pose.
     """
 
     neutral_angles: tuple[float, ...]

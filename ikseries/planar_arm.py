@@ -12,7 +12,10 @@ the +x axis, in degrees in ``[0, 360)`` (link 3's absolute angle is ``phi``). Of
 ``s2 - s1`` lies in ``(-180, 0)`` modulo 360 (the elbow is to the left of the
 shoulder-to-wrist line).
 
-Lengths are the source's "units" (the preset calls them mm); angles are in degrees.
+Lengths are the source's "units" (the preset calls them mm); angles are in degrees. The
+servos see these angles under the joint conventions (:mod:`ikseries.joints`): ``ik`` gives
+``direction * absolute angle + offset`` of the angle in ``[0, 360)``; ``joint_ranges`` has no
+default (the joints are unchecked unless it is given).
 """
 from __future__ import annotations
 
@@ -22,13 +25,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import Geometry
+from .joints import JointConventions
 from .kinematics import NUMPY_MATH, RAD2DEG, UnreachableError, format_point
+from .reach import raise_first_unreachable
 
 __all__ = ["PlanarArm"]
 
 
 @dataclass(frozen=True)
-class PlanarArm(Geometry):
+class PlanarArm(JointConventions, Geometry):
     """Planar 3R arm, tool tip target (x, y) at a fixed tool orientation ``phi``.
 
     With the wrist ``w = (xw, yw) = (x - l3 cos phi, y - l3 sin phi)``, ``d2 = |w|**2``,
@@ -76,9 +81,14 @@ class PlanarArm(Geometry):
 
         Uses only ``+ - * /``, integer powers, constants and ``xp.sqrt`` / ``xp.atan2``, so it
         runs on float arrays (``kinematics.NUMPY_MATH``) and on interval numbers. Returns the
-        absolute angles (s1, s2) in degrees in ``(0, 360]``; equal to :meth:`ik` wherever no
-        link points exactly along +x.
+        servo angles of the absolute angles (s1, s2) in degrees in ``(0, 360]``; equal to
+        :meth:`ik` wherever no link points exactly along +x.
         """
+        return self.servo_angles(self.link_angles(xp, x, y))
+
+    def link_angles(self, xp, x, y):
+        """The absolute link angles (s1, s2) in ``(0, 360]`` of :meth:`angles`, before the joint
+        conventions."""
         lo, hi = self.reach()
         xw, yw = self.wrist(x, y)
         d2 = xw * xw + yw * yw
@@ -90,18 +100,19 @@ class PlanarArm(Geometry):
         return s1, s2
 
     def ik(self, x, y):
-        """Absolute link angles (s1, s2) in degrees in ``[0, 360)`` for tool tip (x, y).
+        """Servo angles of the absolute link angles (s1, s2) in degrees in ``[0, 360)`` for
+        tool tip (x, y).
 
         Raises
         ------
         UnreachableError
             Naming the first point whose wrist is outside the annulus ``|l1 - l2| <= d <= l1 + l2``
-            (or at the shoulder).
+            (or at the shoulder), else the first needing a servo angle beyond ``joint_ranges``.
         """
         x, y = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (x, y)))
         lo, hi = self.reach()
         xw, yw = self.wrist(x, y)
-        d2 = xw * xw + yw * yw  # the same expression as in angles(): its sqrt argument is >= 0 here
+        d2 = xw * xw + yw * yw  # the same expression as in link_angles(): its sqrt argument is >= 0 here
         bad = ~((d2 >= lo * lo) & (d2 <= hi * hi) & (d2 > 0))
         if np.any(bad):
             i = np.flatnonzero(np.ravel(bad))[0]
@@ -109,25 +120,29 @@ class PlanarArm(Geometry):
                 f"target {format_point(self.inputs, (np.ravel(x)[i], np.ravel(y)[i]))} is unreachable: "
                 f"wrist distance from the shoulder {math.sqrt(np.ravel(d2)[i]):.6g} mm must be within "
                 f"[{lo:g}, {hi:g}] mm and > 0")
-        s1, s2 = self.angles(NUMPY_MATH, x, y)
-        return np.mod(s1, 360.0), np.mod(s2, 360.0)
+        s1, s2 = self.link_angles(NUMPY_MATH, x, y)
+        a = self.servo_angles((np.mod(s1, 360.0), np.mod(s2, 360.0)))
+        raise_first_unreachable(self.inputs, (x, y), self.range_checks(a))
+        return a
 
     # -- forward kinematics --------------------------------------------------
     def fk(self, s1, s2):
-        """Tool tip (x, y) for absolute link angles s1, s2 in degrees (link 3 at ``phi``)."""
-        a1, a2 = (np.radians(np.asarray(a, dtype=np.float64)) for a in (s1, s2))
+        """Tool tip (x, y) for servo angles s1, s2 in degrees (link 3 at ``phi``)."""
+        a1, a2 = (np.radians(np.asarray(a, dtype=np.float64)) for a in self.kinematic_angles((s1, s2)))
         xw = self.l1 * np.cos(a1) + self.l2 * np.cos(a2)
         yw = self.l1 * np.sin(a1) + self.l2 * np.sin(a2)
         ph = math.radians(self.phi)
         return xw + self.l3 * math.cos(ph), yw + self.l3 * math.sin(ph)
 
     def rates(self, s1, s2, vx, vy):
-        """Joint velocities and accelerations for a tip moving at constant velocity (vx, vy).
+        """Servo velocities and accelerations at servo angles (s1, s2) for a tip moving at
+        constant velocity (vx, vy).
 
         With the tool orientation fixed the wrist moves like the tip, so
-        ``J w = v`` and ``J a + c(w) = 0`` where ``J = [[-l1 sin s1, -l2 sin s2],
-        [l1 cos s1, l2 cos s2]]`` (per radian) and ``c = -(l1 cos s1 w1^2 + l2 cos s2 w2^2,
-        l1 sin s1 w1^2 + l2 sin s2 w2^2)``.
+        ``J w = v`` and ``J a + c(w) = 0`` where, for the absolute link angles ``s1, s2``,
+        ``J = [[-l1 sin s1, -l2 sin s2], [l1 cos s1, l2 cos s2]]`` (per radian) and
+        ``c = -(l1 cos s1 w1^2 + l2 cos s2 w2^2, l1 sin s1 w1^2 + l2 sin s2 w2^2)``; each servo's
+        rates are its link's times its ``angle_directions`` entry.
 
         Returns
         -------
@@ -136,7 +151,7 @@ class PlanarArm(Geometry):
             squared (time in which the tip moves by (vx, vy)); singular where the links are
             collinear.
         """
-        t1, t2 = np.radians(np.asarray(s1, dtype=np.float64)), np.radians(np.asarray(s2, dtype=np.float64))
+        t1, t2 = (np.radians(np.asarray(a, dtype=np.float64)) for a in self.kinematic_angles((s1, s2)))
         l1, l2 = self.l1, self.l2
         det = l1 * l2 * np.sin(t2 - t1)  # det J
         w1 = (l2 * np.cos(t2) * vx + l2 * np.sin(t2) * vy) / det
@@ -145,4 +160,5 @@ class PlanarArm(Geometry):
         cy = -(l1 * np.sin(t1) * w1 ** 2 + l2 * np.sin(t2) * w2 ** 2)
         a1 = -(l2 * np.cos(t2) * cx + l2 * np.sin(t2) * cy) / det
         a2 = (l1 * np.cos(t1) * cx + l1 * np.sin(t1) * cy) / det
-        return (w1 * RAD2DEG, w2 * RAD2DEG), (a1 * RAD2DEG, a2 * RAD2DEG)
+        d1, d2 = self.angle_directions
+        return (d1 * w1 * RAD2DEG, d2 * w2 * RAD2DEG), (d1 * a1 * RAD2DEG, d2 * a2 * RAD2DEG)

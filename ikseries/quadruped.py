@@ -10,7 +10,9 @@ notes (``IKx``, ``IKy``):
 
 The notes give no lengths and no joint limits; the values here are chosen for a small
 hobby-servo quadruped and documented on each class. Their figures were lost, so the frame
-is reconstructed from the formulas: see the class docstrings.
+is reconstructed from the formulas: see the class docstrings. The joint ranges are the
+defaults of the ``joint_ranges`` field; ``zero_offsets`` and ``angle_directions`` turn the
+angles into the servos' own (:mod:`ikseries.joints`), which ``ik``, ``angles`` and ``fk`` use.
 """
 from __future__ import annotations
 
@@ -19,8 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import Geometry
+from .joints import JointConventions
 from .kinematics import NUMPY_MATH, RAD2DEG
-from .reach import joint_range_checks, raise_first_unreachable
+from .reach import raise_first_unreachable
 
 __all__ = ["QuadrupedHind", "QuadrupedFore"]
 
@@ -36,7 +39,7 @@ def _targets(x, y, pivot_height):
 def _checked_angles(geom, x, y, pivot_height, reachable, reach_message):
     """``geom.angles`` for toe targets (x, y), raising :class:`UnreachableError` for the first
     target (C order) whose pivot-toe distance fails ``reachable`` (message from
-    ``reach_message(distance)``) or that needs a joint beyond ``geom.joint_ranges``."""
+    ``reach_message(distance)``) or that needs a servo angle beyond ``geom.joint_ranges``."""
     x, y, lt = _targets(x, y, pivot_height)
     with np.errstate(invalid="ignore", divide="ignore"):
         a = geom.angles(NUMPY_MATH, x, y)
@@ -44,7 +47,7 @@ def _checked_angles(geom, x, y, pivot_height, reachable, reach_message):
         out = ~(reachable(lt) & finite)
     raise_first_unreachable(geom.inputs, (x, y), [
         (out, lambda i: reach_message(lt[i])),
-        *joint_range_checks(a, geom.servo_names, geom.joint_ranges)])
+        *geom.range_checks(a)])
     return a
 
 
@@ -56,7 +59,7 @@ def _sagittal_tip(pivot_height, segments):
 
 
 @dataclass(frozen=True)
-class QuadrupedHind(Geometry):
+class QuadrupedHind(JointConventions, Geometry):
     """Hind leg: thigh, shin and foot; the hip-toe line bisects the shin (notes' rule).
 
     Inputs (mm), in the leg's vertical plane, origin on the ground below the hip axis:
@@ -114,9 +117,10 @@ class QuadrupedHind(Geometry):
     servos = ("s1", "s2", "s3")
     servo_names = ("hip", "knee", "hock")
     #: Inclusive joint ranges in degrees, per servo (assumed; see the class docstring).
-    joint_ranges = ((-90.0, 90.0), (0.0, 150.0), (0.0, 150.0))
+    default_joint_ranges = ((-90.0, 90.0), (0.0, 150.0), (0.0, 150.0))
 
     def __post_init__(self):
+        super().__post_init__()
         limit = 2.0 * min(self.thigh, self.foot)
         if not self.shin <= limit:
             raise ValueError(f"shin must be <= 2 * min(thigh, foot) = {limit:g} mm (the closed-form "
@@ -147,7 +151,8 @@ class QuadrupedHind(Geometry):
         Returns
         -------
         s1, s2, s3
-            Hip, knee and hock angles in degrees.
+            Hip, knee and hock servo angles in degrees (the angles of the class docstring under
+            the joint conventions).
         """
         s, a, f = 0.5 * self.shin, self.thigh, self.foot
         _, la, lb = self.split(xp, x, y)
@@ -155,7 +160,7 @@ class QuadrupedHind(Geometry):
                + xp.atan2(x, self.hip_height - y)) * RAD2DEG
         knee = 180.0 - xp.acos((a * a + s * s - la * la) / (2.0 * a * s)) * RAD2DEG
         hock = 180.0 - xp.acos((f * f + s * s - lb * lb) / (2.0 * f * s)) * RAD2DEG
-        return hip, knee, hock
+        return self.servo_angles((hip, knee, hock))
 
     def reach(self):
         """Range ``(min, max)`` of the hip-toe distance in mm (folded .. straight)."""
@@ -163,7 +168,7 @@ class QuadrupedHind(Geometry):
         return abs(self.thigh - s) + abs(self.foot - s), self.thigh + self.shin + self.foot
 
     def ik(self, x, y):
-        """Joint angles (s1, s2, s3) in degrees for toe targets (vectorised).
+        """Servo angles (s1, s2, s3) in degrees for toe targets (vectorised).
 
         Raises
         ------
@@ -178,8 +183,9 @@ class QuadrupedHind(Geometry):
                       "shin bisected by the hip-toe line")
 
     def fk(self, s1, s2, s3):
-        """Toe (x, y) in mm for joint angles in degrees (the inverse of :meth:`ik`)."""
-        hip, knee, hock = (np.radians(np.asarray(v, dtype=np.float64)) for v in (s1, s2, s3))
+        """Toe (x, y) in mm for servo angles in degrees (the inverse of :meth:`ik`)."""
+        kinematic = self.kinematic_angles((s1, s2, s3))
+        hip, knee, hock = (np.radians(np.asarray(v, dtype=np.float64)) for v in kinematic)
         thigh = hip - np.pi / 2          # direction from +x, counter-clockwise
         shin = thigh - knee              # the knee turns the shin backwards
         foot = shin + hock               # the hock turns the foot forwards
@@ -188,7 +194,7 @@ class QuadrupedHind(Geometry):
 
 
 @dataclass(frozen=True)
-class QuadrupedFore(Geometry):
+class QuadrupedFore(JointConventions, Geometry):
     """Fore leg: upper arm, forearm and hand, the wrist kept straight (notes' rule).
 
     Inputs (mm) as for :class:`QuadrupedHind`, relative to the shoulder axis standing
@@ -232,7 +238,7 @@ class QuadrupedFore(Geometry):
     servos = ("s1", "s2", "s3")
     servo_names = ("shoulder", "elbow", "wrist")
     #: Inclusive joint ranges in degrees, per servo (assumed; see the class docstring).
-    joint_ranges = ((-90.0, 90.0), (0.0, 150.0), (-90.0, 90.0))
+    default_joint_ranges = ((-90.0, 90.0), (0.0, 150.0), (-90.0, 90.0))
 
     def angles(self, xp, x, y):
         """Pure IK formula (no reachability checks) over the math namespace ``xp``.
@@ -240,7 +246,8 @@ class QuadrupedFore(Geometry):
         Returns
         -------
         s1, s2, s3
-            Shoulder, elbow and wrist angles in degrees (the wrist is ``0 * Lt``, zero in the input's shape).
+            Shoulder, elbow and wrist servo angles in degrees (the angles of the class docstring
+            under the joint conventions; the wrist is ``0 * Lt``, zero in the input's shape).
         """
         p, e = self.upper_arm, self.forearm + self.hand
         h = self.shoulder_height - y
@@ -248,7 +255,7 @@ class QuadrupedFore(Geometry):
         lt = xp.sqrt(lt2)
         shoulder = (xp.acos((p * p + lt2 - e * e) / (2.0 * p * lt)) - xp.atan2(x, h)) * RAD2DEG
         elbow = 180.0 - xp.acos((p * p + e * e - lt2) / (2.0 * p * e)) * RAD2DEG
-        return shoulder, elbow, 0.0 * lt
+        return self.servo_angles((shoulder, elbow, 0.0 * lt))
 
     def reach(self):
         """Range ``(min, max)`` of the shoulder-toe distance in mm (folded .. straight)."""
@@ -256,7 +263,7 @@ class QuadrupedFore(Geometry):
         return abs(p - e), p + e
 
     def ik(self, x, y):
-        """Joint angles (s1, s2, s3) in degrees for toe targets (vectorised).
+        """Servo angles (s1, s2, s3) in degrees for toe targets (vectorised).
 
         Raises
         ------
@@ -270,8 +277,9 @@ class QuadrupedFore(Geometry):
             lambda d: f"shoulder-toe distance {d:.6g} mm must be within [{lo:g}, {hi:g}] mm")
 
     def fk(self, s1, s2, s3):
-        """Toe (x, y) in mm for joint angles in degrees (the inverse of :meth:`ik`)."""
-        sh, el, wr = (np.radians(np.asarray(v, dtype=np.float64)) for v in (s1, s2, s3))
+        """Toe (x, y) in mm for servo angles in degrees (the inverse of :meth:`ik`)."""
+        kinematic = self.kinematic_angles((s1, s2, s3))
+        sh, el, wr = (np.radians(np.asarray(v, dtype=np.float64)) for v in kinematic)
         upper = -np.pi / 2 - sh          # direction from +x, counter-clockwise
         fore = upper + el                # the elbow turns the forearm forwards
         hand = fore + wr                 # a wrist bend turns the hand the same way

@@ -1,27 +1,22 @@
 """Reachability checks shared by the geometries: name the first bad target and why.
 
 A geometry's ``ik`` computes, per target, masks of what makes it unreachable (out of the
-reach of a link pair, a joint beyond its range, ...) and hands them to
-:func:`raise_first_unreachable`, which raises one :class:`~ikseries.kinematics.UnreachableError`
-for the first bad target in C order, with the reason of the first failing check there.
+reach of a link pair, a joint beyond its range: :func:`ikseries.joints.joint_range_checks`, ...)
+and hands them to :func:`raise_first_unreachable`, which raises one
+:class:`~ikseries.kinematics.UnreachableError` for the first bad target in C order, with the
+reason of the first failing check there.
 """
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from .fit import interval as ia
+from .joints import ANGLE_SLACK_DEG, Check
 from .kinematics import UnreachableError, format_point
 
-__all__ = ["raise_first_unreachable", "joint_range_checks", "prove_box_reachable", "ReachUnprovenError",
-           "ANGLE_SLACK_DEG", "REACH_MAX_CELLS"]
-
-#: Joint ranges are inclusive up to this slack (deg), so that a pose exactly on a range end
-#: (e.g. a right-angled knee at 0 deg) is not rejected for a rounding error.
-ANGLE_SLACK_DEG = 1e-9
-
-Check = tuple[np.ndarray, Callable[[int], str]]
+__all__ = ["raise_first_unreachable", "prove_box_reachable", "ReachUnprovenError", "REACH_MAX_CELLS"]
 
 
 def raise_first_unreachable(names: Sequence[str], coords: Sequence[np.ndarray],
@@ -55,23 +50,6 @@ def raise_first_unreachable(names: Sequence[str], coords: Sequence[np.ndarray],
     raise UnreachableError(f"target {format_point(names, point)} is unreachable: {why(i)}")
 
 
-def joint_range_checks(angles: Sequence[np.ndarray], servo_names: Sequence[str],
-                       ranges: Sequence[tuple[float, float]]) -> list[Check]:
-    """Checks that each joint angle (deg) lies in its inclusive range.
-
-    A non-finite angle also fails (its message then shows ``nan``); geometries put their
-    reach checks first so that such targets are reported by reach instead.
-    """
-    checks = []
-    for a, name, (lo, hi) in zip(angles, servo_names, ranges):
-        a = np.ravel(a)
-        with np.errstate(invalid="ignore"):
-            out = ~((a >= lo - ANGLE_SLACK_DEG) & (a <= hi + ANGLE_SLACK_DEG))
-        checks.append((out, lambda i, a=a, name=name, lo=lo, hi=hi:
-                       f"{name} angle {a[i]:.6g} deg must be within [{lo:g}, {hi:g}] deg"))
-    return checks
-
-
 # -- the whole workspace box ------------------------------------------------------------------
 #: Interval cells :func:`prove_box_reachable` evaluates before it gives up.
 REACH_MAX_CELLS = 50_000
@@ -87,7 +65,8 @@ class ReachUnprovenError(ValueError):
 def _cells_reachable(geometry, lo, hi) -> np.ndarray:
     """Per cell [lo, hi] (shape (N, n)): True where interval evaluation of ``geometry.angles``
     proves every point of the cell inside the formula's domain, every angle finite and (for a
-    geometry with ``joint_ranges``) within those ranges."""
+    geometry with ``joint_ranges``) within those ranges: the servo angles of
+    :mod:`ikseries.joints`, which ``angles`` returns, against the configured ranges."""
     with ia.lenient(), np.errstate(all="ignore"):
         angles = geometry.angles(ia.MATH, *ia.variables(lo, hi, order=0))
     ranges = getattr(geometry, "joint_ranges", None) or [(-np.inf, np.inf)] * len(angles)

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .geometry import geometry_class, geometry_type
+from .joints import CONVENTION_FIELDS, geometry_record
 from .kinematics import Calibration, UnreachableError
 from .reach import ReachUnprovenError, prove_box_reachable
 from .robot_parts import (ARCHITECTURES, DSP_CHOICES, HARDWARE_LABELS, LOWERINGS, PRODUCTS, CalibrationSpec,
@@ -93,15 +94,19 @@ def _parse_name(data: dict) -> tuple[str, str]:
 
 
 def _parse_geometry(geo: dict):
-    """The geometry of the ``[geometry]`` table: its ``type`` and that class's fields."""
+    """The geometry of the ``[geometry]`` table: its ``type`` and that class's fields, the
+    numbers required and the optional joint conventions (:mod:`ikseries.joints`) as given,
+    checked by the geometry's constructor."""
     try:
         cls = geometry_class(geo.get("type"))
     except ValueError as e:
         raise RobotError(str(e)) from None
-    fields = [f for f in cls.__dataclass_fields__]
+    fields = [f.name for f in dataclasses.fields(cls)]
     refuse_extra(geo, ["type", *fields], "geometry.")
     signed = getattr(cls, "signed_fields", ())  # fields that may be <= 0 (e.g. an angle)
-    kw = {f: float(field_number(geo, f, "geometry.", positive=f not in signed)) for f in fields}
+    kw = {f: float(field_number(geo, f, "geometry.", positive=f not in signed))
+          for f in fields if f not in CONVENTION_FIELDS}
+    kw.update({f: geo[f] for f in CONVENTION_FIELDS if f in fields and f in geo})
     try:
         return cls(**kw)
     except ValueError as e:
@@ -239,7 +244,7 @@ RECORD_PARTS = {"calibration": CalibrationSpec, "fit": FitOptions, "hardware": H
 def robot_record(robot: Robot) -> dict:
     """JSON-ready record of every parameter of ``robot`` (stored in the fit artifact): the
     name, description and legs, then one table per part, like the TOML."""
-    geometry = {"type": geometry_type(robot.geometry), **dataclasses.asdict(robot.geometry)}
+    geometry = {"type": geometry_type(robot.geometry), **geometry_record(robot.geometry)}
     d = {"name": robot.name, "description": robot.description, "legs": robot.legs, "geometry": geometry,
          "workspace": robot.workspace.record(), "calibration": robot.calibration.record(),
          "fit": robot.fit.record(), "hardware": robot.hardware.record()}

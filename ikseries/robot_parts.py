@@ -162,8 +162,9 @@ class Workspace:
 @dataclass(frozen=True)
 class CalibrationSpec:
     """The servo calibration as described (``[calibration]``): the neutral pose, the pulse
-    at it, the pulse per degree and direction of each servo, and the pulse limits.
-    :meth:`joint_map` computes from it the angle -> pulse map of the geometry."""
+    at it, the pulse per degree and direction of each servo (the pulse's sense against the
+    servo angle of :mod:`ikseries.joints`), and the pulse limits. :meth:`joint_map` computes
+    from it the servo angle -> pulse map of the geometry."""
     neutral_pose: dict
     pulse_unit_us: float
     neutral_pulse_pu: float
@@ -207,7 +208,7 @@ class CalibrationSpec:
                              f"{self.pulse_unit_us:g}, not {self.neutral_pulse_pu!r}")
 
     def joint_map(self, geometry) -> Calibration:
-        """The angle -> pulse map of ``geometry``: its joint angles at the neutral pose."""
+        """The servo angle -> pulse map of ``geometry``: its servo angles at the neutral pose."""
         neutral = tuple(float(a) for a in geometry.ik(*(self.neutral_pose[n] for n in geometry.inputs)))
         return Calibration(neutral, self.directions, self.neutral_pulse_pu, self.pu_per_degree)
 

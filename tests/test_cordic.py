@@ -48,6 +48,21 @@ def test_golden_matches_exact_ik(robot):
         assert e["total"] < 0.1, (s, e)
 
 
+def test_golden_follows_the_joint_conventions():
+    """The datapath computes the kinematic angles; with mirrored servos and horn offsets its
+    pulses still follow the robot's (the calibration mapped to kinematic angles)."""
+    import tomllib
+    from ikseries.robot import parse_robot, preset_text
+    d = tomllib.loads(preset_text("cylinder-leg"))
+    d["geometry"].update(zero_offsets=[12.5, -3.5, 46.3], angle_directions=[-1, 1, -1])
+    robot = parse_robot(d)
+    cp = CordicPlan(robot, DEFAULT_DESIGN)
+    pts = {k: np.clip(v, i.lo, i.hi) for (k, v), i in zip(_targets(cp, 2000, 2).items(), cp.inputs)}
+    m = measure_cordic(robot, DEFAULT_DESIGN, pts)
+    for s, e in m["servos"].items():
+        assert e["total"] < 0.1, (s, e)
+
+
 def test_sized_design_within_tolerance_on_fresh_points(robot):
     m = measure_cordic(robot, SIZED, _random_points(robot, 20000, 7))
     for s, e in m["servos"].items():

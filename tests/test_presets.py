@@ -119,11 +119,14 @@ def test_neutral_pose_gives_the_neutral_pulse(robot):
     (HexapodLeg(), (300.0, 0.0, 0.0),
      "target (x=300, y=0, z=0) is unreachable: tip distance from the femur axis 295.481 mm must be within [50, 210] mm"),
     (HexapodLeg(), (200.0, 0.0, 0.0),
-     "target (x=200, y=0, z=0) is unreachable: tibia angle -54.8592 deg must be within [0, 90] deg"),
+     "target (x=200, y=0, z=0) is unreachable: tibia angle -54.8592 deg must be within [0, 90] deg "
+     "(geometry.joint_ranges[2])"),
     (HexapodLeg(), (54.0, 0.0, 45.0),
-     "target (x=54, y=0, z=45) is unreachable: femur angle -124.613 deg must be within [-90, 90] deg"),
+     "target (x=54, y=0, z=45) is unreachable: femur angle -124.613 deg must be within [-90, 90] deg "
+     "(geometry.joint_ranges[1])"),
     (HexapodLeg(), (-50.0, 1.0, 0.0),
-     "target (x=-50, y=1, z=0) is unreachable: coxa angle 178.854 deg must be within [-90, 90] deg"),
+     "target (x=-50, y=1, z=0) is unreachable: coxa angle 178.854 deg must be within [-90, 90] deg "
+     "(geometry.joint_ranges[0])"),
     (QuadrupedHind(), (0.0, -30.0),
      "target (x=0, y=-30) is unreachable: hip-toe distance 135 mm must be within (30, 130) mm "
      "with the shin bisected by the hip-toe line"),
@@ -131,13 +134,16 @@ def test_neutral_pose_gives_the_neutral_pulse(robot):
      "target (x=0, y=80) is unreachable: hip-toe distance 25 mm must be within (30, 130) mm "
      "with the shin bisected by the hip-toe line"),
     (QuadrupedHind(), (0.0, 70.0),
-     "target (x=0, y=70) is unreachable: knee angle 160.556 deg must be within [0, 150] deg"),
+     "target (x=0, y=70) is unreachable: knee angle 160.556 deg must be within [0, 150] deg "
+     "(geometry.joint_ranges[1])"),
     (QuadrupedFore(), (100.0, 0.0),
      "target (x=100, y=0) is unreachable: shoulder-toe distance 145 mm must be within [20, 120] mm"),
     (QuadrupedFore(), (0.0, 70.0),
-     "target (x=0, y=70) is unreachable: shoulder angle 109.616 deg must be within [-90, 90] deg"),
+     "target (x=0, y=70) is unreachable: shoulder angle 109.616 deg must be within [-90, 90] deg "
+     "(geometry.joint_ranges[0])"),
     (QuadrupedFore(), (14.0, 75.0),
-     "target (x=14, y=75) is unreachable: elbow angle 154.233 deg must be within [0, 150] deg"),
+     "target (x=14, y=75) is unreachable: elbow angle 154.233 deg must be within [0, 150] deg "
+     "(geometry.joint_ranges[1])"),
 ])
 def test_unreachable_target_is_a_one_line_error_naming_it(geometry, point, message):
     with pytest.raises(UnreachableError) as e:
@@ -161,7 +167,8 @@ def test_unreachable_workspace_is_a_robot_error():
     d = tomllib.loads(preset_text("hexapod-leg"))
     d["workspace"]["z"]["max"] = 60.0
     with pytest.raises(RobotError, match=r"^workspace: target \(x=54, y=-40, z=40\) is unreachable: "
-                                         r"femur angle -91.7416 deg must be within \[-90, 90\] deg$"):
+                                         r"femur angle -91.7416 deg must be within \[-90, 90\] deg "
+                                         r"\(geometry.joint_ranges\[1\]\)$"):
         parse_robot(d)
 
 

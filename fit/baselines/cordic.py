@@ -553,7 +553,7 @@ class CordicPlan:
         n_table = max(d.rot_iters, d.xy_iters, d.uv_iters, d.law_iters)
         f, t = g.femur, g.tibia
         area = lambda val: round(val * 2 ** W)  # noqa: E731
-        cal = robot.joint_calibration
+        cal = g.kinematic_calibration(robot.joint_calibration)   # the datapath's angles are kinematic
         tpp = robot.ticks_per_pu
         c1, c0 = [], []
         for j in range(len(robot.servos)):

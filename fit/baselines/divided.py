@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...joints import geometry_record
 from ...planar_arm import PlanarArm
 from ..polyfit import fit_lawson, total_degree_terms, vander
 
@@ -517,7 +518,7 @@ def run_divided_differences(geometry: PlanarArm, cases=DEFAULT_CASES, *, pu_per_
               max_degree=max_degree)
     return {
         "method": "divided-differences",
-        "geometry": dataclasses.asdict(geometry),
+        "geometry": geometry_record(geometry),
         "pu_per_degree": float(pu_per_degree), "tolerance_pu": float(tolerance_pu),
         "cases": [path_report(geometry, c, **kw) for c in cases],
     }
