@@ -329,3 +329,11 @@ def _joint_change(i, **kw):
 def test_bad_chain_geometry_is_one_line(geometry, message):
     with pytest.raises(RobotError, match=f"^{message}$"):
         parse_robot(_robot_data("hexapod-leg", geometry))
+
+
+def test_a_certified_fit_of_a_chain_is_refused_before_the_search(hexapod_chain):
+    from ikseries.fit.fitter import fit_robot
+    with pytest.raises(RobotError, match=r"^geometry.type: a chain's reference IK is numeric \(Newton\), so its "
+                                         r"fit cannot be certified yet \(the certifier evaluates the IK as a formula "
+                                         r"on intervals; a chain needs an interval Newton enclosure per cell\)$"):
+        fit_robot(hexapod_chain)

@@ -85,6 +85,8 @@ class Chain(Geometry):
     tool: Tool | None = None
 
     coordinates = "cartesian"
+    #: ``angles`` runs on float64 only: the certifier cannot evaluate it on intervals
+    numeric_ik = True
 
     def __post_init__(self):
         object.__setattr__(self, "joints", tuple(_as(Joint, j) for j in self.joints))
