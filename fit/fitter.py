@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..robot_parts import RobotError
 from .certify import CertificationError, certify
 from .context import Budget, FitContext, FitError, FormatError, operand_bits
 from .cost import DEFAULT_COST_MODEL, CostModel
@@ -149,7 +150,14 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True,
     ``hardware.dsp`` (:func:`operand_bits`; narrowed by the plan builder). The extra rounding
     may not fit the usual 10 % of the tolerance; then the whole fit is redone with the next
     of ``QUANTIZATION_SHARES`` (the approximation budget shrinks by as much).
+
+    A geometry whose reference IK is numeric (``numeric_ik``: a chain) has no formula for the
+    certifier to run on intervals; its certified fit is refused at once, before the search.
     """
+    if certified and getattr(robot.geometry, "numeric_ik", False):
+        raise RobotError(f"geometry.type: a {type(robot.geometry).__name__.lower()}'s reference IK is numeric "
+                         f"(Newton), so its fit cannot be certified yet (the certifier evaluates the IK as a "
+                         f"formula on intervals; a chain needs an interval Newton enclosure per cell)")
     bits = operand_bits(robot)
     if bits is None:
         return _fit_attempts(FitContext.for_robot(robot, QUANTIZATION_SHARES[0], cost_model), progress, certified)

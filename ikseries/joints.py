@@ -168,9 +168,11 @@ class JointConventions:
 
 
 def joint_range_checks(angles: Sequence[np.ndarray], servo_names: Sequence[str],
-                       ranges: Sequence[tuple[float, float]]) -> list[Check]:
+                       ranges: Sequence[tuple[float, float]],
+                       field: str = "geometry.joint_ranges[{k}]") -> list[Check]:
     """Checks (for :func:`ikseries.reach.raise_first_unreachable`) that each joint angle (deg)
-    lies in its inclusive range; the message names the ``geometry.joint_ranges`` entry.
+    lies in its inclusive range; the message names the TOML entry to widen (``field``, with
+    ``{k}`` the servo's index).
 
     A non-finite angle also fails (its message then shows ``nan``); geometries put their
     reach checks first so that such targets are reported by reach instead.
@@ -180,9 +182,8 @@ def joint_range_checks(angles: Sequence[np.ndarray], servo_names: Sequence[str],
         a = np.ravel(a)
         with np.errstate(invalid="ignore"):
             out = ~((a >= lo - ANGLE_SLACK_DEG) & (a <= hi + ANGLE_SLACK_DEG))
-        checks.append((out, lambda i, a=a, name=name, lo=lo, hi=hi, k=k:
-                       f"{name} angle {a[i]:.6g} deg must be within [{lo:g}, {hi:g}] deg "
-                       f"(geometry.joint_ranges[{k}])"))
+        checks.append((out, lambda i, a=a, name=name, lo=lo, hi=hi, where=field.format(k=k):
+                       f"{name} angle {a[i]:.6g} deg must be within [{lo:g}, {hi:g}] deg ({where})"))
     return checks
 
 

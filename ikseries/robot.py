@@ -20,6 +20,7 @@ import numpy as np
 from .geometry import geometry_class, geometry_type
 from .joints import CONVENTION_FIELDS, geometry_record
 from .kinematics import Calibration, UnreachableError
+from .chain.parse import CHAIN_TYPES, parse_chain
 from .reach import ReachUnprovenError, prove_box_reachable
 from .robot_parts import (ARCHITECTURES, DSP_CHOICES, HARDWARE_LABELS, LOWERINGS, PRODUCTS, CalibrationSpec,
                           FitOptions, HardwareOptions, InputSpec, RobotError, Workspace, field_number, field_table,
@@ -113,13 +114,15 @@ def _parse_geometry(geo: dict):
         raise RobotError(f"geometry.{e}") from None
 
 
-def parse_robot(data: dict, source: str = "robot") -> Robot:
-    """Validate a parsed TOML table and build a :class:`Robot`."""
+def parse_robot(data: dict, source: str = "robot", base_dir=None) -> Robot:
+    """Validate a parsed TOML table and build a :class:`Robot`; files it names (a chain's
+    URDF) are relative to ``base_dir``."""
     if not isinstance(data, dict):
         raise RobotError(f"{source}: a robot description must be a table")
     refuse_extra(data, {"name", "description", "legs", "geometry", "workspace", "calibration", "fit", "hardware"}, "")
     name, desc = _parse_name(data)
-    geometry = _parse_geometry(field_table(data, "geometry", ""))
+    geo = field_table(data, "geometry", "")
+    geometry = parse_chain(geo, base_dir) if geo.get("type") in CHAIN_TYPES else _parse_geometry(geo)
     workspace = Workspace.parse(field_table(data, "workspace", ""), geometry)
     calibration = CalibrationSpec.parse(field_table(data, "calibration", ""), geometry)
     fit = FitOptions.parse(field_table(data, "fit", "", required=False))
@@ -195,7 +198,8 @@ def with_fit(robot: Robot, **options) -> Robot:
 def _check_reachable(robot: Robot) -> None:
     """The neutral pose and every target of the workspace box must be reachable: a grid over
     the box (corners included) is checked first, then the whole box is proven by interval
-    analysis (:func:`ikseries.reach.prove_box_reachable`)."""
+    analysis (:func:`ikseries.reach.prove_box_reachable`), or by the geometry's own
+    ``check_box`` where it has one (a chain's numeric IK is no formula to run on intervals)."""
     ws = robot.workspace
     try:
         robot.geometry.ik(*(robot.calibration.neutral_pose[n] for n in ws.names))
@@ -205,7 +209,11 @@ def _check_reachable(robot: Robot) -> None:
     grid = [g.ravel() for g in np.meshgrid(*axes, indexing="ij")]
     try:
         robot.geometry.ik(*grid)
-        prove_box_reachable(robot.geometry, ws.lows, ws.highs)
+        check = getattr(robot.geometry, "check_box", None)
+        if check is not None:
+            check(ws.lows, ws.highs)
+        else:
+            prove_box_reachable(robot.geometry, ws.lows, ws.highs)
     except (UnreachableError, ReachUnprovenError) as e:
         raise RobotError(f"workspace: {e}") from None
 
@@ -326,7 +334,7 @@ def load_robot(path) -> Robot:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise RobotError(f"{path}: invalid TOML: {e}") from None
-    return parse_robot(data, str(path))
+    return parse_robot(data, str(path), path.parent)
 
 
 def preset_names() -> list[str]:

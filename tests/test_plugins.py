@@ -22,8 +22,8 @@ def test_a_registered_name_loads_its_class():
 
 @pytest.mark.parametrize("name", ["hexapod", 3, ["cylinder-leg"], None])
 def test_an_unregistered_name_is_one_line_naming_it(name):
-    with pytest.raises(ValueError, match=r"^geometry.type must be one of cylinder-leg, hexapod-leg, planar-arm, "
-                                         r"quadruped-fore, quadruped-hind, not " + re.escape(repr(name)) + "$"):
+    with pytest.raises(ValueError, match=r"^geometry.type must be one of chain, cylinder-leg, hexapod-leg, "
+                                         r"planar-arm, quadruped-fore, quadruped-hind, urdf, not " + re.escape(repr(name)) + "$"):
         geometry_class(name)
 
 

@@ -36,7 +36,7 @@ _DEL = object()
     ("fit.products", "narrow", "fit.products must be one of exact, dsp, not 'narrow'"),
     ("geometry.femur", -60.0, "geometry.femur must be > 0, not -60.0"),
     ("geometry.femur", _DEL, "geometry.femur is missing"),
-    ("geometry.type", "hexapod", "geometry.type must be one of cylinder-leg, hexapod-leg, planar-arm, quadruped-fore, quadruped-hind, not 'hexapod'"),
+    ("geometry.type", "hexapod", "geometry.type must be one of chain, cylinder-leg, hexapod-leg, planar-arm, quadruped-fore, quadruped-hind, urdf, not 'hexapod'"),
     ("geometry.knee", 3.0, "unknown field geometry.knee"),
     ("workspace.r.max", -1.0, "workspace.r.max must be > workspace.r.min (0.0), not -1.0"),
     ("workspace.theta.min", -270.0, "workspace.theta must lie within [-180, 180] deg, not [-270.0, 180.0]"),
