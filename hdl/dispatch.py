@@ -437,6 +437,15 @@ class Dispatcher(wiring.Component):
                     m.d.comb += bnd.eq(Mux(high, inp.hi, inp.lo))
         return bnd
 
+    def _outside(self, m, r, v, high: bool):
+        """Whether ``v`` is above coordinate ``k``'s ``hi`` if ``high``, else below its ``lo``."""
+        out = Signal()
+        with m.Switch(r.k):
+            for k, inp in enumerate(self._plan.inputs):
+                with m.Case(k):
+                    m.d.comb += out.eq(v > inp.hi if high else v < inp.lo)
+        return out
+
     def _move_states(self, m, r, wr):
         with m.State("LEG_NEXT"):
             with m.If(r.leg == self._legs):
@@ -447,16 +456,14 @@ class Dispatcher(wiring.Component):
                 m.next = "LOAD"
             with m.Else():
                 m.d.sync += [r.leg.eq(r.leg + 1), r.ch.eq(r.ch + self._servos)]
-        # one subtractor against the bound: its sign says below, sign and zero say above
+        # a comparator per bound of each coordinate, against its constant: a carry chain and
+        # no look-up table on iCE40 (a subtractor against a selected bound needs both)
         v = r.val[:17].as_signed()
-        diff = Signal(signed(18))
         with m.State("CLAMP_LO"):
-            m.d.comb += diff.eq(v - self._bound(m, r, 0))
-            m.d.sync += r.below.eq(diff < 0)
+            m.d.sync += r.below.eq(self._outside(m, r, v, high=False))
             m.next = "CLAMP_HI"
         with m.State("CLAMP_HI"):
-            m.d.comb += diff.eq(v - self._bound(m, r, 1))
-            m.d.sync += r.above.eq((diff >= 0) & (diff != 0))
+            m.d.sync += r.above.eq(self._outside(m, r, v, high=True))
             m.next = "CLAMP_SET"
         with m.State("CLAMP_SET"):
             bnd = self._bound(m, r, r.above)
