@@ -585,17 +585,26 @@ class Dispatcher(wiring.Component):
     def _build(self, m, r, wr):
         byte, field_end, answer_end = Signal(8), Signal(), Signal()
         sources = self._sources(r)
-        fid_bits = len(r.fid)
+        fid_bits, fk_bits = len(r.fid), len(r.fk)
+        # the answers' bytes by where they come from: one multiplexer input per distinct source
+        # byte (the six receiver counters' bytes are one, counter_data's), bytes past a field's
+        # signal zero
+        cases = {}
         with m.Switch(Cat(r.fid, r.kind)):
             for kind, fields in enumerate(_BUILT):
                 for i, f in enumerate(fields):
                     n, sig = f.group_bytes(None), sources[kind][f.name]
                     assert len(answer_byte_map((f,))) == n and len(sig) <= 8 * n, f.name
                     with m.Case(kind << fid_bits | i):
-                        m.d.comb += [byte.eq(Cat(sig, Const(0, 8 * n - len(sig))).word_select(r.fk, 8)),
-                                     field_end.eq(r.fk == n - 1), answer_end.eq(i == len(fields) - 1)]
+                        m.d.comb += [field_end.eq(r.fk == n - 1), answer_end.eq(i == len(fields) - 1)]
                         if f.name in P.RECEIVER_COUNTERS:
                             m.d.comb += self.counter_addr.eq(P.RECEIVER_COUNTERS.index(f.name))
+                    for k in range((len(sig) + 7) // 8):
+                        cases.setdefault((id(sig), k), (sig, k, []))[2].append((kind << fid_bits | i) << fk_bits | k)
+        with m.Switch(Cat(r.fk, r.fid, r.kind)):
+            for sig, k, at in cases.values():
+                with m.Case(*at):
+                    m.d.comb += byte.eq(sig[8 * k:8 * k + 8])
         # each byte is written a cycle after its field is selected: the counters are a memory
         with m.If(~r.settle):
             m.d.sync += r.settle.eq(1)
