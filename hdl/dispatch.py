@@ -85,8 +85,11 @@ def _register_slice(m, inner, outer):
 
 
 def _saturating_increment(m, counter, event):
-    with m.If(event & (counter != (1 << len(counter)) - 1)):
-        m.d.sync += counter.eq(counter + 1)
+    # the increment's carry out says the counter is full: no separate all-ones detector
+    nxt = Signal(len(counter) + 1)
+    m.d.comb += nxt.eq(counter + 1)
+    with m.If(event & ~nxt[-1]):
+        m.d.sync += counter.eq(nxt[:-1])
 
 
 class Dispatcher(wiring.Component):
