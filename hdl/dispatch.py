@@ -106,7 +106,8 @@ class Dispatcher(wiring.Component):
     into the servo controller; an answer header waits until the servo controller has taken
     the writes, targets and commit. Requests arrive
     at the line rate, thousands of cycles apart, so everything is byte-serial: one field
-    register, one comparator for the target bounds, answers built a byte a cycle in block RAM.
+    register, checked by the rule a table picks for the command and field, a comparator per
+    target bound (against its constant), answers built a byte a cycle in block RAM.
 
     Moves: each leg of a ``move_leg``/``move_legs`` target goes through the IK core, one leg at
     a time; a coordinate is saturated to the plan input's ``[lo, hi]`` first (``status`` counts
