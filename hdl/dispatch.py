@@ -14,6 +14,7 @@ from .servo_fields import ChannelField, FailsafeAction
 __all__ = ["Dispatcher"]
 
 _C = {c.name: c for c in P.COMMANDS}
+_INDEX = {c.name: i for i, c in enumerate(P.COMMANDS)}
 _REASON = {name: i + 1 for i, (name, _) in enumerate(P.NACK_REASONS)}
 #: the request field a parameter write carries as its value, and its servo field
 _WRITES = {"set_trim": ("trim", ChannelField.TRIM), "set_limits": ("max", ChannelField.MIN),
@@ -38,10 +39,9 @@ class _Regs:
 
     def __init__(self, d):
         self.cmd = Signal(8)
+        self.ci = Signal(range(len(P.COMMANDS) + 1))      # the command's index (len: none)
         self.ra = Signal(range(d._max_request + 1))         # next payload byte to read
         self.bcnt = Signal(range(_LOAD_CYCLES))             # cycle of the field load
-        self.nb = Signal(range(5))                          # bytes of the field being loaded
-        self.sgn = Signal()                                 # ... and whether it is signed
         self.step = Signal(range(4))                        # fields of the request loaded
         self.val = Signal(32)                               # the field, extended to 32 bits
         self.lim = Signal(signed(d._w + 1))                 # value of a parameter write
@@ -85,8 +85,11 @@ def _register_slice(m, inner, outer):
 
 
 def _saturating_increment(m, counter, event):
-    with m.If(event & (counter != (1 << len(counter)) - 1)):
-        m.d.sync += counter.eq(counter + 1)
+    # the increment's carry out says the counter is full: no separate all-ones detector
+    nxt = Signal(len(counter) + 1)
+    m.d.comb += nxt.eq(counter + 1)
+    with m.If(event & ~nxt[-1]):
+        m.d.sync += counter.eq(nxt[:-1])
 
 
 class Dispatcher(wiring.Component):
@@ -103,7 +106,8 @@ class Dispatcher(wiring.Component):
     into the servo controller; an answer header waits until the servo controller has taken
     the writes, targets and commit. Requests arrive
     at the line rate, thousands of cycles apart, so everything is byte-serial: one field
-    register, one comparator for the target bounds, answers built a byte a cycle in block RAM.
+    register, checked by the rule a table picks for the command and field, a comparator per
+    target bound (against its constant), answers built a byte a cycle in block RAM.
 
     Moves: each leg of a ``move_leg``/``move_legs`` target goes through the IK core, one leg at
     a time; a coordinate is saturated to the plan input's ``[lo, hi]`` first (``status`` counts
@@ -273,35 +277,41 @@ class Dispatcher(wiring.Component):
     def _receive_states(self, m, r):
         with m.State("IDLE"):
             with m.If(self.request.valid & ~r.sending):
+                with m.Switch(self.request.payload.command):
+                    for i, c in enumerate(P.COMMANDS):
+                        with m.Case(c.code):
+                            m.d.sync += r.ci.eq(i)
+                    with m.Default():
+                        m.d.sync += r.ci.eq(len(P.COMMANDS))
                 m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.w_ch.eq(0), r.nack.eq(0),
                              r.ident.eq(0), r.unsupported.eq(0), r.bcnt.eq(0), r.legs_phase.eq(0)]
                 m.next = "DECODE"
         with m.State("DECODE"):
-            with m.Switch(r.cmd):
-                with m.Case(_C["identity"].code):
+            with m.Switch(r.ci):
+                with m.Case(_INDEX["identity"]):
                     m.d.comb += self.request.ready.eq(1)
                     m.d.sync += [r.ident.eq(1), r.ans_len.eq(len(self._identity))]
                     m.next = "ANSWER"
-                with m.Case(_C["status"].code):
+                with m.Case(_INDEX["status"]):
                     m.d.comb += self.request.ready.eq(1)
                     m.d.sync += r.ch.eq(0)
                     m.next = "STATUS_READ"
-                for c in P.COMMANDS:
-                    if scalar_offsets(c):
-                        with m.Case(c.code):
-                            self._load(m, r, c, 0)
+                with m.Case(*[i for i, c in enumerate(P.COMMANDS) if scalar_offsets(c)]):
+                    m.d.sync += r.step.eq(0)
+                    m.next = "LOAD"
                 with m.Default():   # the receiver passes request codes only: kept for a defined state
                     m.d.sync += r.unsupported.eq(1)
                     self._nack(m, r)
         with m.State("LOAD"):
             # a byte a cycle, the payload memory a cycle behind the address; the bytes past the
             # field's end are its extension, so every check sees one 32-bit integer
+            nb, sgn = self._field_kind(m, r)
             m.d.comb += self.rd_addr.eq(r.ra)
-            with m.If(r.bcnt < r.nb):
+            with m.If(r.bcnt < nb):
                 m.d.sync += r.ra.eq(r.ra + 1)
-            fill = Mux(r.sgn & r.val[-1], 0xFF, 0)
+            fill = Mux(sgn & r.val[-1], 0xFF, 0)
             with m.If(r.bcnt != 0):
-                m.d.sync += r.val.eq(Cat(r.val[8:], Mux(r.bcnt <= r.nb, self.rd_data, fill)))
+                m.d.sync += r.val.eq(Cat(r.val[8:], Mux(r.bcnt <= nb, self.rd_data, fill)))
             m.d.sync += r.bcnt.eq(r.bcnt + 1)
             with m.If(r.bcnt == _LOAD_CYCLES - 1):
                 m.d.sync += r.bcnt.eq(0)
@@ -309,12 +319,6 @@ class Dispatcher(wiring.Component):
                     m.next = "CLAMP_LO"
                 with m.Else():
                     m.next = "CHECK"
-
-    def _load(self, m, r, cmd, i: int):
-        """Go and read the ``i``-th scalar field of ``cmd`` (fields are read in order)."""
-        _, nbytes, signed_ = list(scalar_offsets(cmd).values())[i]
-        m.d.sync += [r.nb.eq(nbytes), r.sgn.eq(signed_), r.step.eq(i)]
-        m.next = "LOAD"
 
     def _nack(self, m, r):
         """Refuse the request (still offered by the link): build the NACK answer."""
@@ -331,50 +335,66 @@ class Dispatcher(wiring.Component):
         m.next = "ANSWER"
 
     # -- checking each field as it is read, then executing the request
+    def _field_kind(self, m, r):
+        """Bytes and signedness of the field being loaded: a coordinate's, or the scalar
+        field ``step`` of the command's (a table on the command index and ``step``)."""
+        coord = next(f for f in _C["move_legs"].request if f.count == "coords")
+        nb, sgn = Signal(range(5)), Signal()
+        with m.Switch(Cat(r.step, r.ci)):
+            for ci, c in enumerate(P.COMMANDS):
+                for i, (_, nbytes, signed_) in enumerate(scalar_offsets(c).values()):
+                    with m.Case(ci << len(r.step) | i):
+                        m.d.comb += [nb.eq(nbytes), sgn.eq(signed_)]
+        with m.If(r.legs_phase):
+            m.d.comb += [nb.eq(P.KINDS[coord.kind][0]), sgn.eq(P.KINDS[coord.kind][1])]
+        return nb, sgn
+
     def _checks(self, m, r):
         """Each range check, once, on the field register (a field's kind and rule pick one)."""
         v, top = r.val, self._w
-        named = {"channel": v < self._channels, "leg": v < self._legs,
-                 "leg_mask": (v != 0) & (v >> self._legs == 0), "channel_mask": v >> self._channels == 0,
-                 "failsafe_action": v <= max(FailsafeAction),
-                 # a signed width is in [-2**top, 2**top): its bits from top up are its sign
-                 "signed_width": (v[top:] == 0) | (v[top:] == (1 << (32 - top)) - 1),
-                 "width": v >> top == 0, "max": (v >> top == 0) & (r.lim.as_unsigned() <= v[:top + 1])}
-        out = {}
-        for name, expr in named.items():
-            out[name] = Signal(name=f"ok_{name}")
-            m.d.comb += out[name].eq(expr)
-        return out
+        return {"none": Const(1), "channel": v < self._channels, "leg": v < self._legs,
+                "leg_mask": (v != 0) & (v >> self._legs == 0), "channel_mask": v >> self._channels == 0,
+                "failsafe_action": v <= max(FailsafeAction),
+                # a signed width is in [-2**top, 2**top): its bits from top up are its sign
+                "signed_width": (v[top:] == 0) | (v[top:] == (1 << (32 - top)) - 1),
+                "width": v >> top == 0, "max": (v >> top == 0) & (r.lim.as_unsigned() <= v[:top + 1])}
 
-    def _field_ok(self, ok, cmd, name: str):
+    @staticmethod
+    def _rule(cmd, name: str) -> str:
+        """The check of request field ``name`` of ``cmd``: a key of :meth:`_checks`."""
         field = next(f for f in cmd.request if f.name == name)
         if field.values is not None:
-            return ok[field.values]
+            return field.values
         if name not in _WIDE.get(cmd.name, ()):
-            return Const(1)
+            return "none"
         if cmd.name == "set_limits" and name == "max":
-            return ok["max"]
-        return ok["signed_width" if P.KINDS[field.kind][1] else "width"]
+            return "max"
+        return "signed_width" if P.KINDS[field.kind][1] else "width"
 
     def _check(self, m, r, wr):
-        ok = self._checks(m, r)
-        with m.Switch(r.cmd):
-            for c in P.COMMANDS:
+        # one multiplexer picks the field's check; every failure takes the one NACK path
+        checks = self._checks(m, r)
+        ok, last = Signal(), Signal()
+        with m.Switch(Cat(r.step, r.ci)):
+            for ci, c in enumerate(P.COMMANDS):
                 names = list(scalar_offsets(c))
-                if not names:
-                    continue
-                with m.Case(c.code):
-                    with m.Switch(r.step):
-                        for i, name in enumerate(names):
-                            with m.Case(i):
-                                with m.If(~self._field_ok(ok, c, name)):
-                                    self._nack(m, r)
-                                with m.Else():
-                                    self._keep(m, r, c, name)
-                                    if i + 1 < len(names):
-                                        self._load(m, r, c, i + 1)
-                                    else:
-                                        self._execute(m, r, c, wr)
+                for i, name in enumerate(names):
+                    with m.Case(ci << len(r.step) | i):
+                        m.d.comb += [ok.eq(checks[self._rule(c, name)]), last.eq(i + 1 == len(names))]
+        with m.If(~ok):
+            self._nack(m, r)
+        with m.Elif(~last):
+            m.d.sync += r.step.eq(r.step + 1)
+            m.next = "LOAD"
+        with m.Switch(Cat(r.step, r.ci)):
+            for ci, c in enumerate(P.COMMANDS):
+                names = list(scalar_offsets(c))
+                for i, name in enumerate(names):
+                    with m.Case(ci << len(r.step) | i):
+                        with m.If(ok):
+                            self._keep(m, r, c, name)
+                            if i + 1 == len(names):
+                                self._execute(m, r, c, wr)
 
     def _keep(self, m, r, cmd, name: str):
         """A checked field that later states read from its own register."""
@@ -421,28 +441,33 @@ class Dispatcher(wiring.Component):
                     m.d.comb += bnd.eq(Mux(high, inp.hi, inp.lo))
         return bnd
 
+    def _outside(self, m, r, v, high: bool):
+        """Whether ``v`` is above coordinate ``k``'s ``hi`` if ``high``, else below its ``lo``."""
+        out = Signal()
+        with m.Switch(r.k):
+            for k, inp in enumerate(self._plan.inputs):
+                with m.Case(k):
+                    m.d.comb += out.eq(v > inp.hi if high else v < inp.lo)
+        return out
+
     def _move_states(self, m, r, wr):
-        coord = next(f for f in _C["move_legs"].request if f.count == "coords")
         with m.State("LEG_NEXT"):
             with m.If(r.leg == self._legs):
                 m.d.comb += self.request.ready.eq(1)
                 m.next = "STAGE_WAIT"
             with m.Elif(r.legs.bit_select(r.leg, 1)):
-                m.d.sync += [r.k.eq(0), r.j.eq(0), r.outside.eq(0), r.legs_phase.eq(1),
-                             r.nb.eq(P.KINDS[coord.kind][0]), r.sgn.eq(P.KINDS[coord.kind][1])]
+                m.d.sync += [r.k.eq(0), r.j.eq(0), r.outside.eq(0), r.legs_phase.eq(1)]
                 m.next = "LOAD"
             with m.Else():
                 m.d.sync += [r.leg.eq(r.leg + 1), r.ch.eq(r.ch + self._servos)]
-        # one subtractor against the bound: its sign says below, sign and zero say above
+        # a comparator per bound of each coordinate, against its constant: a carry chain and
+        # no look-up table on iCE40 (a subtractor against a selected bound needs both)
         v = r.val[:17].as_signed()
-        diff = Signal(signed(18))
         with m.State("CLAMP_LO"):
-            m.d.comb += diff.eq(v - self._bound(m, r, 0))
-            m.d.sync += r.below.eq(diff < 0)
+            m.d.sync += r.below.eq(self._outside(m, r, v, high=False))
             m.next = "CLAMP_HI"
         with m.State("CLAMP_HI"):
-            m.d.comb += diff.eq(v - self._bound(m, r, 1))
-            m.d.sync += r.above.eq((diff >= 0) & (diff != 0))
+            m.d.sync += r.above.eq(self._outside(m, r, v, high=True))
             m.next = "CLAMP_SET"
         with m.State("CLAMP_SET"):
             bnd = self._bound(m, r, r.above)
@@ -484,7 +509,7 @@ class Dispatcher(wiring.Component):
             m.next = "STAGE_SEND"
         with m.State("STAGE_SEND"):
             # a move stages the channels of its legs, set_pulse its one channel
-            pend = Mux(r.cmd == _C["set_pulse"].code, r.ch == r.w_ch, r.legs.bit_select(r.leg, 1))
+            pend = Mux(r.ci == _INDEX["set_pulse"], r.ch == r.w_ch, r.legs.bit_select(r.leg, 1))
             m.d.comb += [r.target.valid.eq(pend), r.target.payload.channel.eq(r.ch),
                          r.target.payload.time.eq(r.move_time)]
             with m.If(~pend | r.target.ready):
@@ -502,9 +527,9 @@ class Dispatcher(wiring.Component):
     def _write_states(self, m, r):
         with m.State("WRITE"):
             field = Signal(4)
-            with m.Switch(r.cmd):
+            with m.Switch(r.ci):
                 for name, (_, cf) in _WRITES.items():
-                    with m.Case(_C[name].code):
+                    with m.Case(_INDEX[name]):
                         m.d.comb += field.eq(Mux(r.w_more, cf, ChannelField.MAX) if name == "set_limits" else cf)
             m.d.comb += [r.write.valid.eq(1), r.write.payload.channel.eq(r.w_ch),
                          r.write.payload.field.eq(field), r.write.payload.value.eq(r.lim)]
@@ -564,17 +589,26 @@ class Dispatcher(wiring.Component):
     def _build(self, m, r, wr):
         byte, field_end, answer_end = Signal(8), Signal(), Signal()
         sources = self._sources(r)
-        fid_bits = len(r.fid)
+        fid_bits, fk_bits = len(r.fid), len(r.fk)
+        # the answers' bytes by where they come from: one multiplexer input per distinct source
+        # byte (the six receiver counters' bytes are one, counter_data's), bytes past a field's
+        # signal zero
+        cases = {}
         with m.Switch(Cat(r.fid, r.kind)):
             for kind, fields in enumerate(_BUILT):
                 for i, f in enumerate(fields):
                     n, sig = f.group_bytes(None), sources[kind][f.name]
                     assert len(answer_byte_map((f,))) == n and len(sig) <= 8 * n, f.name
                     with m.Case(kind << fid_bits | i):
-                        m.d.comb += [byte.eq(Cat(sig, Const(0, 8 * n - len(sig))).word_select(r.fk, 8)),
-                                     field_end.eq(r.fk == n - 1), answer_end.eq(i == len(fields) - 1)]
+                        m.d.comb += [field_end.eq(r.fk == n - 1), answer_end.eq(i == len(fields) - 1)]
                         if f.name in P.RECEIVER_COUNTERS:
                             m.d.comb += self.counter_addr.eq(P.RECEIVER_COUNTERS.index(f.name))
+                    for k in range((len(sig) + 7) // 8):
+                        cases.setdefault((id(sig), k), (sig, k, []))[2].append((kind << fid_bits | i) << fk_bits | k)
+        with m.Switch(Cat(r.fk, r.fid, r.kind)):
+            for sig, k, at in cases.values():
+                with m.Case(*at):
+                    m.d.comb += byte.eq(sig[8 * k:8 * k + 8])
         # each byte is written a cycle after its field is selected: the counters are a memory
         with m.If(~r.settle):
             m.d.sync += r.settle.eq(1)
