@@ -97,11 +97,13 @@ def robot_on_board(robot, spec: BoardSpec):
 
 @dataclass(frozen=True)
 class BoardBuild:
-    """The controller's Verilog and its bitstream."""
+    """The controller's Verilog, its IK core and its bitstream."""
     spec: BoardSpec
     module: str
     verilog: str
     bitstream: BitstreamResult
+    #: the controller's IK core: {"architecture", "legs", "latency_cycles"}
+    core: dict
 
 
 def board_build(robot, plan, spec: BoardSpec, module: str, manifest_text: str, outdir, progress) -> BoardBuild:
@@ -114,7 +116,10 @@ def board_build(robot, plan, spec: BoardSpec, module: str, manifest_text: str, o
                               name=robot.name, manifest=digest)
     except ValueError as e:
         raise BoardBuildError(f"robot controller: {e}") from None
-    progress(f"exporting the robot controller ({ctl.shape.channels} channels, host link at {spec.baud:,} baud)")
+    core = {"architecture": "shared", "legs": robot.legs, "latency_cycles": ctl.core.latency}
+    progress(f"exporting the robot controller ({ctl.shape.channels} channels, host link at {spec.baud:,} baud; IK core: "
+             f"the folded evaluator shared by the legs, {ctl.core.latency} cycles a leg, since requests arrive at "
+             "the line rate)")
     name = controller_module(module)
     text = verilog.convert(ctl, name=name, emit_src=False)
     progress(f"building the {spec.board.name} bitstream: {spec.clock.describe()}")
@@ -123,4 +128,4 @@ def board_build(robot, plan, spec: BoardSpec, module: str, manifest_text: str, o
     except (BitstreamError, DoesNotFitError) as e:
         raise BoardBuildError(str(e)) from None
     progress(f"bitstream {bits.path.name}: Fmax {bits.fmax_mhz:g} MHz against {spec.clock_hz / 1e6:g} MHz")
-    return BoardBuild(spec, name, text, bits)
+    return BoardBuild(spec, name, text, bits, core)
