@@ -259,3 +259,27 @@ def test_mearm_firmware_against_exact_and_mirror():
     # forearm angle leaves the elbow's pulse unchanged (the linkage the MeArm is built with)
     a0, a1, a2 = mearm.solve(*mearm.HOME)
     assert mearm.angle2pwm("elbow", a2) == mearm.angle2pwm("elbow", mearm.solve(*mearm.unsolve(a0, a1 + 0.1, a2))[2])
+
+
+# -- what ikseries' hexapod-leg expresses (docs/robots.md, last table) -----------------------
+
+def test_hexapod_leg_expresses_one_leg():
+    """One Phoenix / PhantomX / Freenove leg is hexapod-leg under the mapping docs/robots.md
+    gives: the exact ports' servo angles and HexapodLeg.ik agree to 1e-9 deg over the boxes."""
+    from ikseries.hexapod_leg import HexapodLeg
+    wide = [[-180, 180]] * 3
+    for mod, cfg, leg in ((phoenix, phoenix.PHOENIX, "RF"), (phantomx, phantomx.PHANTOMX, "LM")):
+        i, bh = cfg.leg(leg), 200.0
+        g = HexapodLeg(coxa=cfg.coxa[i], femur=cfg.femur[i], tibia=cfg.tibia[i], body_height=bh, joint_ranges=wide,
+                       zero_offsets=[cfg.coxa_angle1[i] / 10, cfg.femur_horn_offset1 / 10, -cfg.tibia_horn_offset1 / 10],
+                       angle_directions=[1, 1, -1])
+        x, y, z = _box_samples(mod.walking_box(leg), 300, seed=8)
+        ok = mod.within_limits(leg, x, y, z)
+        want = np.array(phoenix_code.leg_ik_exact(cfg, leg, x[ok], y[ok], z[ok]))
+        np.testing.assert_allclose(np.array(g.ik(x[ok], z[ok], bh - y[ok])), want, atol=1e-9)
+    x, y, z = _box_samples(freenove.walking_box(), 300, seed=9)
+    a, b, c = freenove.coordinate_to_angle_exact(-z, x, y)
+    for dirs, want in (([-1, -1, 1], (a, 90 - b, c)), ([-1, 1, -1], (a, 90 + b, 180 - c))):
+        g = HexapodLeg(coxa=freenove.L1, femur=freenove.L2, tibia=freenove.L3, body_height=100.0,
+                       joint_ranges=[[-90, 270]] * 3, zero_offsets=[90, 90, 90], angle_directions=dirs)
+        np.testing.assert_allclose(np.array(g.ik(x, y, 100.0 + z)), np.array(want), atol=1e-9)
