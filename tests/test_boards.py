@@ -621,7 +621,10 @@ def test_interrupted_tools_are_stopped_and_leave_nothing(tmp_path):
     import sys
     import time
     out = tmp_path / "out"
-    script = (f"import sys; sys.path.insert(0, {os.path.dirname(__file__)!r})\n"
+    # the child takes SIGINT as KeyboardInterrupt even where it inherits SIGINT ignored (a
+    # background job's), in which case Python installs no handler of its own
+    script = (f"import signal, sys; sys.path.insert(0, {os.path.dirname(__file__)!r})\n"
+              "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
               "from test_boards import EchoServos\n"
               "from ikseries.bitstream import build_bitstream\n"
               "from ikseries.constraints.boards import BOARDS\n"
