@@ -14,11 +14,13 @@ Every servo has its own pulse limits, the plan's output clamp. ``[calibration]``
 defaults of every servo; ``[calibration.servos.<servo>]`` overrides them for one servo
 (:class:`ServoOverride`).
 
-The maps evaluate over any math namespace the certifier uses: a table is written as a sum of
-clamps, ``p_0 + sum_i (p_{i+1} - p_i) * (clamp(a, a_i, a_{i+1}) - a_i) / (a_{i+1} - a_i)``,
-so interval and centred evaluation (``ikseries.fit.interval.clamp``) bound it rigorously: where
-a cell's angle may cross a table point, the clamp may switch and only first-order forms apply,
-as for the plan's own output clamp. The same formula runs on numpy arrays (``np.clip``).
+The maps evaluate over any math namespace the certifier uses. On numpy arrays a table is
+interpolated segment by segment (exact at its points); for the certifier it is written in
+hinge form, ``p_0 + s_0 (a - a_0) + sum_k (s_k - s_{k-1}) (max(a, a_k) - a_k)`` over the inner
+points ``a_k`` (the same function up to the rounding of its slopes ``s_k``), with ``max`` the
+namespace's clamp (``ikseries.fit.interval.clamp``): where a cell's angle may cross a table
+point, that clamp may switch and only the first-order forms apply, as for the plan's own
+output clamp, and only the slope's change at the point widens the derivative's enclosure.
 """
 from __future__ import annotations
 
@@ -43,7 +45,7 @@ class LinearMap:
     pu_per_degree: float      # signed: its sign is the servo's direction
     trim_pu: float = 0.0
 
-    def pulse(self, angle, clamp: Callable = np.clip):
+    def pulse(self, angle, clamp: Callable | None = None):
         """The pulse of ``angle`` (an array, or a number of the certifier's namespaces)."""
         p = self.pulse_pu + self.pu_per_degree * (angle - self.angle_deg)
         return p + self.trim_pu if self.trim_pu else p
@@ -57,7 +59,8 @@ class LinearMap:
 @dataclass(frozen=True)
 class TableMap:
     """``pulse`` = piecewise-linear through ``points`` ((deg, pu), angles strictly increasing)
-    + ``trim_pu``; outside the table the end pulses hold (the box check refuses such angles)."""
+    + ``trim_pu``; outside the table the end segments extend (the box check refuses such
+    angles on its grid)."""
     points: tuple[tuple[float, float], ...]
     trim_pu: float = 0.0
 
@@ -65,14 +68,34 @@ class TableMap:
     def angle_range(self) -> tuple[float, float]:
         return self.points[0][0], self.points[-1][0]
 
-    def pulse(self, angle, clamp: Callable = np.clip):
-        """The pulse of ``angle`` as a sum of clamps (module docstring): at a table angle every
-        term is 0 or its whole step, so the table's pulses come out exactly when their steps
-        are exact in float64 (e.g. whole or half microseconds)."""
-        p = self.points[0][1]
-        for (a0, p0), (a1, p1) in zip(self.points, self.points[1:]):
-            p = p + (p1 - p0) * ((clamp(angle, a0, a1) - a0) / (a1 - a0))
+    @property
+    def slopes(self) -> np.ndarray:
+        """pu per degree of each segment."""
+        a, p = np.array(self.points).T
+        return np.diff(p) / np.diff(a)
+
+    def pulse(self, angle, clamp: Callable | None = None):
+        """The pulse of ``angle``: on numpy arrays (``clamp`` None) by segment, exact at the
+        table's points; else in hinge form (module docstring) with the namespace's ``clamp``."""
+        p = self._segments(angle) if clamp is None else self._hinges(angle, clamp)
         return p + self.trim_pu if self.trim_pu else p
+
+    def _segments(self, angle) -> np.ndarray:
+        a = np.asarray(angle, dtype=np.float64)
+        xs, ps = (np.array(c) for c in zip(*self.points))
+        k = np.clip(np.searchsorted(xs, a, side="right") - 1, 0, len(xs) - 2)
+        with np.errstate(invalid="ignore"):
+            p = ps[k] + self.slopes[k] * (a - xs[k])
+        return np.where(a == xs[-1], ps[-1], p)     # the last point is no segment's start
+
+    def _hinges(self, angle, clamp: Callable):
+        (a0, p0), s = self.points[0], self.slopes
+        p = p0 + float(s[0]) * (angle - a0)
+        for (ak, _), step in zip(self.points[1:-1], np.diff(s)):
+            # max(a, a_k) - a_k: the clamp compares the angle itself, so a cell that only touches
+            # a_k is not taken to cross it for the rounding of a difference
+            p = p + float(step) * (clamp(angle, ak, np.inf) - ak)
+        return p
 
     def of_kinematic(self, direction: int, offset: float) -> "TableMap":
         """The same pulses as a map of the kinematic angle (see :meth:`LinearMap.of_kinematic`)."""
@@ -92,8 +115,9 @@ class Calibration:
         return cls(tuple(LinearMap(float(n), neutral_pulse_pu, d * pu_per_degree)
                          for n, d in zip(neutral_angles, directions)))
 
-    def pulse(self, k: int, angle, clamp: Callable = np.clip):
-        """Pulse of servo ``k`` at ``angle``; ``clamp`` of the namespace ``angle`` is in."""
+    def pulse(self, k: int, angle, clamp: Callable | None = None):
+        """Pulse of servo ``k`` at ``angle``: a numpy array (``clamp`` None) or a number of a
+        math namespace whose ``clamp(x, lo, hi)`` is given (the certifier's)."""
         return self.servos[k].pulse(angle, clamp)
 
     def pulses(self, angles):

@@ -287,9 +287,9 @@ class CalibrationSpec:
             us, (lo, hi) = float(m.pulse(a)) * self.pulse_unit_us, self.limits_us(name)
             if not lo <= us <= hi:
                 trimmed = o.trim_us and lo <= us - o.trim_us <= hi    # the trim alone drives it out
-                what = f"{path}.trim_us = {o.trim_us:g} drives" if trimmed else f"{path} gives"
-                raise RobotError(f"{what} the pulse at the neutral pose to {us:.6g} us, outside its pulse limits "
-                                 f"[{lo:g}, {hi:g}] us")
+                what = (f"{path}.trim_us = {o.trim_us:g} drives the pulse at the neutral pose to {us:.6g} us"
+                        if trimmed else f"{path} gives a pulse of {us:.6g} us at the neutral pose")
+                raise RobotError(f"{what}, outside its pulse limits [{lo:g}, {hi:g}] us")
 
     def check_box(self, geometry, names, coords, angles) -> None:
         """At the targets ``coords`` (arrays, input ``names``) with servo ``angles``: every
