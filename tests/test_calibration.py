@@ -12,12 +12,14 @@ from ikseries.fit.certify import _reference_function
 from ikseries.robot import (RobotError, load_preset, parse_robot, preset_text, robot_from_record, robot_record)
 
 TABLE = [[30, 900], [70, 1300], [110, 1712], [150, 2136]]     # s3 (tibia) spans 38..140 deg
-#: the small fit's servos: s2 by its pulse at angle 0 and a negative gain, s3 by a table
+#: the small fit's servos: s2 by its pulse at angle 0 and a negative gain, pulse limits just
+#: outside its pulses over the box (1253.9 .. 1873.9 us: the output clamp stays), s3 by a table
 FIT_SERVOS = f"""
 [calibration.servos.s2]
 zero_pulse_us = 1700.0
 us_per_degree = -10.67
-pulse_max_us = 2000.0
+pulse_min_us = 1250.0
+pulse_max_us = 1880.0
 
 [calibration.servos.s3]
 table = {TABLE}
@@ -135,7 +137,7 @@ def test_overrides_are_recorded_and_read_back():
     robot = parse_robot(tomllib.loads(preset_text("cylinder-leg") + FIT_SERVOS))
     rec = robot_record(robot)
     assert rec["calibration"]["servos"] == {
-        "s2": {"zero_pulse_us": 1700.0, "us_per_degree": -10.67, "pulse_max_us": 2000.0},
+        "s2": {"zero_pulse_us": 1700.0, "us_per_degree": -10.67, "pulse_min_us": 1250.0, "pulse_max_us": 1880.0},
         "s3": {"table": [[30.0, 900.0], [70.0, 1300.0], [110.0, 1712.0], [150.0, 2136.0]], "trim_us": 12.5}}
     assert robot.fit_record()["servos"] == rec["calibration"]["servos"]   # the plan-cache key sees them
     back = robot_from_record(copy.deepcopy(rec))
@@ -148,7 +150,8 @@ def test_servo_records_list_each_servos_calibration():
     assert s1 == {"servo": "s1", "map": "linear", "neutral_angle_deg": 0.0, "neutral_pulse_us": 1500.0,
                   "zero_pulse_us": 1500.0, "us_per_degree": 10.0, "trim_us": 0.0,
                   "pulse_min_us": 500.0, "pulse_max_us": 2500.0}
-    assert s2["us_per_degree"] == -10.67 and s2["zero_pulse_us"] == 1700.0 and s2["pulse_max_us"] == 2000.0
+    assert s2["us_per_degree"] == -10.67 and s2["zero_pulse_us"] == 1700.0
+    assert (s2["pulse_min_us"], s2["pulse_max_us"]) == (1250.0, 1880.0)
     assert s2["neutral_pulse_us"] == pytest.approx(1700.0 - 10.67 * s2["neutral_angle_deg"], abs=1e-9)
     assert s3["map"] == "table" and s3["table"] == TABLE and s3["trim_us"] == 12.5 and "us_per_degree" not in s3
     assert s3["neutral_pulse_us"] == pytest.approx(float(np.interp(s3["neutral_angle_deg"], *zip(*TABLE))) + 12.5)
@@ -218,3 +221,78 @@ def test_a_calibration_past_the_limits_inside_the_box_names_the_target_and_servo
     with pytest.raises(RobotError) as e:
         parse_robot(with_servos(servos))
     assert str(e.value) == message
+
+
+# -- a small fit with a per-servo gain and a table servo ------------------------------------------
+FIT_TOML = (preset_text("cylinder-leg").replace('name = "cylinder-leg"', 'name = "calibrated-leg"')
+            .replace("tolerance_pu = 0.5 ", "tolerance_pu = 4.0 ") + FIT_SERVOS)
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    """The robot of FIT_TOML, its description file and its certified plan (a fit of seconds)."""
+    from ikseries.fit.fitter import fit_robot
+    path = tmp_path_factory.mktemp("calibrated") / "calibrated-leg.toml"
+    path.write_text(FIT_TOML)
+    robot = parse_robot(tomllib.loads(FIT_TOML))
+    plan = fit_robot(robot)[0]
+    plan.meta["robot_description"] = robot_record(robot)
+    (path.parent / "plan.json").write_text(plan.dumps())
+    return robot, path, plan
+
+
+def test_per_servo_fit_is_certified_with_its_own_clamps(calibrated):
+    robot, _, plan = calibrated
+    cert = plan.meta["certificate"]["servos"]
+    assert [c["name"] for c in cert] == ["s1", "s2", "s3"]
+    assert all(c["converged"] and c["total_pu"] <= robot.fit.tolerance_pu and c["clamp_pu"] == 0 for c in cert)
+    limits = robot.pulse_limits_ticks()
+    assert limits == {"s1": (24000, 120000), "s2": (60000, 90240), "s3": (24000, 120000)}
+    for o in plan.outputs:      # a clamp that never acts is dropped: the output's range is inside
+        n, (lo, hi) = plan.nodes[o.node], limits[o.name]
+        assert lo <= n.lo and n.hi <= hi and (n.op != "clamp" or tuple(n.param) == (lo, hi))
+    assert plan.nodes[plan.outputs[1].node].op == "clamp"     # s2's own limits act
+
+
+def test_per_servo_fit_golden_model_meets_the_tolerance(calibrated):
+    from ikseries.accuracy import measure, verification_points
+    robot, _, plan = calibrated
+    worst = measure(robot, plan, verification_points(robot, n_points=20_000, n_face=2_000))
+    assert all(w["total"] <= robot.fit.tolerance_pu for w in worst["servos"].values())
+
+
+def test_eval_uses_the_per_servo_map(calibrated, capsys):
+    from ikseries.cli import main
+    robot, path, _ = calibrated
+    assert main(["eval", "--robot", str(path), "--plan", str(path.parent / "plan.json"), "-q", "10", "45", "5"]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines() if line.startswith("s")][1:]
+    ref = [float(p[0]) for p in robot.pulses_pu([10.0], [45.0], [5.0])]
+    assert [r[0] for r in rows] == ["s1", "s2", "s3"]
+    assert [float(r[1]) for r in rows] == pytest.approx(ref, abs=1e-3)
+    assert all(abs(float(r[4])) <= robot.fit.tolerance_pu for r in rows)
+    a = robot.geometry.ik(10.0, 45.0, 5.0)
+    assert ref[1] == pytest.approx((1700.0 - 10.67 * float(a[1])) / 0.5, abs=1e-9)
+    assert ref[2] == pytest.approx((float(np.interp(a[2], *zip(*TABLE))) + 12.5) / 0.5, abs=1e-9)
+
+
+def test_cordic_datapath_refuses_a_table_servo(calibrated):
+    from ikseries.fit.baselines.cordic import CordicDesign, CordicPlan
+    design = CordicDesign(rot_iters=13, xy_iters=13, uv_iters=14, law_iters=13, len_frac=11, area_frac=3,
+                          angle_frac=11, gain_frac=18, scale_frac=0)
+    with pytest.raises(ValueError, match=r"^the CORDIC datapath scales angles to pulses linearly: "
+                                         r"calibration\.servos\.s3\.table needs the polynomial fit$"):
+        CordicPlan(calibrated[0], design)
+
+
+@pytest.mark.long
+def test_build_lists_each_servos_calibration(calibrated, tmp_path):
+    import json
+
+    from ikseries.cli import main
+    robot, path, _ = calibrated
+    out = tmp_path / "build"
+    assert main(["build", str(path), "--no-synth", "--cocotb", "none", "-q", "-o", str(out)]) == 0
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["calibration"] == json.loads(json.dumps(robot.calibration.servo_records(robot.geometry)))
+    md = (out / "report.md").read_text()
+    assert "## Calibration" in md and "| s3 | table 30:900, 70:1300, 110:1712, 150:2136 |" in md
