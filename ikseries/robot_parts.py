@@ -219,8 +219,8 @@ class CalibrationSpec:
                              f"{self.pulse_unit_us:g}, not {self.neutral_pulse_pu!r}")
 
     def check_servos(self, servos) -> None:
-        """Per servo override: its pulse limits in order, and a gain not also flipped by
-        ``directions`` (the gain's sign is the direction)."""
+        """Per servo override: its pulse limits in order, and a gain or table not also flipped
+        by ``directions`` (the gain's sign is the direction; a table gives the pulses)."""
         for k, name in enumerate(servos):
             o = self.servos.get(name)
             if o is None:
@@ -232,9 +232,11 @@ class CalibrationSpec:
             if not lo < hi:
                 raise RobotError(f"calibration.servos.{name}.pulse_min_us must be < the pulse_max_us of {name} "
                                  f"({hi!r}), not {lo!r}")
-            if o.us_per_degree is not None and self.directions[k] != 1:
-                raise RobotError(f"calibration.directions[{k}] must be 1 when calibration.servos.{name}.us_per_degree "
-                                 f"is given (its sign is the direction), not {self.directions[k]!r}")
+            own = "us_per_degree" if o.us_per_degree is not None else "table" if o.table is not None else None
+            if own is not None and self.directions[k] != 1:
+                why = "its sign is the direction" if own == "us_per_degree" else "it gives the pulses"
+                raise RobotError(f"calibration.directions[{k}] must be 1 when calibration.servos.{name}.{own} "
+                                 f"is given ({why}), not {self.directions[k]!r}")
 
     def limits_us(self, servo: str) -> tuple[float, float]:
         """Pulse limits (µs) of ``servo``: its own, else the defaults."""

@@ -196,6 +196,8 @@ S2 = "calibration.servos.s2"
     ({"s2": {"zero_pulse_us": 1500.0, "us_per_degree": 10.0}}, {"directions": [1, -1, 1]},
      "calibration.directions[1] must be 1 when calibration.servos.s2.us_per_degree is given (its sign is the "
      "direction), not -1"),
+    ({"s3": {"table": TABLE}}, {"directions": [1, 1, -1]},
+     "calibration.directions[2] must be 1 when calibration.servos.s3.table is given (it gives the pulses), not -1"),
     ({"s2": {"zero_pulse_us": 1500.0, "knee": 1}}, {},
      "unknown field calibration.servos.s2.knee (expected one of: neutral_pulse_us, pulse_max_us, pulse_min_us, "
      "table, trim_us, us_per_degree, zero_pulse_us)"),
