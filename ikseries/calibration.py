@@ -8,7 +8,8 @@ what a geometry's ``ik`` and ``angles`` return. Its pulse is one of
   ``neutral_pulse_us``) or servo angle 0 (a servo's ``zero_pulse_us``), the gain in pu per degree
   of either sign (its sign is the direction);
 - a table: ``pulse = piecewise-linear interpolation of [[angle, pulse], ...] + trim``, for a
-  servo that is not linear; angles outside the table are refused (:func:`box_problem`).
+  servo that is not linear; angles outside the table are refused
+  (``CalibrationSpec.check_box`` in :mod:`ikseries.robot_parts`).
 
 Every servo has its own pulse limits, the plan's output clamp. ``[calibration]`` gives the
 defaults of every servo; ``[calibration.servos.<servo>]`` overrides them for one servo
@@ -30,7 +31,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["LinearMap", "TableMap", "Calibration", "ServoOverride", "OVERRIDE_FIELDS", "REFERENCES"]
+__all__ = ["LinearMap", "TableMap", "Calibration", "ServoOverride", "REFERENCES", "first_failure"]
 
 #: the two references of a linear servo: field -> what it is
 REFERENCES = {"zero_pulse_us": "the pulse at servo angle 0",
@@ -149,9 +150,9 @@ class ServoOverride:
         if extra:
             raise ValueError(f"unknown field {path}.{extra[0]} (expected one of: {', '.join(sorted(names))})")
         for key in names[:-1]:
+            unit = "us per degree" if key == "us_per_degree" else "us"
             if key in t and not _finite(t[key]):
-                raise ValueError(f"{path}.{key} must be a finite number of us{' per degree' * (key == 'us_per_degree')}"
-                                 f", not {t[key]!r}")
+                raise ValueError(f"{path}.{key} must be a finite number of {unit}, not {t[key]!r}")
         o = cls(**{k: float(t[k]) for k in names[:-1] if k in t},
                 table=_parse_table(t["table"], f"{path}.table") if "table" in t else None)
         o._check(path)
@@ -199,8 +200,6 @@ def _parse_table(value, path: str) -> tuple[tuple[float, float], ...]:
         out.append((float(p[0]), float(p[1])))
     return tuple(out)
 
-
-OVERRIDE_FIELDS = tuple(f.name for f in fields(ServoOverride))
 
 
 def first_failure(masks: Sequence[np.ndarray]) -> tuple[int, int] | None:
