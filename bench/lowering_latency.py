@@ -45,7 +45,7 @@ def rebuild(robot, plan, fits, extra: int | None, horner: bool = False, guard: i
     fv = plan.meta["features"]["frac_bits"]
     b = PlanBuilder(list(ctx.inputs))
     nodes = FeatureNodes(ctx, b, fv)
-    lo, hi = robot.pulse_limits_ticks()
+    limits = robot.pulse_limits_ticks()
     outs, splits = [], {}
     for sf in fits:
         feats, coefficient = poly_inputs(b, sf.features, nodes[sf.features.kind], fv)
@@ -56,7 +56,7 @@ def rebuild(robot, plan, fits, extra: int | None, horner: bool = False, guard: i
         split = None if horner else choose_split(b, lower, poly_degrees(sf.poly, k), extra)[0]
         splits[sf.name] = split
         acc = lower(split)
-        out = b.clamp(b.round(acc, 0), lo, hi)
+        out = b.clamp(b.round(acc, 0), *limits[sf.name])
         outs.append(PlanOutput(sf.name, out, acc, "ticks", robot.ticks_per_pu))
     return b.build(outs), splits
 

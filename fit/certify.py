@@ -161,13 +161,12 @@ def _reference_function(robot, servo: int, ticks_per_pu: float):
     """``values -> Interval`` of the reference pulse width of ``servo`` in ticks."""
     cal = robot.joint_calibration
     names = [i.name for i in robot.workspace.inputs]
-    slope = cal.directions[servo] * cal.pu_per_degree
-    neutral = cal.neutral_angles[servo]
 
     def run(values: dict) -> ia.Interval:
         xp = cn.MATH if isinstance(values[names[0]], cn.Centred) else ia.MATH
         angle = robot.geometry.angles(xp, *(values[k] for k in names))[servo]
-        return (cal.neutral_pulse_pu + slope * (angle - neutral)) * ticks_per_pu
+        # a calibration table is a sum of clamps (ikseries.calibration): cn.clamp takes both namespaces
+        return cal.pulse(servo, angle, cn.clamp) * ticks_per_pu
     return run
 
 

@@ -65,17 +65,18 @@ def servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], fv
     return estrin(b, poly, feats, frac, coefficient, split=None, parity=k)
 
 
-def build_plan(ctx, fits: list[ServoFit], fv: int, mixed: bool | None = None) -> Plan:
+def build_plan(ctx, fits: list[ServoFit], fv: int, mixed: bool | None = None, limits: dict | None = None) -> Plan:
     """The plan of ``fits`` with features of ``fv`` fractional bits; ``mixed`` None: as the
-    context's lowering says."""
+    context's lowering says. Each output is clamped to its servo's pulse limits (``limits``:
+    servo name -> (lo, hi) ticks; None: the robot's)."""
     mixed = ctx.mixed if mixed is None else mixed
     b = PlanBuilder(list(ctx.inputs), operand_bits=ctx.operand_bits)
     nodes = FeatureNodes(ctx, b, fv, mixed)
-    lo, hi = ctx.robot.pulse_limits_ticks()
+    limits = ctx.robot.pulse_limits_ticks() if limits is None else limits
     outs = []
     for sf in fits:
         acc = servo_nodes(b, sf.features, sf.poly, nodes[sf.features.kind], fv, sf.frac, mixed)
-        out = b.clamp(b.round(acc, 0), lo, hi)
+        out = b.clamp(b.round(acc, 0), *limits[sf.name])
         outs.append(PlanOutput(sf.name, out, acc, "ticks", ctx.ticks_per_pu))
     return b.build(outs)
 
@@ -85,12 +86,14 @@ def output_multipliers(plan: Plan) -> dict:
     return {o.name: sum(1 for i in plan.cone(o.node) if plan.nodes[i].op == "mul") for o in plan.outputs}
 
 
-def structure_cost(ctx, fs: FeatureSet, terms: list) -> float:
-    """Cost (``ctx.cost_model``) of the servo evaluation (coordinate stage included) for
-    ``terms``, known before fitting: the structure alone decides it."""
+def structure_cost(ctx, fs: FeatureSet, terms: list, servo: str | None = None) -> float:
+    """Cost (``ctx.cost_model``) of the evaluation of ``servo`` (its output clamp; None: the
+    first servo's) with the coordinate stage for ``terms``, known before fitting: the
+    structure alone decides it."""
     # distinct coefficients: equal ones would share Horner sub-expressions
     cells = fs.cut.cells if fs.cut else 0
     sf = ServoFit("cost", fs, 0, {e: (1.0 + k / 4096,) * cells if cells else 1.0 + k / 4096
                                   for k, e in enumerate(terms)}, 0.0, frac=16)
-    plan = build_plan(ctx, [sf], 16, mixed=False)
+    limits = ctx.robot.pulse_limits_ticks()
+    plan = build_plan(ctx, [sf], 16, mixed=False, limits={"cost": limits[servo or ctx.robot.servos[0]]})
     return ctx.cost_model.cost(plan, "cost")

@@ -161,7 +161,7 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
         nonlocal best
         for deg in range(1, MAX_DEGREE + 1):
             terms = fs.terms(deg)
-            cost = structure_cost(ctx, fs, terms)
+            cost = structure_cost(ctx, fs, terms, name)
             if best is not None and cost >= best[0]:
                 return
             if data.lsq_error(terms) > 8 * budget_ticks:
@@ -214,7 +214,7 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
             if sum(t) == 0 or t in rejected:
                 continue
             rest = terms[:i] + terms[i + 1:]
-            c2 = structure_cost(ctx, sf.features, rest)
+            c2 = structure_cost(ctx, sf.features, rest, sf.name)
             if c2 < cost:
                 pick = (t, rest, c2)
                 break

@@ -25,7 +25,7 @@ def cordic_input_layout(cp: CordicPlan) -> data.StructLayout:
 
 def cordic_output_layout(cp: CordicPlan) -> data.StructLayout:
     """One field per servo: pulse width in PWM clock ticks, shaped by the pulse limits."""
-    return data.StructLayout({s: _shape(*cp.limits) for s in cp.servos})
+    return data.StructLayout({s: _shape(*cp.limits[s]) for s in cp.servos})
 
 
 class AmaranthOps(OperatorOps):

@@ -177,6 +177,8 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
         "pwm": [{"servo": s, "port": f"pwm_{s}", "period_cycles": core.period,
                  "period_us": core.period / clk * 1e6,
                  "update": "new width applied at the next period start"} for s in core.servos],
+        # each servo's angle -> pulse map and pulse limits (the outputs' clamp), as fitted
+        "calibration": robot.calibration.servo_records(robot.geometry),
         "latency_cycles": core.latency,
         "latency_ns": core.latency / clk * 1e9,
         "initiation_interval": ii,

@@ -11,14 +11,15 @@ Three optional ``[geometry]`` fields, one entry per servo in the geometry's serv
 
 The servo angle is ``servo = direction * kinematic + offset``. It is what the geometry's ``ik``
 and ``angles`` return, what ``joint_ranges`` and the workspace reachability proof check, what
-``fk`` takes, and what the calibration maps to a pulse::
+``fk`` takes, and what the calibration (:mod:`ikseries.calibration`) maps to a pulse, by default::
 
     pulse = neutral_pulse_pu + calibration.directions * pu_per_degree * (servo - servo at the neutral pose)
 
 so ``angle_directions`` and ``calibration.directions`` both flip a servo's pulse deviations, but
 only ``angle_directions`` also flips the angle that ``joint_ranges`` and ``zero_offsets`` are
-measured in. Because the calibration counts from the neutral pose, an offset shifts the servo
-angle and where its range lies, not its pulse.
+measured in. Because that calibration counts from the neutral pose, an offset shifts the servo
+angle and where its range lies, not its pulse (a servo calibrated by its pulse at servo angle 0,
+``zero_pulse_us``, or by a table of servo angles does see the offset).
 
 Defaults: direction +1, offset 0 (the servo angle is the kinematic angle, bit for bit: the
 conversion is skipped) and the geometry's own ranges (:attr:`JointConventions.default_joint_ranges`;
@@ -157,14 +158,14 @@ class JointConventions:
         return joint_range_checks(angles, self.servo_names, self.joint_ranges)
 
     def kinematic_calibration(self, cal):
-        """``cal`` (an :class:`ikseries.kinematics.Calibration` of the servo angles) as the same
-        map of the kinematic angles: pulses are unchanged, the direction is the product of the
-        calibration's and the joint's, and the neutral angles are kinematic."""
+        """``cal`` (an :class:`ikseries.calibration.Calibration` of the servo angles) as the same
+        map of the kinematic angles: pulses are unchanged, each servo's map takes the kinematic
+        angle (``of_kinematic``: a linear gain's sign times the joint's direction)."""
         if all(self._identity(k) for k in range(len(self.servos))):
             return cal
-        return dataclasses.replace(
-            cal, neutral_angles=tuple(float(a) for a in self.kinematic_angles(cal.neutral_angles)),
-            directions=tuple(c * d for c, d in zip(cal.directions, self.angle_directions)))
+        return dataclasses.replace(cal, servos=tuple(
+            m if self._identity(k) else m.of_kinematic(d, o)
+            for k, (m, d, o) in enumerate(zip(cal.servos, self.angle_directions, self.zero_offsets))))
 
 
 def joint_range_checks(angles: Sequence[np.ndarray], servo_names: Sequence[str],

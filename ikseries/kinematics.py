@@ -1,4 +1,4 @@
-"""Reference inverse and forward kinematics (float64) and servo calibration.
+"""Reference inverse and forward kinematics (float64); the servo calibration is :mod:`ikseries.calibration`.
 
 Everything here is vectorised over numpy arrays and is the ground truth the
 fitted integer series is measured against.
@@ -15,7 +15,7 @@ import numpy as np
 from .geometry import CylindricalGeometry
 from .joints import JointConventions
 
-__all__ = ["UnreachableError", "CylinderLeg", "Calibration", "NUMPY_MATH", "RAD2DEG", "format_point"]
+__all__ = ["UnreachableError", "CylinderLeg", "NUMPY_MATH", "RAD2DEG", "format_point"]
 
 RAD2DEG = 180.0 / np.pi
 
@@ -171,24 +171,3 @@ class CylinderLeg(JointConventions, CylindricalGeometry):
     def fk(self, s1, s2, s3):
         """Cylindrical tip target (R, theta, Z) for servo angles in degrees."""
         return self.from_cartesian(*self.fk_cartesian(s1, s2, s3))
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """Servo calibration: servo angle (deg) -> pulse width (pulse units).
-
-    ``pulse = neutral_pulse + direction * pu_per_degree * (angle - neutral_angle)``
-    where ``angle`` is the servo angle a geometry's ``ik`` gives (its kinematic angle under
-    the joint conventions of :mod:`ikseries.joints`) and ``neutral_angle`` that angle at the
-    neutral pose.
-    """
-
-    neutral_angles: tuple[float, ...]
-    directions: tuple[int, ...]
-    neutral_pulse_pu: float = 3000.0
-    pu_per_degree: float = 20.0
-
-    def pulses(self, angles):
-        """Pulse widths in pu for a sequence of per-servo angle arrays."""
-        return tuple(self.neutral_pulse_pu + d * self.pu_per_degree * (np.asarray(a) - n)
-                     for a, d, n in zip(angles, self.directions, self.neutral_angles))

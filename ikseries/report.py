@@ -62,6 +62,7 @@ class BuildReport:
             "servos": [_servo_record(sf, o, plan, self.fitted.accuracy)
                        for sf, o in zip(self.fitted.servos, plan.outputs)],
             "plan": _plan_record(plan),
+            "calibration": man["calibration"],
             "latency_cycles": man["latency_cycles"],
             "latency_ns": man["latency_ns"],
             "initiation_interval": man["initiation_interval"],
@@ -237,6 +238,23 @@ def _series_section(r: dict) -> list[str]:
     return out
 
 
+def _calibration_section(r: dict) -> list[str]:
+    """Each servo's angle -> pulse map (reports written before it have none)."""
+    if not r.get("calibration"):
+        return []
+    out = ["## Calibration", "",
+           "Servo angle -> pulse per servo, trim included; outputs are clamped to the pulse limits.", "",
+           _row(["servo", "map", "neutral angle (deg)", "neutral pulse (us)", "pulse at 0 deg (us)",
+                 "us per deg", "trim (us)", "limits (us)"]), _row(["---"] * 8)]
+    for c in r["calibration"]:
+        table = c["map"] == "table"
+        out.append(_row([c["servo"], "table " + ", ".join(f"{a:g}:{p:g}" for a, p in c["table"]) if table else "linear",
+                         f"{c['neutral_angle_deg']:.4f}", f"{c['neutral_pulse_us']:.4f}",
+                         "" if table else f"{c['zero_pulse_us']:.4f}", "" if table else f"{c['us_per_degree']:g}",
+                         f"{c['trim_us']:g}", f"{c['pulse_min_us']:g} .. {c['pulse_max_us']:g}"]))
+    return out + [""]
+
+
 def _cocotb_line(sim: str, c: dict) -> str:
     return (f"- cocotb on {sim} (exported Verilog): {', '.join(c['tests'])} passed"
             + (f" ({c['random_targets']} random targets plus the corners)" if "random_targets" in c else "")
@@ -343,7 +361,7 @@ def _board_section(r: dict) -> list[str]:
 def render_markdown(r: dict) -> str:
     """report.md from a build's report record (:meth:`BuildReport.record`, report.json)."""
     t = r["times_s"]
-    out = [*_header(r), *_accuracy_section(r), *_series_section(r), *_timing_section(r),
+    out = [*_header(r), *_accuracy_section(r), *_series_section(r), *_calibration_section(r), *_timing_section(r),
            *_resources_section(r), *_board_section(r), *_coefficients_section(r),
            "## Build times", "", ", ".join(f"{k[:-2]} {v:g} s" for k, v in t.items()), ""]
     return "\n".join(out)

@@ -19,7 +19,8 @@ import numpy as np
 
 from .geometry import geometry_class, geometry_type
 from .joints import CONVENTION_FIELDS, geometry_record
-from .kinematics import Calibration, UnreachableError
+from .calibration import Calibration
+from .kinematics import UnreachableError
 from .chain.parse import CHAIN_TYPES, parse_chain
 from .reach import ReachUnprovenError, prove_box_reachable
 from .robot_parts import (ARCHITECTURES, DSP_CHOICES, HARDWARE_LABELS, LOWERINGS, PRODUCTS, CalibrationSpec,
@@ -64,9 +65,11 @@ class Robot:
         """PWM clock ticks per pulse unit."""
         return self.hardware.clock_hz * self.calibration.pulse_unit_us * 1e-6
 
-    def pulse_limits_ticks(self) -> tuple[int, int]:
+    def pulse_limits_ticks(self) -> dict[str, tuple[int, int]]:
+        """Per servo its pulse limits in whole PWM ticks (inside the µs limits): the output clamp."""
         tpu = self.hardware.clock_hz * 1e-6
-        return int(np.ceil(self.calibration.pulse_min_us * tpu)), int(np.floor(self.calibration.pulse_max_us * tpu))
+        limits = {s: self.calibration.limits_us(s) for s in self.servos}
+        return {s: (int(np.ceil(lo * tpu)), int(np.floor(hi * tpu))) for s, (lo, hi) in limits.items()}
 
     @property
     def joint_calibration(self) -> Calibration:
@@ -196,19 +199,23 @@ def with_fit(robot: Robot, **options) -> Robot:
 
 
 def _check_reachable(robot: Robot) -> None:
-    """The neutral pose and every target of the workspace box must be reachable: a grid over
-    the box (corners included) is checked first, then the whole box is proven by interval
-    analysis (:func:`ikseries.reach.prove_box_reachable`), or by the geometry's own
-    ``check_box`` where it has one (a chain's numeric IK is no formula to run on intervals)."""
-    ws = robot.workspace
+    """The neutral pose and every target of the workspace box must be reachable, and the
+    calibration must keep every servo within its pulse limits (and a table servo within its
+    table) there: a grid over the box (corners included) is checked first, then the whole box
+    is proven reachable by interval analysis (:func:`ikseries.reach.prove_box_reachable`), or
+    by the geometry's own ``check_box`` where it has one (a chain's numeric IK is no formula to
+    run on intervals), then the calibration on the grid (between its points the certifier
+    counts any pulse past the limits in its clamp term)."""
+    ws, cal = robot.workspace, robot.calibration
     try:
-        robot.geometry.ik(*(robot.calibration.neutral_pose[n] for n in ws.names))
+        robot.geometry.ik(*(cal.neutral_pose[n] for n in ws.names))
     except UnreachableError as e:
         raise RobotError(f"calibration.neutral_pose: {e}") from None
+    cal.check_neutral(robot.geometry)
     axes = [np.linspace(lo, hi, 9) for lo, hi in zip(ws.lows, ws.highs)]
     grid = [g.ravel() for g in np.meshgrid(*axes, indexing="ij")]
     try:
-        robot.geometry.ik(*grid)
+        angles = robot.geometry.ik(*grid)
         check = getattr(robot.geometry, "check_box", None)
         if check is not None:
             check(ws.lows, ws.highs)
@@ -216,6 +223,7 @@ def _check_reachable(robot: Robot) -> None:
             prove_box_reachable(robot.geometry, ws.lows, ws.highs)
     except (UnreachableError, ReachUnprovenError) as e:
         raise RobotError(f"workspace: {e}") from None
+    cal.check_box(robot.geometry, ws.names, grid, angles)
 
 
 def _check_pulses(robot: Robot) -> None:

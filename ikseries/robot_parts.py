@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .constraints.devices import FAMILIES, FIT_DEVICES, PRIMITIVES
-from .kinematics import Calibration
+from .calibration import Calibration, LinearMap, ServoOverride, TableMap, first_failure
+from .kinematics import format_point
 
 __all__ = ["RobotError", "InputSpec", "Workspace", "CalibrationSpec", "FitOptions", "HardwareOptions",
            "field_number", "field_table", "refuse_extra", "HARDWARE_LABELS", "ARCHITECTURE_OPTIONS",
@@ -44,6 +45,11 @@ HARDWARE_LABELS = {"legs": "legs", "architecture": "hardware.architecture",
 #: options that only one architecture takes: option -> (architecture, why the others don't)
 ARCHITECTURE_OPTIONS = {"multipliers": ("folded", "auto picks 1 or 2 multipliers itself"),
                         "interval": ("modulo", "auto and fastest pick the interval themselves")}
+
+
+#: pulses are within their limits up to this slack (µs): a pulse on a limit is not refused for a
+#: rounding error
+PULSE_SLACK_US = 1e-9
 
 
 class RobotError(ValueError):
@@ -163,8 +169,10 @@ class Workspace:
 class CalibrationSpec:
     """The servo calibration as described (``[calibration]``): the neutral pose, the pulse
     at it, the pulse per degree and direction of each servo (the pulse's sense against the
-    servo angle of :mod:`ikseries.joints`), and the pulse limits. :meth:`joint_map` computes
-    from it the servo angle -> pulse map of the geometry."""
+    servo angle of :mod:`ikseries.joints`), and the pulse limits, the defaults of every servo;
+    ``servos`` maps a servo to its own calibration (``[calibration.servos.<servo>]``,
+    :class:`ikseries.calibration.ServoOverride`). :meth:`joint_map` computes from it the servo
+    angle -> pulse map of the geometry."""
     neutral_pose: dict
     pulse_unit_us: float
     neutral_pulse_pu: float
@@ -172,13 +180,14 @@ class CalibrationSpec:
     directions: tuple[int, ...]
     pulse_min_us: float = 500.0
     pulse_max_us: float = 2500.0
+    servos: dict = dataclasses.field(default_factory=dict)   # servo -> ServoOverride
 
     @classmethod
     def parse(cls, table: dict, geometry) -> "CalibrationSpec":
         """Validate the ``[calibration]`` table for ``geometry``'s inputs and servos."""
         p = "calibration."
         refuse_extra(table, ["pulse_unit_us", "neutral_pulse_pu", "pu_per_degree", "neutral_pose", "directions",
-                             "pulse_min_us", "pulse_max_us"], p)
+                             "pulse_min_us", "pulse_max_us", "servos"], p)
         pose = field_table(table, "neutral_pose", p)
         refuse_extra(pose, geometry.inputs, "calibration.neutral_pose.")
         pose = {name: float(field_number(pose, name, "calibration.neutral_pose.")) for name in geometry.inputs}
@@ -193,8 +202,10 @@ class CalibrationSpec:
             raise RobotError(f"calibration.pulse_max_us must be > pulse_min_us ({pmin!r}), not {pmax!r}")
         spec = cls(pose, float(field_number(table, "pulse_unit_us", p, positive=True)),
                    float(field_number(table, "neutral_pulse_pu", p, positive=True)),
-                   float(field_number(table, "pu_per_degree", p, positive=True)), tuple(dirs), pmin, pmax)
+                   float(field_number(table, "pu_per_degree", p, positive=True)), tuple(dirs), pmin, pmax,
+                   _parse_servos(field_table(table, "servos", p, required=False), geometry))
         spec.check_neutral_pulse()
+        spec.check_servos(geometry.servos)
         return spec
 
     def check_neutral_pulse(self) -> None:
@@ -207,17 +218,149 @@ class CalibrationSpec:
                              f"{self.pulse_max_us / self.pulse_unit_us:g}] pu at pulse_unit_us = "
                              f"{self.pulse_unit_us:g}, not {self.neutral_pulse_pu!r}")
 
+    def check_servos(self, servos) -> None:
+        """Per servo override: its pulse limits in order, and a gain or table not also flipped
+        by ``directions`` (the gain's sign is the direction; a table gives the pulses)."""
+        for k, name in enumerate(servos):
+            o = self.servos.get(name)
+            if o is None:
+                continue
+            lo, hi = self.limits_us(name)
+            if not lo < hi and o.pulse_max_us is not None:
+                raise RobotError(f"calibration.servos.{name}.pulse_max_us must be > the pulse_min_us of {name} "
+                                 f"({lo!r}), not {hi!r}")
+            if not lo < hi:
+                raise RobotError(f"calibration.servos.{name}.pulse_min_us must be < the pulse_max_us of {name} "
+                                 f"({hi!r}), not {lo!r}")
+            own = "us_per_degree" if o.us_per_degree is not None else "table" if o.table is not None else None
+            if own is not None and self.directions[k] != 1:
+                why = "its sign is the direction" if own == "us_per_degree" else "it gives the pulses"
+                raise RobotError(f"calibration.directions[{k}] must be 1 when calibration.servos.{name}.{own} "
+                                 f"is given ({why}), not {self.directions[k]!r}")
+
+    def limits_us(self, servo: str) -> tuple[float, float]:
+        """Pulse limits (µs) of ``servo``: its own, else the defaults."""
+        o = self.servos.get(servo)
+        lo = o.pulse_min_us if o is not None and o.pulse_min_us is not None else self.pulse_min_us
+        hi = o.pulse_max_us if o is not None and o.pulse_max_us is not None else self.pulse_max_us
+        return lo, hi
+
+    def limit_field(self, servo: str, which: str) -> str:
+        """The TOML field that sets ``servo``'s ``which`` ("pulse_min_us" / "pulse_max_us") limit."""
+        o = self.servos.get(servo)
+        return f"calibration.servos.{servo}.{which}" if o is not None and getattr(o, which) is not None \
+            else f"calibration.{which}"
+
+    def neutral_angles(self, geometry) -> tuple[float, ...]:
+        """The servo angles of ``geometry`` at the neutral pose."""
+        return tuple(float(a) for a in geometry.ik(*(self.neutral_pose[n] for n in geometry.inputs)))
+
     def joint_map(self, geometry) -> Calibration:
         """The servo angle -> pulse map of ``geometry``: its servo angles at the neutral pose."""
-        neutral = tuple(float(a) for a in geometry.ik(*(self.neutral_pose[n] for n in geometry.inputs)))
-        return Calibration(neutral, self.directions, self.neutral_pulse_pu, self.pu_per_degree)
+        neutral = self.neutral_angles(geometry)
+        if not self.servos:
+            return Calibration.linear(neutral, self.directions, self.neutral_pulse_pu, self.pu_per_degree)
+        return Calibration(tuple(self._servo_map(k, name, neutral[k]) for k, name in enumerate(geometry.servos)))
+
+    def _servo_map(self, k: int, name: str, neutral: float):
+        u, o = self.pulse_unit_us, self.servos.get(name)
+        if o is None:
+            return LinearMap(neutral, self.neutral_pulse_pu, self.directions[k] * self.pu_per_degree)
+        trim = (o.trim_us or 0.0) / u
+        if o.table is not None:
+            return TableMap(tuple((a, us / u) for a, us in o.table), trim)
+        gain = o.us_per_degree / u if o.us_per_degree is not None else self.directions[k] * self.pu_per_degree
+        if o.zero_pulse_us is not None:
+            return LinearMap(0.0, o.zero_pulse_us / u, gain, trim)
+        return LinearMap(neutral, o.neutral_pulse_us / u, gain, trim)
+
+    def check_neutral(self, geometry) -> None:
+        """Each overridden servo's pulse at the neutral pose (trim included) lies within its
+        pulse limits, and a table servo's neutral angle within its table."""
+        cal = self.joint_map(geometry)
+        for k, (name, a) in enumerate(zip(geometry.servos, self.neutral_angles(geometry))):
+            o, m = self.servos.get(name), cal.servos[k]
+            if o is None:
+                continue
+            path = f"calibration.servos.{name}"
+            if isinstance(m, TableMap) and not m.angle_range[0] <= a <= m.angle_range[1]:
+                raise RobotError(f"{path}.table covers servo angles [{m.angle_range[0]:g}, {m.angle_range[1]:g}] deg, "
+                                 f"not the neutral pose's {a:.6g} deg")
+            us, (lo, hi) = float(m.pulse(a)) * self.pulse_unit_us, self.limits_us(name)
+            if not lo <= us <= hi:
+                trimmed = o.trim_us and lo <= us - o.trim_us <= hi    # the trim alone drives it out
+                what = (f"{path}.trim_us = {o.trim_us:g} drives the pulse at the neutral pose to {us:.6g} us"
+                        if trimmed else f"{path} gives a pulse of {us:.6g} us at the neutral pose")
+                raise RobotError(f"{what}, outside its pulse limits [{lo:g}, {hi:g}] us")
+
+    def check_box(self, geometry, names, coords, angles) -> None:
+        """At the targets ``coords`` (arrays, input ``names``) with servo ``angles``: every
+        servo's pulse within its limits and every table servo's angle within its table; the
+        first target (C order) that fails is named with the servo."""
+        cal, labels = self.joint_map(geometry), getattr(geometry, "servo_names", geometry.servos)
+        masks, reasons = [], []
+        for k, (name, label, a) in enumerate(zip(geometry.servos, labels, angles)):
+            m, a = cal.servos[k], np.ravel(a)
+            if isinstance(m, TableMap):
+                lo, hi = m.angle_range
+                masks.append(~((a >= lo) & (a <= hi)))
+                reasons.append(lambda i, a=a, s=f"{name} ({label})", lo=lo, hi=hi, f=f"calibration.servos.{name}.table":
+                               f"needs servo {s} at {a[i]:.6g} deg, outside its table [{lo:g}, {hi:g}] deg ({f})")
+            us = np.ravel(m.pulse(a)) * self.pulse_unit_us
+            (lo, hi), s = self.limits_us(name), f"{name} ({label})"
+            for mask, which in ((us < lo - PULSE_SLACK_US, "pulse_min_us"), (us > hi + PULSE_SLACK_US, "pulse_max_us")):
+                masks.append(mask)
+                reasons.append(lambda i, us=us, s=s, lo=lo, hi=hi, f=self.limit_field(name, which):
+                               f"drives servo {s} to {us[i]:.6g} us, past its pulse limits [{lo:g}, {hi:g}] us ({f})")
+        bad = first_failure(masks)
+        if bad is not None:
+            i, j = bad
+            point = format_point(names, [np.ravel(c)[i] for c in coords])
+            raise RobotError(f"calibration: target {point} {reasons[j](i)}")
+
+    def servo_records(self, geometry) -> list[dict]:
+        """Each servo's calibration as used (µs, deg): for the manifest and the report."""
+        cal, u = self.joint_map(geometry), self.pulse_unit_us
+        out = []
+        for k, (name, a) in enumerate(zip(geometry.servos, self.neutral_angles(geometry))):
+            m = cal.servos[k]
+            lo, hi = self.limits_us(name)
+            rec = {"servo": name, "map": "table" if isinstance(m, TableMap) else "linear",
+                   "neutral_angle_deg": a, "neutral_pulse_us": float(m.pulse(a)) * u}
+            if isinstance(m, TableMap):
+                rec["table"] = [[d, p * u] for d, p in m.points]
+            else:
+                rec.update(zero_pulse_us=float(m.pulse(0.0)) * u, us_per_degree=m.pu_per_degree * u)
+            rec.update(trim_us=m.trim_pu * u, pulse_min_us=lo, pulse_max_us=hi)
+            out.append(rec)
+        return out
 
     def record(self) -> dict:
-        return {**dataclasses.asdict(self), "directions": list(self.directions)}
+        d = {**dataclasses.asdict(self), "directions": list(self.directions)}
+        del d["servos"]
+        if self.servos:   # left out without overrides: the record (and plan-cache key) they predate
+            d["servos"] = {name: o.record() for name, o in self.servos.items()}
+        return d
 
     @classmethod
     def from_record(cls, d: dict) -> "CalibrationSpec":
-        return cls(**{**d, "directions": tuple(d["directions"])})
+        servos = {name: _override(t, name) for name, t in d.get("servos", {}).items()}
+        return cls(**{**d, "directions": tuple(d["directions"]), "servos": servos})
+
+
+def _override(t, name: str) -> ServoOverride:
+    try:
+        return ServoOverride.parse(t, f"calibration.servos.{name}")
+    except ValueError as e:
+        raise RobotError(str(e)) from None
+
+
+def _parse_servos(table: dict, geometry) -> dict:
+    """``[calibration.servos]``: one table per servo named as the geometry names them, in
+    the geometry's servo order."""
+    refuse_extra(table, geometry.servos, "calibration.servos.")
+    return {name: _override(field_table(table, name, "calibration.servos."), name)
+            for name in geometry.servos if name in table}
 
 
 # -- fit options -------------------------------------------------------------------------

@@ -64,7 +64,7 @@ def _fields(plan) -> tuple[list[tuple[str, int]], list[tuple[str, int]]]:
     if isinstance(plan, Plan):
         outs = [(o.name, plan.nodes[o.node].width) for o in plan.outputs]
     else:
-        outs = [(s, bits_for(*plan.limits)[0]) for s in plan.servos]
+        outs = [(s, bits_for(*plan.limits[s])[0]) for s in plan.servos]
     for n, w in ins + outs:
         if w > 64:
             raise ValueError(f"port widths must be <= 64 bits for this bench, not {w} (field {n!r})")

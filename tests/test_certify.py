@@ -11,7 +11,7 @@ from ikseries.fit.certify import (CertificationError, _initial_cells, _plan_func
                                   output_rounding)
 from ikseries.fit.horner import horner
 from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
-from ikseries.kinematics import Calibration
+from ikseries.calibration import Calibration
 from ikseries.robot import load_preset
 from ikseries.sim.golden import evaluate_ideal
 
@@ -32,8 +32,8 @@ def _robot(tolerance=0.5):
     return SimpleNamespace(
         geometry=_SineGeometry(), servos=("y",), fit=SimpleNamespace(tolerance_pu=tolerance),
         workspace=SimpleNamespace(inputs=(SimpleNamespace(name="a"), SimpleNamespace(name="b"))),
-        joint_calibration=Calibration(neutral_angles=(0.0,), directions=(1,), neutral_pulse_pu=0.0,
-                                pu_per_degree=1.0))
+        joint_calibration=Calibration.linear(neutral_angles=(0.0,), directions=(1,), neutral_pulse_pu=0.0,
+                                             pu_per_degree=1.0))
 
 
 def _plan(offset=0.0, floor_only=False, clamp=(-10, 10)):

@@ -142,9 +142,10 @@ def test_plan_matches_the_float_series_within_the_certified_bound(robot, pfit, p
     pre = {o.preround for o in pplan.outputs}
     iv = golden.evaluate(pplan, points, pre | {o.node for o in pplan.outputs})
     bounds = pplan.rounding_bounds()
-    lo, hi = robot.pulse_limits_ticks()
+    limits = robot.pulse_limits_ticks()
     tpp = robot.ticks_per_pu
     for s, o in zip(pfit.servos, pplan.outputs):
+        lo, hi = limits[o.name]
         want = evaluate_servo(s, *real)                         # pu, the paper's series
         got_pre = iv[o.preround] * 2.0 ** -pplan.nodes[o.preround].frac / tpp
         bound = bounds[o.preround] / tpp

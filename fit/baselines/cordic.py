@@ -47,6 +47,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+from ...calibration import LinearMap
 from ..plan import PlanInput, bits_for
 from ..ports import plan_inputs
 
@@ -509,8 +510,7 @@ def datapath(ops, cp: "CordicPlan") -> dict:
     live = ops.stage("scale", {s: ops.mulc(live[s], k["c1"][j]) for j, s in enumerate(cp.servos)})
     live = ops.stage("round", {s: ops.shr(ops.add(live[s], ops.c(k["c0"][j])), A + S)
                                for j, s in enumerate(cp.servos)})
-    lo, hi = cp.limits
-    return ops.stage("out", {s: ops.clamp(live[s], lo, hi) for s in cp.servos})
+    return ops.stage("out", {s: ops.clamp(live[s], *cp.limits[s]) for s in cp.servos})
 
 
 # -- a design bound to a robot --------------------------------------------------------------
@@ -538,7 +538,7 @@ class CordicPlan:
             raise ValueError(f"angle_frac must be >= the {ith.name} input's frac_bits ({ith.frac}), "
                              f"not {design.angle_frac!r}")
         self.servos: tuple[str, ...] = tuple(robot.servos)
-        self.limits: tuple[int, int] = robot.pulse_limits_ticks()
+        self.limits: dict[str, tuple[int, int]] = robot.pulse_limits_ticks()   # per servo
         self.k = self._constants()
         ia = IntervalOps({i.name: i.port_range for i in self.inputs})
         out = datapath(ia, self)
@@ -556,9 +556,12 @@ class CordicPlan:
         cal = g.kinematic_calibration(robot.joint_calibration)   # the datapath's angles are kinematic
         tpp = robot.ticks_per_pu
         c1, c0 = [], []
-        for j in range(len(robot.servos)):
-            per_deg = tpp * cal.directions[j] * cal.pu_per_degree          # ticks per degree
-            off = tpp * (cal.neutral_pulse_pu - cal.directions[j] * cal.pu_per_degree * cal.neutral_angles[j])
+        for j, m in enumerate(cal.servos):
+            if not isinstance(m, LinearMap):
+                raise ValueError(f"the CORDIC datapath scales angles to pulses linearly: calibration.servos."
+                                 f"{robot.servos[j]}.table needs the polynomial fit")
+            per_deg = tpp * m.pu_per_degree          # ticks per degree
+            off = tpp * ((m.pulse_pu + m.trim_pu if m.trim_pu else m.pulse_pu) - m.pu_per_degree * m.angle_deg)
             c1.append(round(per_deg * 2 ** S))
             c0.append(round(off * 2 ** (A + S)) + (1 << (A + S - 1) if A + S > 0 else 0))
         return {

@@ -448,11 +448,11 @@ def _servo_node(b, servo: PaperServo, scales: dict, tpp: float, frac: int) -> in
 
 def _build_plan(robot, servos: list, scales: dict) -> Plan:
     b = PlanBuilder(plan_inputs(robot))
-    lo, hi = robot.pulse_limits_ticks()
+    limits = robot.pulse_limits_ticks()
     outs = []
     for s in servos:
         acc = _servo_node(b, s, scales, robot.ticks_per_pu, s.frac)
-        outs.append(PlanOutput(s.name, b.clamp(b.round(acc, 0), lo, hi), acc, "ticks", robot.ticks_per_pu))
+        outs.append(PlanOutput(s.name, b.clamp(b.round(acc, 0), *limits[s.name]), acc, "ticks", robot.ticks_per_pu))
     return b.build(outs)
 
 
