@@ -5,7 +5,9 @@ whole real input box, not only at sample points:
 
 - ``P`` is the plan's ideal function (:func:`ikseries.sim.golden.evaluate_ideal`: unrounded
   constants, exact shifts), ``f`` the reference pulse width,
-  ``calibration(geometry.angles(xp, *inputs)) * ticks_per_pu``;
+  ``calibration(geometry.angles(xp, *inputs)) * ticks_per_pu`` (a closed form evaluated on
+  intervals; a chain's numeric IK enclosed per cell by a Krawczyk step,
+  :mod:`ikseries.chain.enclose`);
 - the box is covered by cells; on a cell with centre ``c`` and half-widths ``h`` the bound is
   the least of the plain interval enclosure of ``e``, the mean-value form
   ``|e(c)| + sum_k sup|de/dx_k (cell)| h_k`` and the second-order Taylor form
@@ -25,6 +27,8 @@ whole real input box, not only at sample points:
   one over the half), which needs ``e`` and its gradient at the centre only: a point
   evaluation, without second derivatives; only where that misses the target are the
   derivatives enclosed over the half itself (every second split, see ``FULL_AGE``).
+  A cell whose bound is not finite (the reference has no enclosure there) is split first; one
+  left once the budget is spent refuses the certificate (:class:`UnboundedCellError`).
 
 A piecewise plan cuts inputs into table cells (``index``, ``mask``) and looks its
 coefficients up per cell (``lut``): the initial cells are aligned to the table edges of every
@@ -54,7 +58,7 @@ from .cut import chain_range, cut_chain
 from .ops import OPS
 from .plan import Plan
 
-__all__ = ["CertificationError", "ServoCertificate", "Certificate", "certify", "output_rounding",
+__all__ = ["CertificationError", "UnboundedCellError", "ServoCertificate", "Certificate", "certify", "output_rounding",
            "DEFAULT_MAX_CELLS"]
 
 #: Default budget of evaluated cells per servo.
@@ -64,6 +68,11 @@ _CHUNK = 8192
 
 class CertificationError(ValueError):
     """A plan whose certified error exceeds the tolerance."""
+
+
+class UnboundedCellError(CertificationError):
+    """A cell over which the error has no finite bound once the cell budget is spent: the
+    reference (or the plan) has no enclosure there, so no refit can be certified either."""
 
 
 @dataclass(frozen=True)
@@ -519,6 +528,19 @@ def _refine(err, names, box_lo, box_hi, target, per_axis, max_cells, progress, l
     return cover.best, cover.sampled, cover.cells, evaluated, (cover.f_lo, cover.f_hi)
 
 
+def _unbounded(err, names, servo: str, best: dict) -> str:
+    """The message of a final cell without a finite bound: the cell and, from a strict
+    evaluation over it, why (an exception's ``reason`` if it has one, else its message)."""
+    lo, hi = best["lo"][None], best["hi"][None]
+    box = ", ".join(f"{k} in [{a:.6g}, {b:.6g}]" for k, a, b in zip(names, lo[0], hi[0]))
+    try:
+        err(dict(zip(names, cn.variables(lo, hi))))
+        why = "the enclosure of the error is unbounded there"
+    except (ia.IntervalDomainError, ZeroDivisionError) as e:
+        why = getattr(e, "reason", str(e))
+    return f"servo {servo}: no finite error bound over the cell ({box}) once the cell budget is spent: {why}"
+
+
 def _error_function(plan: Plan, robot, k: int):
     """``values -> (e, f)`` Intervals: e = P - f and f for output k, in ticks."""
     o = plan.outputs[k]
@@ -571,6 +593,12 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
     Returns
     -------
     Certificate
+
+    Raises
+    ------
+    UnboundedCellError
+        Naming a cell where the error has no finite bound once the budget is spent (the
+        reference could not be enclosed there, e.g. a chain's IK near a singular pose).
     """
     if isinstance(max_cells, bool) or not isinstance(max_cells, int) or max_cells < 1:
         raise ValueError(f"max_cells must be a positive integer, not {max_cells!r}")
@@ -593,6 +621,8 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
         best, sampled, cells, evaluated, (f_lo, f_hi) = _refine(
             err, names, box_lo, box_hi, target * tpp, [initial] * len(names), max_cells, progress, o.name,
             edges, cut)
+        if not np.isfinite(best["bound"]):
+            raise UnboundedCellError(_unbounded(err, names, o.name, best))
         clamp = 0.0 if clamp_rng is None else max(0.0, clamp_rng[0] - f_lo, f_hi - clamp_rng[1])
         servos.append(ServoCertificate(
             o.name, best["bound"] / tpp, sampled / tpp, rounding_pu, out_pu, clamp / tpp, target,

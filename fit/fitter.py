@@ -20,8 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..robot_parts import RobotError
-from .certify import CertificationError, certify
+from .certify import CertificationError, UnboundedCellError, certify
 from .context import Budget, FitContext, FitError, FormatError, operand_bits
 from .cost import DEFAULT_COST_MODEL, CostModel
 from .lowering import build_plan, output_multipliers
@@ -151,13 +150,10 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True,
     may not fit the usual 10 % of the tolerance; then the whole fit is redone with the next
     of ``QUANTIZATION_SHARES`` (the approximation budget shrinks by as much).
 
-    A geometry whose reference IK is numeric (``numeric_ik``: a chain) has no formula for the
-    certifier to run on intervals; its certified fit is refused at once, before the search.
+    A cell of the workspace over which the reference has no enclosure once the certifier's
+    cell budget is spent (:class:`~ikseries.fit.certify.UnboundedCellError`: e.g. a chain's IK
+    near a singular pose) refuses the fit at once, naming the cell: no refit can help.
     """
-    if certified and getattr(robot.geometry, "numeric_ik", False):
-        raise RobotError(f"geometry.type: a {type(robot.geometry).__name__.lower()}'s reference IK is numeric "
-                         f"(Newton), so its fit cannot be certified yet (the certifier evaluates the IK as a "
-                         f"formula on intervals; a chain needs an interval Newton enclosure per cell)")
     bits = operand_bits(robot)
     if bits is None:
         return _fit_attempts(FitContext.for_robot(robot, QUANTIZATION_SHARES[0], cost_model), progress, certified)
@@ -215,7 +211,10 @@ def _fit_attempts(ctx: FitContext, progress, certified: bool) -> FitResult:
         plan, fits = lower(ctx, fits, progress)
         if not certified:
             return FitResult(plan, fits)
-        cert = _certificate(ctx, plan, progress)
+        try:
+            cert = _certificate(ctx, plan, progress)
+        except UnboundedCellError as e:
+            raise FitError(f"fit refused: {e}") from None
         failed = [k for k, c in enumerate(cert.servos)
                   if not (c.converged and c.total_pu <= robot.fit.tolerance_pu)]
         if not failed:

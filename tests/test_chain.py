@@ -138,12 +138,14 @@ def test_record_round_trip_gives_the_same_chain(hexapod_chain):
     assert again.geometry == hexapod_chain.geometry and robot_record(again)["geometry"]["type"] == "chain"
 
 
-def test_angles_runs_on_floats_only(hexapod_chain):
-    from ikseries.fit import interval as ia
+def test_angles_runs_on_floats_and_the_certifiers_namespaces_only(hexapod_chain):
+    from types import SimpleNamespace
     g = hexapod_chain.geometry
     assert np.allclose(g.angles(NUMPY_MATH, 74.0, 0.0, 0.0), g.ik(74.0, 0.0, 0.0), atol=1e-12)
-    with pytest.raises(TypeError, match=r"^a chain geometry's IK is numeric \(Newton\), not a formula"):
-        g.angles(ia.MATH, 74.0, 0.0, 0.0)
+    with pytest.raises(TypeError, match=r"^a chain geometry's IK is numeric \(Newton\): it is evaluated on float64 "
+                                        r"arrays \(NUMPY_MATH\) or enclosed over intervals \(ikseries.fit.interval.MATH, "
+                                        r"ikseries.fit.centred.MATH\), not over the math namespace SimpleNamespace$"):
+        g.angles(SimpleNamespace(cos=np.cos, sin=np.sin), 74.0, 0.0, 0.0)
 
 
 # -- URDF -----------------------------------------------------------------------------------------
@@ -330,11 +332,3 @@ def _joint_change(i, **kw):
 def test_bad_chain_geometry_is_one_line(geometry, message):
     with pytest.raises(RobotError, match=f"^{message}$"):
         parse_robot(_robot_data("hexapod-leg", geometry))
-
-
-def test_a_certified_fit_of_a_chain_is_refused_before_the_search(hexapod_chain):
-    from ikseries.fit.fitter import fit_robot
-    with pytest.raises(RobotError, match=r"^geometry.type: a chain's reference IK is numeric \(Newton\), so its "
-                                         r"fit cannot be certified yet \(the certifier evaluates the IK as a formula "
-                                         r"on intervals; a chain needs an interval Newton enclosure per cell\)$"):
-        fit_robot(hexapod_chain)

@@ -1,8 +1,7 @@
 """The workspace check of a chain robot: singular poses, branch changes and second solutions.
 
-:func:`check_box` samples the box on a grid (it is no proof: enclosing the IK over every cell
-needs an interval Newton step, which the closed forms' :func:`ikseries.reach.prove_box_reachable`
-does not) and raises :class:`ChainBoxError`, one line naming the target, where
+:func:`check_box` samples the box on a grid (no proof: the certifier's Krawczyk enclosure
+per cell, :mod:`ikseries.chain.enclose`, proves the IK there) and raises :class:`ChainBoxError`, one line naming the target, where
 
 - the chain is near-singular: the smallest singular value of the row-scaled Jacobian (mm per
   rad; :attr:`Chain.row_scale`) is below :data:`SINGULAR_SHARE` of the chain's reach;

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["rpy_matrix", "matrix_rpy", "forward", "jacobian"]
+__all__ = ["rpy_matrix", "matrix_rpy", "forward", "jacobian", "hessian"]
 
 
 def rpy_matrix(rpy_deg) -> list[list[float]]:
@@ -114,11 +114,19 @@ def forward(xp, joints, tip, thetas):
     return _add(pos, _matvec(rot, tip)), rot, axes, origins
 
 
+def _cross(a, d):
+    return [_dot([a[1], -a[2]], [d[2], d[1]]), _dot([a[2], -a[0]], [d[0], d[2]]), _dot([a[0], -a[1]], [d[1], d[0]])]
+
+
 def jacobian(tip_position, axes, origins):
     """Columns ``axis_i x (tip - origin_i)`` (mm per rad) of the tip position's Jacobian."""
-    cols = []
-    for a, o in zip(axes, origins):
-        d = [p if _zero(q) else p - q for p, q in zip(tip_position, o)]
-        cols.append([_dot([a[1], -a[2]], [d[2], d[1]]), _dot([a[2], -a[0]], [d[0], d[2]]),
-                     _dot([a[0], -a[1]], [d[1], d[0]])])
-    return cols
+    return [_cross(a, [p if _zero(q) else p - q for p, q in zip(tip_position, o)]) for a, o in zip(axes, origins)]
+
+
+def hessian(axes, columns, pairs):
+    """Second derivatives (mm per rad**2) of the tip position, one 3-list per joint pair
+    ``(j, k)`` of ``pairs`` (j <= k): ``axis_j x column_k``. Turning joint j <= k turns axis k,
+    the tip and origin k about axis j, so it changes ``column_k = axis_k x (tip - origin_k)``
+    by ``(axis_j x axis_k) x (tip - origin_k) + axis_k x (axis_j x (tip - origin_k))``, which
+    is ``axis_j x column_k`` (the Jacobi identity)."""
+    return [_cross(axes[j], columns[k]) for j, k in pairs]

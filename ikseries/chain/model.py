@@ -77,8 +77,9 @@ class Chain(Geometry):
     solution is on the home pose's branch (:mod:`ikseries.chain.solve`); it raises
     :class:`UnreachableError` for a target it cannot reach on that branch or whose joint
     leaves its range. ``check_box`` is the workspace check of a robot description
-    (:mod:`ikseries.chain.checks`). ``kinematics(xp, *servo_angles)`` and ``jacobian`` are
-    pure formulas over a math namespace, for an interval enclosure of the IK.
+    (:mod:`ikseries.chain.checks`). ``kinematics``, ``measure_rows``, ``derivatives`` and
+    ``goal_rows`` are pure formulas over a math namespace, for the interval enclosure of the IK
+    that ``angles`` gives the certifier (:mod:`ikseries.chain.enclose`).
     """
 
     joints: tuple[Joint, ...]
@@ -88,8 +89,6 @@ class Chain(Geometry):
     tool: Tool | None = None
 
     coordinates = "cartesian"
-    #: ``angles`` runs on float64 only: the certifier cannot evaluate it on intervals
-    numeric_ik = True
 
     def __post_init__(self):
         object.__setattr__(self, "joints", tuple(_as(Joint, j) for j in self.joints))
@@ -146,24 +145,29 @@ class Chain(Geometry):
     def kinematics(self, xp, *angles):
         """Tip position (base frame, mm) and Jacobian columns (mm per rad, one per joint) of
         servo angles (deg, xp values), as formulas over the math namespace ``xp``."""
-        th = [(a - j.zero_offset) * DEG2RAD for a, j in zip(angles, self.joints)]
-        tip, _, axes, origins = frames.forward(xp, self.joints, self.tip, th)
+        tip, _, axes, origins = frames.forward(xp, self.joints, self.tip, self._thetas(angles))
         return tip, frames.jacobian(tip, axes, origins)
 
-    def goal(self, *coords):
-        """The solved quantities of targets: the fixed tip coordinates (mm) and, with a tool
-        constraint, its angle (deg), as float arrays of one shape."""
-        coords = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in coords))
+    def goal_rows(self, xp, *coords):
+        """The solved quantities of targets as formulas over the math namespace ``xp``: the
+        fixed tip coordinates (mm) and, with a tool constraint, its angle (deg; a float where
+        it is fixed)."""
         if self.target == "cylindrical":
             r, th, z = coords[:3]
             nx, ny, nz = self.neutral
-            t = np.radians(th)
-            pos = [nx + r * np.cos(t), ny + r * np.sin(t), nz + z]
+            t = th * DEG2RAD
+            pos = [nx + r * xp.cos(t), ny + r * xp.sin(t), nz + z]
         else:
             pos = list(coords[:len(self.target)])
         if self.tool is not None:
-            pos.append(coords[-1] if self.tool_input else np.full(coords[0].shape, self.tool.angle))
+            pos.append(coords[-1] if self.tool_input else self.tool.angle)
         return pos
+
+    def goal(self, *coords):
+        """:meth:`goal_rows` of float targets, as float arrays of one shape."""
+        coords = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in coords))
+        return [np.broadcast_to(np.asarray(v, dtype=np.float64), coords[0].shape)
+                for v in self.goal_rows(NUMPY_MATH, *coords)]
 
     @property
     def goal_names(self) -> tuple[str, ...]:
@@ -180,15 +184,43 @@ class Chain(Geometry):
         names = self.tool.joints if self.tool is not None else ()
         return np.array([j.name in names for j in self.joints], dtype=np.float64)
 
-    def measure(self, q_deg) -> np.ndarray:
-        """The solved quantities (N, m) of servo angles ``q_deg`` (N, n): the fixed tip
-        coordinates (mm) and the tool angle (deg)."""
-        tip, _ = self.kinematics(NUMPY_MATH, *q_deg.T)
-        out = [np.broadcast_to(tip[k], q_deg.shape[:1]) for k in self.tip_axes]
+    def _thetas(self, angles):
+        return [(a - j.zero_offset) * DEG2RAD for a, j in zip(angles, self.joints)]
+
+    def _tool_angle(self, angles):
+        return sum(a - j.zero_offset for a, j in zip(angles, self.joints) if j.name in self.tool.joints)
+
+    def measure_rows(self, xp, *angles):
+        """The solved quantities of servo angles (deg, xp values) as formulas over ``xp``: the
+        fixed tip coordinates (mm) and the tool angle (deg)."""
+        tip = frames.forward(xp, self.joints, self.tip, self._thetas(angles))[0]
+        rows = [tip[k] for k in self.tip_axes]
         if self.tool is not None:
-            offsets = np.array([j.zero_offset for j in self.joints])
-            out.append((q_deg - offsets) @ self._tool_mask())
-        return np.stack(out, 1)
+            rows.append(self._tool_angle(angles))
+        return rows
+
+    def derivatives(self, xp, *angles):
+        """:meth:`measure_rows`, their Jacobian (rows x joints, per deg) and their second
+        derivatives (rows x joint pairs in the order of ``numpy.triu_indices``, per deg**2) as
+        formulas over ``xp`` (the tool angle's are 1 for its joints and 0)."""
+        tip, _, axes, origins = frames.forward(xp, self.joints, self.tip, self._thetas(angles))
+        cols = frames.jacobian(tip, axes, origins)
+        n = len(self.joints)
+        pairs = list(zip(*(a.tolist() for a in np.triu_indices(n))))
+        hess = frames.hessian(axes, cols, pairs)
+        d2 = DEG2RAD * DEG2RAD
+        rows = [tip[k] for k in self.tip_axes]
+        jac = [[c[k] * DEG2RAD for c in cols] for k in self.tip_axes]
+        second = [[h[k] * d2 for h in hess] for k in self.tip_axes]
+        if self.tool is not None:
+            rows.append(self._tool_angle(angles))
+            jac.append([float(j.name in self.tool.joints) for j in self.joints])
+            second.append([0.0] * len(pairs))
+        return rows, jac, second
+
+    def measure(self, q_deg) -> np.ndarray:
+        """:meth:`measure_rows` (N, m) of servo angles ``q_deg`` (N, n)."""
+        return np.stack([np.broadcast_to(v, q_deg.shape[:1]) for v in self.measure_rows(NUMPY_MATH, *q_deg.T)], 1)
 
     def system(self, q_deg, goal):
         """Residual (N, m, mm; see :attr:`row_scale`) and Jacobian (N, m, n, mm per rad) of
@@ -241,14 +273,20 @@ class Chain(Geometry):
         return tuple(angles)
 
     def angles(self, xp, *coords):
-        """The reference IK as :meth:`ik` without its checks (NaN where it fails) under
-        ``NUMPY_MATH``. A numeric IK is no formula: over any other namespace (intervals) this
-        raises, since enclosing it needs an interval Newton step per cell."""
+        """The reference IK: under ``NUMPY_MATH`` as :meth:`ik` without its checks (NaN where it
+        fails); under the certifier's namespaces ``ikseries.fit.interval.MATH`` and
+        ``ikseries.fit.centred.MATH`` a proven enclosure over the cells of the input numbers,
+        with derivatives (a Krawczyk step per cell, :mod:`ikseries.chain.enclose`)."""
+        from ..fit import centred as cn
+        from ..fit import interval as ia
+        if xp is ia.MATH or xp is cn.MATH:
+            from .enclose import enclosed_angles
+            return enclosed_angles(self, xp, coords)
         if xp is not NUMPY_MATH:
-            raise TypeError("a chain geometry's IK is numeric (Newton), not a formula: it can be evaluated "
-                            "on float64 arrays only, not over the math namespace "
-                            f"{getattr(xp, '__name__', type(xp).__name__)} (an interval enclosure "
-                            "needs an interval Newton step per cell)")
+            raise TypeError("a chain geometry's IK is numeric (Newton): it is evaluated on float64 arrays "
+                            "(NUMPY_MATH) or enclosed over intervals (ikseries.fit.interval.MATH, "
+                            "ikseries.fit.centred.MATH), not over the math namespace "
+                            f"{getattr(xp, '__name__', type(xp).__name__)}")
         coords = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in coords))
         sol = self.solve(*coords)
         q = np.where(sol.ok[:, None], sol.angles, np.nan)
