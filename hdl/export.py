@@ -216,4 +216,7 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
                       for leg in range(core.legs) for s in core.servos]
         man["period_start"] = {"port": "period_start",
                                "meaning": "high for one cycle when a PWM period starts"}
+        # the constants after the plan (None: none, the widths are the plan's): a bench's model
+        # applies them as the core does (ikseries.sim.golden.robot_outputs)
+        man["channel_table"] = None if core.channels is None else core.channels.record()
     return man
