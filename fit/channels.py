@@ -62,17 +62,18 @@ class ChannelTable:
     # -- checks against a plan --------------------------------------------------------------
     def check(self, plan) -> None:
         """Fail (one line) unless the table fits ``plan``: its servos, every channel's limits
-        inside its servo's output range (so the width keeps the plan's output shape), and a
-        mirrored input whose in-range integers are their own negation."""
+        within its servo's unsigned output width (so the width keeps the plan's output shape),
+        and a mirrored input whose in-range integers are their own negation."""
         names = tuple(o.name for o in plan.outputs)
         if names != self.servos:
             raise ValueError(f"channel table servos must be the plan's ({', '.join(names)}), "
                              f"not ({', '.join(self.servos)})")
         for k, c in enumerate(self.channels):
             node = plan.nodes[plan.outputs[k % len(names)].node]
-            if not node.lo <= c.lo <= c.hi <= node.hi:
+            top = (1 << node.width) - 1
+            if node.lo < 0 or not 0 <= c.lo <= c.hi <= top:
                 raise ValueError(f"channel {k} (leg {k // len(names)} {names[k % len(names)]}) limits [{c.lo}, {c.hi}] "
-                                 f"ticks must lie within the plan's output range [{node.lo}, {node.hi}]")
+                                 f"ticks must fit the plan's {node.width}-bit unsigned output [0, {top}]")
         if self.mirror_input is not None:
             inp = next((i for i in plan.inputs if i.name == self.mirror_input), None)
             if inp is None or inp.lo != -inp.hi:
