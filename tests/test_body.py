@@ -336,3 +336,75 @@ def test_phoenix_plan_left_legs_mirror_bit_exactly(phoenix_small):
         ref = channel_pulses_pu(r, k + 3, *leg_xyz)
         for j, s in enumerate(core.servos):
             assert np.max(np.abs(exp[s][:n][sel] / tpu - ref[j])) <= bound
+
+
+def test_robot_core_channel_table_cocotb(tmp_path_factory):
+    """The exported robot top with a channel table on Icarus: the bench's model applies the
+    manifest's table (widths per channel, o_leg, latency, the last leg's PWM waveforms, a
+    mirrored left leg); told another table (one trim), the same design fails."""
+    import json
+
+    from ikseries.sim.runner import run, simulator_available
+    ok, why = simulator_available("icarus")
+    if not ok:
+        pytest.skip(why)
+    plan, table = mirror_plan(), mirror_table()
+    period = 400
+    core = RobotCore(plan, 3, period, 1e6, multipliers=1, channels=table)
+    d = tmp_path_factory.mktemp("cocotb_table")
+    (d / "plan.json").write_text(plan.dumps())
+    res = run(d / "plan.json", period, "icarus", d / "good", core=core, n_random=200)
+    assert res.ok and res.legs == 3 and res.latency == core.latency, res.summary()
+    man = json.loads(res.manifest.read_text())
+    assert ChannelTable.from_record(man["channel_table"]) == table
+    chans = list(table.channels)
+    chans[7] = dataclasses.replace(chans[7], offset=chans[7].offset + 1)    # leg 2 s2: trim + 1
+    man["channel_table"] = dataclasses.replace(table, channels=tuple(chans)).record()
+    (d / "wrong.json").write_text(json.dumps(man))
+    bad = run(d / "plan.json", period, "icarus", d / "bad", core=core, n_random=200, manifest=d / "wrong.json",
+              testcase="test_back_to_back")
+    assert not bad.ok, bad.summary()
+
+
+# -- the command line ---------------------------------------------------------------------------
+def _cli(capsys, *argv):
+    from ikseries.cli import main
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--preset", "hexapod", "--leg", "A", "80", "0", "0"],
+     "--leg and --body need a robot with a [body], which hexapod has not"),
+    (["--preset", "phoenix", "--body", "80", "0", "0"], "--body needs --leg (one of RR, RM, RF, LR, LM, LF)"),
+    (["--preset", "phoenix", "--leg", "XX", "80", "0", "0"], "--leg must be one of RR, RM, RF, LR, LM, LF, not 'XX'"),
+    (["--preset", "phoenix", "--leg", "LF", "--body", "0", "0", "0"],
+     "x must be within [90, 130] mm in the leg frame of LF, not -92.5141 (from the body-frame target)"),
+    (["--preset", "phoenix", "--leg", "RM", "100", "40", "0"], "y must be within [-32, 32] mm in the leg frame of RM, not 40"),
+])
+def test_eval_leg_messages(capsys, argv, message):
+    code, _, err = _cli(capsys, "eval", *argv)
+    assert code == 2 and err == f"ikseries: error: {message}\n"
+
+
+def test_eval_leg_body_frame(capsys, phoenix_small, tmp_path):
+    """``eval --leg NAME --body``: mirrored body targets on LF and RF give widths that sum to
+    the rounded 2 centre, each within the fit's tolerance (plus the mirror's rounding) of its
+    channel's reference."""
+    r, plan = phoenix_small
+    plan.meta["robot_description"] = robot_record(r)
+    pfile, rfile = tmp_path / "plan.json", tmp_path / "phoenix4.toml"
+    pfile.write_text(plan.dumps())
+    rfile.write_text(preset_text("phoenix").replace("tolerance_pu = 0.5", "tolerance_pu = 4.0"))
+    rows = {}
+    for leg, y in (("LF", 95.0), ("RF", -95.0)):
+        code, out, _ = _cli(capsys, "eval", "--robot", str(rfile), "--plan", str(pfile), "--leg", leg, "--body",
+                            "173", str(y), "10")
+        assert code == 0 and f"leg {leg} (" in out
+        rows[leg] = [line.split() for line in out.splitlines() if re.match(r"\d+ +s\d", line)]
+    assert [row[1] for row in rows["LF"]] == ["s1", "s2", "s3"] and [row[0] for row in rows["LF"]] == ["15", "16", "17"]
+    twice = channel_table(r).channels[15].offset
+    for a, b in zip(rows["LF"], rows["RF"]):
+        assert int(a[3]) + int(b[3]) == twice
+        assert abs(float(a[5])) <= 4.0 + 0.5 / r.ticks_per_pu and abs(float(b[5])) <= 4.0
