@@ -408,3 +408,10 @@ def test_eval_leg_body_frame(capsys, phoenix_small, tmp_path):
     for a, b in zip(rows["LF"], rows["RF"]):
         assert int(a[3]) + int(b[3]) == twice
         assert abs(float(a[5])) <= 4.0 + 0.5 / r.ticks_per_pu and abs(float(b[5])) <= 4.0
+
+
+def test_legs_override_must_keep_the_body():
+    from ikseries.robot import with_hardware
+    with pytest.raises(RobotError) as e:
+        with_hardware(load_preset("phoenix"), labels={"legs": "--legs"}, legs=4)
+    assert str(e.value) == "--legs must be 6 (the number of [[body.legs]]) for phoenix, not 4"
