@@ -19,6 +19,11 @@ So the workspace's y range must be symmetric about 0 when there are left legs (a
 in-range target must be in range); the description is refused otherwise (rather than fitting
 the union of the box and its mirror, which would cost accuracy on every leg).
 
+The mirror's ``2 centre`` is rounded to whole ticks, so a mirrored channel's error is the
+plan's plus that rounding (at most half a tick; the channel records give it per channel as
+``mirror_error_ticks``). The fit does not reserve it: the phoenix preset's plan is certified to
+0.5 pu, its left legs' channels to 0.5 + 0.028 pu.
+
 :func:`channel_calibration` is the one place the per-channel constants (direction, centre,
 trim, limits) are read from the description; :func:`channel_table` turns them into the
 hardware table.
