@@ -415,3 +415,15 @@ def test_legs_override_must_keep_the_body():
     with pytest.raises(RobotError) as e:
         with_hardware(load_preset("phoenix"), labels={"legs": "--legs"}, legs=4)
     assert str(e.value) == "--legs must be 6 (the number of [[body.legs]]) for phoenix, not 4"
+
+
+def test_report_lists_every_channel():
+    from ikseries.report import _channels_section
+    r = load_preset("phoenix")
+    recs = channel_records(r, {k: f"pwm_l{k // 3}_s{k % 3 + 1}" for k in range(18)})
+    board = {"channels": [{"channel": k, "pin": f"P{k}"} for k in range(18)]}
+    lines = _channels_section({"channels": recs, "board": board})
+    rows = [line for line in lines if line.startswith("| ") and line[2].isdigit()]
+    assert len(rows) == 18
+    assert rows[9] == ("| 9 | 3 LR | s1 | left | -82, 43, 0, 150 | +1 | 36004.165 | 0 | 10320 | 61680 | "
+                       "yes (0.331 tick) | pwm_l3_s1 | P9 |")
