@@ -154,6 +154,7 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True,
     cell budget is spent (:class:`~ikseries.fit.certify.UnboundedCellError`: e.g. a chain's IK
     near a singular pose) refuses the fit at once, naming the cell: no refit can help.
     """
+    robot = robot.fitted    # a mirrored leg's margin reserved
     bits = operand_bits(robot)
     if bits is None:
         return _fit_attempts(FitContext.for_robot(robot, QUANTIZATION_SHARES[0], cost_model), progress, certified)

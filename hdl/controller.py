@@ -80,8 +80,10 @@ class RobotController(wiring.Component):
         Robot name of the identity answer (at most 32 UTF-8 bytes).
     manifest : bytes
         The identity answer's 8 manifest-hash bytes.
-    multipliers, dsp
-        The core's folded evaluator (as :class:`~ikseries.hdl.shared.RobotCore`).
+    multipliers, dsp, channels
+        The core's folded evaluator and its channel table (as :class:`~ikseries.hdl.shared.RobotCore`):
+        a left leg's mirror and each channel's direction, centre, trim and limits, applied
+        before the servo controller's own run-time trim and limits.
     time_bits, home_at_reset
         As :class:`~ikseries.hdl.servo.ServoController`.
 
@@ -110,10 +112,10 @@ class RobotController(wiring.Component):
 
     def __init__(self, plan: Plan, legs: int, period: int, clock_hz: int, baud: float, *,
                  name: str = "", manifest: bytes = bytes(8), multipliers: int = 1, dsp=None,
-                 time_bits: int = 16, home_at_reset: list[int] | None = None):
+                 time_bits: int = 16, home_at_reset: list[int] | None = None, channels=None):
         _check(plan, legs, period, clock_hz, name, manifest)
         self._divisor = uart_divisor(clock_hz, baud)
-        self._core = RobotCore(plan, legs, period, clock_hz, multipliers=multipliers, dsp=dsp)
+        self._core = RobotCore(plan, legs, period, clock_hz, multipliers=multipliers, dsp=dsp, channels=channels)
         self._w = pulse_bits(plan, period)
         if self._w > _WIRE_PULSE_BITS:
             raise ValueError(f"pulse widths must fit {_WIRE_PULSE_BITS} bits (a u24 on the wire), not {self._w}")

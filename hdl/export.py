@@ -177,8 +177,9 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
         "pwm": [{"servo": s, "port": f"pwm_{s}", "period_cycles": core.period,
                  "period_us": core.period / clk * 1e6,
                  "update": "new width applied at the next period start"} for s in core.servos],
-        # each servo's angle -> pulse map and pulse limits (the outputs' clamp), as fitted
-        "calibration": robot.calibration.servo_records(robot.geometry),
+        # each servo's angle -> pulse map and pulse limits (the outputs' clamp), as fitted (none
+        # for a core exported without its robot description)
+        "calibration": [] if robot.calibration is None else robot.calibration.servo_records(robot.geometry),
         "latency_cycles": core.latency,
         "latency_ns": core.latency / clk * 1e9,
         "initiation_interval": ii,
@@ -218,4 +219,7 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
                       for leg in range(core.legs) for s in core.servos]
         man["period_start"] = {"port": "period_start",
                                "meaning": "high for one cycle when a PWM period starts"}
+        # the constants after the plan (None: none, the widths are the plan's): a bench's model
+        # applies them as the core does (ikseries.sim.golden.robot_outputs)
+        man["channel_table"] = None if core.channels is None else core.channels.record()
     return man

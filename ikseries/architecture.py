@@ -35,6 +35,7 @@ from .hdl.architectures.modulo import Modulo
 from .hdl.architectures.options import primitive_families
 from .hdl.architectures.pipelined import Pipelined
 from .hdl.architectures.shared import Shared
+from .body import channel_table
 
 __all__ = ["ArchitectureError", "Choice", "Tried", "AUTO_ORDER", "FASTEST_ORDER", "candidates",
            "choose_architecture", "cost_model", "synth_candidate", "build_target"]
@@ -104,7 +105,7 @@ def build_target(robot) -> BuildTarget:
 
 def _configuration(arch: str, k, robot) -> Architecture:
     if robot.legs > 1:
-        return Shared(robot.legs, k, robot.hardware.dsp)
+        return Shared(robot.legs, k, robot.hardware.dsp, channel_table(robot))
     if arch == "modulo":
         prim = robot.hardware.dsp_primitives and robot.hardware.dsp in primitive_families()
         return Modulo(k, robot.hardware.dsp, primitives=prim)

@@ -18,6 +18,7 @@ from fractions import Fraction
 from amaranth.back import verilog
 
 from .bitstream import BitstreamError, BitstreamResult, build_bitstream
+from .body import channel_table
 from .constraints.boards import Board, BoardError, board
 from .constraints.pll import ClockPlan, ClockPlanError, clock_plan
 from .hdl.controller import RobotController
@@ -60,10 +61,12 @@ class BoardSpec:
         return round(self.clock.achieved_hz)
 
     def channels(self, robot) -> list[dict]:
-        """Per channel: its pin, package pin, leg and servo (channel ``l * servos + j`` is
-        servo ``j`` of leg ``l``)."""
+        """Per channel: its pin, package pin, leg (index and name) and servo (channel
+        ``l * servos + j`` is servo ``j`` of leg ``l``)."""
         n = len(robot.servos)
-        return [{"channel": k, "pin": pin, "package_pin": pad, "leg": k // n, "servo": robot.servos[k % n]}
+        names = robot.body.names if robot.body is not None else None
+        return [{"channel": k, "pin": pin, "package_pin": pad, "leg": k // n, "servo": robot.servos[k % n],
+                 **({"leg_name": names[k // n]} if names is not None else {})}
                 for pin, pad, k in self.pins]
 
     def record(self, robot) -> dict:
@@ -113,7 +116,7 @@ def board_build(robot, plan, spec: BoardSpec, module: str, manifest_text: str, o
     digest = hashlib.sha256(manifest_text.encode()).digest()[:8]
     try:
         ctl = RobotController(plan, robot.legs, robot.hardware.pwm_period_ticks, spec.clock_hz, spec.baud,
-                              name=robot.name, manifest=digest)
+                              name=robot.name, manifest=digest, channels=channel_table(robot))
     except ValueError as e:
         raise BoardBuildError(f"robot controller: {e}") from None
     core = {"architecture": "shared", "legs": robot.legs, "latency_cycles": ctl.core.latency}

@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 from . import steps
+from .body import channel_records
 from .boardbuild import BITSTREAM_DIR, BoardBuildError, BoardSpec, board_build, controller_module, robot_on_board
 from .buildrecord import (BuildRecordError, OutputDirError, check_output_dir, recorded_files, staging,
                           write_record)
@@ -144,6 +145,7 @@ def _write_outputs(robot, fitted, core, tmp: Path, *, synth, vcd, cocotb, progre
     progress("plotting the error map")
     emap = error_map(robot, plan, tmp / "error_map.png")
     man = manifest(robot, plan, component, name, core.choice.record())
+    man["channels"] = channel_records(robot, {c: p["port"] for c, p in enumerate(man["pwm"])})
     if board is not None:
         man["board"] = {**board.record(robot), "controller_module": controller_module(name)}
     man_text = json.dumps(man, indent=1, sort_keys=True) + "\n"

@@ -186,6 +186,8 @@ def cmd_eval(args):
     if len(vals) != len(robot.workspace.inputs):
         names = ", ".join(i.name for i in robot.workspace.inputs)
         raise CliError(f"eval needs {len(robot.workspace.inputs)} values ({names}) for {robot.name}, not {len(vals)}")
+    if args.leg is not None or args.body:
+        return _eval_leg(robot, args)
     for v, spec in zip(vals, robot.workspace.inputs):
         if not np.isfinite(v) or not spec.min <= v <= spec.max:
             raise CliError(f"{spec.name} must be within [{spec.min:g}, {spec.max:g}] {spec.unit}, not {v:g}")
@@ -204,6 +206,49 @@ def cmd_eval(args):
     for k, o in enumerate(plan.outputs):
         pu = outs[o.name][0] / o.ticks_per_pu
         print(f"{o.name:6} {float(ref_q[k]):14.4f} {int(outs[o.name][0]):13d} {pu:11.4f} {pu - float(ref_q[k]):+9.4f}")
+
+
+def _eval_leg(robot, args):
+    """``ikseries eval --leg NAME [--body]``: one leg's channels, the target in its leg frame
+    or (``--body``) in the body frame; the core takes it in the leg's mount frame."""
+    import numpy as np
+
+    from .body import body_to_leg, channel_pulses_pu, channel_table, mirror
+    from .kinematics import UnreachableError
+    from .robot import RobotError
+    from .sim import golden
+    if robot.body is None:
+        raise CliError(f"--leg and --body need a robot with a [body], which {robot.name} has not")
+    if args.leg is None:
+        raise CliError(f"--body needs --leg (one of {', '.join(robot.body.names)})")
+    try:
+        k, leg = robot.body.leg(args.leg)
+    except RobotError as e:
+        raise CliError(f"--{e}") from None
+    given = [float(v) for v in args.values]
+    target = [float(v) for v in (body_to_leg(leg, *given) if args.body else given)]
+    for v, spec in zip(target, robot.workspace.inputs):
+        if not np.isfinite(v) or not spec.min <= v <= spec.max:
+            raise CliError(f"{spec.name} must be within [{spec.min:g}, {spec.max:g}] {spec.unit} in the leg frame of "
+                           f"{leg.name}, not {v:g}" + (" (from the body-frame target)" if args.body else ""))
+    plan, which = _eval_plan(robot, args, _progress(args.quiet))
+    names = [i.name for i in robot.workspace.inputs]
+    ints = golden.quantize_inputs(plan, dict(zip(names, ([v] for v in mirror(leg, *target)))))
+    q = mirror(leg, *(float(ints[i.name][0]) * 2.0 ** -i.frac_bits for i in robot.workspace.inputs))
+    try:
+        ref = channel_pulses_pu(robot, k, *q)
+    except UnreachableError as e:
+        raise CliError(str(e)) from None
+    outs = golden.robot_outputs(plan, channel_table(robot), np.array([k]), ints)
+    print(which)
+    print(f"leg {leg.name} ({leg.side}): " + (f"body ({', '.join(f'{v:g}' for v in given)}) mm -> " if args.body else "")
+          + "leg frame (" + ", ".join(f"{float(v):.4g}" for v in q) + ") mm; port integers (mount frame): "
+          + ", ".join(f"{n}={int(ints[n][0])}" for n in names))
+    print(f"{'channel':8} {'reference pu':>14} {'golden ticks':>13} {'golden pu':>11} {'error pu':>9}")
+    for j, o in enumerate(plan.outputs):
+        pu = outs[o.name][0] / o.ticks_per_pu
+        ch = k * len(plan.outputs) + j
+        print(f"{ch:<3}{o.name:5} {float(ref[j]):14.4f} {int(outs[o.name][0]):13d} {pu:11.4f} {pu - float(ref[j]):+9.4f}")
 
 
 def cmd_report(args):
@@ -430,6 +475,10 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--robot", help="robot description (TOML)")
     e.add_argument("--plan", help="use this plan.json instead of fitting")
     e.add_argument("-q", "--quiet", action="store_true")
+    e.add_argument("--leg", metavar="NAME", help="a robot with a [body]: the leg the target is for (its channels "
+                   "are shown: mirror and channel table applied); the target is in its leg frame (a left leg's "
+                   "is mirrored, y -> -y)")
+    e.add_argument("--body", action="store_true", help="with --leg: the target X Y Z is in the body frame")
     e.add_argument("values", type=float, nargs="+", metavar="VALUE",
                    help="the target, one value per robot input (cylinder-leg: R THETA Z)")
     r = sub.add_parser("report", help="extra reports on a finished build (--pnr: place-and-route)")

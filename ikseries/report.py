@@ -80,6 +80,8 @@ class BuildReport:
         }
         if "primitives" in man:
             rec["primitives"] = man["primitives"]
+        if "channels" in man:
+            rec["channels"] = man["channels"]
         if self.board is not None:
             rec["board"] = _board_record(self.board, robot)
         return rec
@@ -358,10 +360,34 @@ def _board_section(r: dict) -> list[str]:
     return out
 
 
+def _channels_section(r: dict) -> list[str]:
+    """Every channel: its leg, servo, side, mount, the per-channel calibration applied after the
+    plan, its core port and, on a board, its pin."""
+    chans = r.get("channels")
+    if not chans:
+        return []
+    pins = {c["channel"]: c["pin"] for c in (r.get("board") or {}).get("channels", [])}
+    head = ["channel", "leg", "servo", "side", "mount x, y, z mm, yaw deg", "direction", "centre ticks",
+            "trim ticks", "min ticks", "max ticks", "mirrored", "port", *(["pin"] if pins else [])]
+    out = ["## Channels", "",
+           "The per-channel calibration is applied after the shared plan (a mirrored channel is "
+           "2 centre - width, 2 centre rounded to whole ticks: that rounding, at most half a tick, adds to "
+           "its error); changing it changes no fit.", "", _row(head), _row(["---"] * len(head))]
+    for c in chans:
+        m = c["mount"]
+        mount = "-" if m is None else f"{m['x']:g}, {m['y']:g}, {m['z']:g}, {m['yaw']:g}"
+        out.append(_row([str(c["channel"]), f"{c['leg']} {c['leg_name']}", c["servo"], c["side"], mount,
+                         f"{c['direction']:+d}", f"{c['centre_ticks']:.3f}", str(c["trim_ticks"]),
+                         str(c["min_ticks"]), str(c["max_ticks"]),
+                         f"yes ({c['mirror_error_ticks']:.3f} tick)" if c["mirrored"] else "no", c.get("port", "-"),
+                         *([pins.get(c["channel"], "-")] if pins else [])]))
+    return out + [""]
+
+
 def render_markdown(r: dict) -> str:
     """report.md from a build's report record (:meth:`BuildReport.record`, report.json)."""
     t = r["times_s"]
     out = [*_header(r), *_accuracy_section(r), *_series_section(r), *_calibration_section(r), *_timing_section(r),
-           *_resources_section(r), *_board_section(r), *_coefficients_section(r),
+           *_resources_section(r), *_channels_section(r), *_board_section(r), *_coefficients_section(r),
            "## Build times", "", ", ".join(f"{k[:-2]} {v:g} s" for k, v in t.items()), ""]
     return "\n".join(out)

@@ -23,6 +23,7 @@ from .calibration import Calibration
 from .kinematics import UnreachableError
 from .chain.parse import CHAIN_TYPES, parse_chain
 from .reach import ReachUnprovenError, prove_box_reachable
+from .body import Body
 from .robot_parts import (ARCHITECTURES, DSP_CHOICES, HARDWARE_LABELS, LOWERINGS, PRODUCTS, CalibrationSpec,
                           FitOptions, HardwareOptions, InputSpec, RobotError, Workspace, field_number, field_table,
                           refuse_extra)
@@ -46,7 +47,8 @@ FIT_RESERVED_SHARE = 0.25
 @dataclass(frozen=True)
 class Robot:
     """A robot description: ``legs`` identical legs of one ``geometry`` sharing one fitted plan,
-    and the parts read from the TOML tables of the same names."""
+    and the parts read from the TOML tables of the same names; ``body`` (optional, ``[body]``,
+    :mod:`ikseries.body`) places the legs on a body and gives their sides."""
     name: str
     description: str
     legs: int
@@ -55,6 +57,7 @@ class Robot:
     calibration: CalibrationSpec
     fit: FitOptions
     hardware: HardwareOptions
+    body: Body | None = None
 
     @property
     def servos(self) -> tuple[str, ...]:
@@ -80,9 +83,26 @@ class Robot:
         """Exact pulse widths (pu, float64) per servo for input coordinate arrays."""
         return self.joint_calibration.pulses(self.geometry.ik(*coords))
 
+    @property
+    def fitted(self) -> "Robot":
+        """The robot its plan is fitted for: with mirrored legs, ``fit.tolerance_pu`` less the
+        largest error a mirrored channel adds to the plan's (:func:`ikseries.body.mirror_margin_pu`),
+        so that every channel, mirrored or not, stays within the tolerance; else the robot itself."""
+        from .body import mirror_margin_pu
+
+        margin = mirror_margin_pu(self) if self.body is not None else 0.0
+        if not margin:
+            return self
+        tol = self.fit.tolerance_pu - margin
+        if tol <= 0:
+            raise RobotError(f"fit.tolerance_pu must exceed the {margin:.4g} pu a mirrored leg's channel adds "
+                             f"(its 2 * centre rounded to whole PWM ticks), not {self.fit.tolerance_pu!r}")
+        return dataclasses.replace(self, fit=dataclasses.replace(self.fit, tolerance_pu=tol))
+
     def fit_record(self) -> dict:
-        """The part of :func:`robot_record` that decides the fitted plan (:func:`fit_record`)."""
-        return fit_record(robot_record(self))
+        """The part of :func:`robot_record` that decides the fitted plan (:func:`fit_record`): of
+        :attr:`fitted`, so a mirror's margin is part of it."""
+        return fit_record(robot_record(self.fitted))
 
 
 def _parse_name(data: dict) -> tuple[str, str]:
@@ -122,17 +142,22 @@ def parse_robot(data: dict, source: str = "robot", base_dir=None) -> Robot:
     URDF) are relative to ``base_dir``."""
     if not isinstance(data, dict):
         raise RobotError(f"{source}: a robot description must be a table")
-    refuse_extra(data, {"name", "description", "legs", "geometry", "workspace", "calibration", "fit", "hardware"}, "")
+    refuse_extra(data, {"name", "description", "legs", "geometry", "workspace", "calibration", "fit", "hardware",
+                        "body"}, "")
     name, desc = _parse_name(data)
     geo = field_table(data, "geometry", "")
     geometry = parse_chain(geo, base_dir) if geo.get("type") in CHAIN_TYPES else _parse_geometry(geo)
     workspace = Workspace.parse(field_table(data, "workspace", ""), geometry)
     calibration = CalibrationSpec.parse(field_table(data, "calibration", ""), geometry)
     fit = FitOptions.parse(field_table(data, "fit", "", required=False))
-    legs = data.get("legs", 1)
+    body = None
+    if "body" in data:
+        body = Body.parse(field_table(data, "body", ""), data.get("legs"), geometry, workspace)
+        _check_mirrored_tables(calibration, body)
+    legs = data.get("legs", 1) if body is None else len(body.legs)
     _check_legs_count(legs)
     hardware = HardwareOptions.parse(field_table(data, "hardware", "", required=False), legs)
-    robot = Robot(name, desc, legs, geometry, workspace, calibration, fit, hardware)
+    robot = Robot(name, desc, legs, geometry, workspace, calibration, fit, hardware, body)
     _check_period(robot)
     _check_legs(robot)
     _check_ticks(robot)
@@ -143,6 +168,16 @@ def parse_robot(data: dict, source: str = "robot", base_dir=None) -> Robot:
 
 
 # -- checks across parts -----------------------------------------------------------------
+def _check_mirrored_tables(calibration, body) -> None:
+    """A left leg's pulse is ``2 centre -`` the right leg's: the mirror of a linear map only."""
+    left = [leg.name for leg in body.legs if leg.mirrored]
+    tables = [s for s, o in calibration.servos.items() if o.table is not None]
+    if left and tables:
+        raise RobotError(f"calibration.servos.{tables[0]}.table cannot be mirrored onto the left legs "
+                         f"({', '.join(left)}): a left leg's pulse is 2 * centre - the right leg's, the mirror "
+                         "image of a linear map only; give that servo us_per_degree instead")
+
+
 def _check_legs_count(legs, labels: dict | None = None) -> None:
     lab = {**HARDWARE_LABELS, **(labels or {})}
     if isinstance(legs, bool) or not isinstance(legs, int) or legs < 1:
@@ -183,6 +218,10 @@ def with_hardware(robot: Robot, labels: dict | None = None, **options) -> Robot:
     legs = options.pop("legs", robot.legs)
     new = dataclasses.replace(robot, legs=legs, hardware=dataclasses.replace(robot.hardware, **options))
     _check_legs_count(new.legs, labels)
+    if new.body is not None and new.legs != len(new.body.legs):
+        lab = {**HARDWARE_LABELS, **(labels or {})}
+        raise RobotError(f"{lab['legs']} must be {len(new.body.legs)} (the number of [[body.legs]]) for "
+                         f"{robot.name}, not {new.legs!r}")
     new.hardware.validate(labels)
     _check_legs(new, labels)
     _check_refresh(new, labels)
@@ -264,6 +303,8 @@ def robot_record(robot: Robot) -> dict:
     d = {"name": robot.name, "description": robot.description, "legs": robot.legs, "geometry": geometry,
          "workspace": robot.workspace.record(), "calibration": robot.calibration.record(),
          "fit": robot.fit.record(), "hardware": robot.hardware.record()}
+    if robot.body is not None:      # absent without [body]: older records stay byte-identical
+        d["body"] = robot.body.record()
     return json.loads(json.dumps(d))
 
 
@@ -315,12 +356,15 @@ def robot_from_record(d: dict) -> Robot:
         cls = geometry_class(geo.pop("type"))
         robot = Robot(r["name"], r["description"], r.get("legs", 1), cls(**geo),
                       Workspace.from_record(r["workspace"]), CalibrationSpec.from_record(r["calibration"]),
-                      FitOptions(**r["fit"]), HardwareOptions(**r["hardware"]))
+                      FitOptions(**r["fit"]), HardwareOptions(**r["hardware"]),
+                      Body.from_record(r["body"]) if "body" in r else None)
     except (KeyError, TypeError, ValueError) as e:
         if isinstance(e, RobotError):
             raise
         raise RobotError(f"not a robot record: {e}") from None
     _check_legs_count(robot.legs)
+    if robot.body is not None and robot.legs != len(robot.body.legs):
+        raise RobotError(f"not a robot record: legs {robot.legs!r} but {len(robot.body.legs)} body legs")
     robot.hardware.validate()
     _check_legs(robot)
     _check_reachable(robot)

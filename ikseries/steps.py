@@ -152,7 +152,8 @@ def _verification_targets(plan: Plan, interval: int) -> dict:
 def simulate(core, plan: Plan, progress, vcd=None) -> Simulation:
     """Amaranth simulation of ``core``: bit-exact against the golden model, latency measured,
     targets accepted back to back every ``initiation_interval`` cycles; a robot core gets each
-    target addressed to a random leg and must return it with that leg."""
+    target addressed to a random leg and must return it with that leg and that leg's channel
+    widths (its channel table applied, :func:`ikseries.sim.golden.robot_outputs`)."""
     ii = core.initiation_interval
     targets = _verification_targets(plan, ii)
     n = len(next(iter(targets.values())))
@@ -165,7 +166,7 @@ def simulate(core, plan: Plan, progress, vcd=None) -> Simulation:
     else:
         res = simulate_leg(core.simulation_model(), targets, vcd=vcd)
         leg_mismatches = 0
-    exp = golden.outputs(plan, targets)
+    exp = golden.robot_outputs(plan, core.channels, legs, targets) if shared else golden.outputs(plan, targets)
     mismatches = int(sum(np.count_nonzero(res.outputs[s] != exp[s]) for s in exp))
     lat = sorted(set(int(x) for x in res.latencies))
     gaps = sorted(set(int(x) for x in np.diff(res.input_cycles)))

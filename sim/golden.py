@@ -13,7 +13,7 @@ import numpy as np
 from ..fit.ops import OPS
 from ..fit.plan import Plan
 
-__all__ = ["evaluate", "evaluate_ideal", "quantize_inputs", "outputs", "port_values"]
+__all__ = ["evaluate", "evaluate_ideal", "quantize_inputs", "outputs", "port_values", "robot_outputs"]
 
 
 def quantize_inputs(plan: Plan, values: dict) -> dict:
@@ -86,3 +86,13 @@ def outputs(plan: Plan, ints: dict) -> dict:
     vals = evaluate(plan, ints, keep={o.node for o in plan.outputs})
     n = max(np.size(v) for v in ints.values()) if ints else 1
     return {o.name: np.broadcast_to(vals[o.node], (n,)).astype(np.int64) for o in plan.outputs}
+
+
+def robot_outputs(plan: Plan, table, legs, ints: dict) -> dict:
+    """Channel widths (ticks) per servo of a robot core for port integers ``ints`` addressed
+    to ``legs`` (one leg index per target): the channel table's input mirror, the plan, the
+    table's per-channel constants (:class:`ikseries.fit.channels.ChannelTable`; None: the plan's
+    widths, a core without a table)."""
+    if table is None:
+        return outputs(plan, ints)
+    return table.apply(legs, outputs(plan, table.mirror_inputs(plan, legs, ints)))

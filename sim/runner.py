@@ -253,6 +253,8 @@ class BenchRobot:
     core: its own ``clock_hz``, which sets its refresh rate)."""
     name: str
     hardware: BenchClock
+    #: no description: no calibration to record
+    calibration: None = None
 
 
 def bench_manifest(plan, core, name: str) -> dict:

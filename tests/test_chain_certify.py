@@ -14,7 +14,8 @@ from ikseries.fit import centred as cn
 from ikseries.fit import interval as ia
 from ikseries.fit.certify import UnboundedCellError, certify
 from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
-from ikseries.kinematics import NUMPY_MATH, Calibration
+from ikseries.calibration import Calibration
+from ikseries.kinematics import NUMPY_MATH
 from ikseries.robot import load_preset, parse_robot
 from test_chain import CYLINDER_CHAIN, HEXAPOD_CHAIN, _arm4, _planar, _robot_data
 
@@ -121,8 +122,7 @@ def _chain_robot(chain, tolerance=0.5):
     return SimpleNamespace(
         geometry=chain, servos=chain.servos, fit=SimpleNamespace(tolerance_pu=tolerance),
         workspace=SimpleNamespace(inputs=tuple(SimpleNamespace(name=k) for k in chain.inputs)),
-        joint_calibration=Calibration(neutral_angles=(0.0,) * n, directions=(1,) * n, neutral_pulse_pu=0.0,
-                                      pu_per_degree=1.0))
+        joint_calibration=Calibration.linear((0.0,) * n, (1,) * n, neutral_pulse_pu=0.0, pu_per_degree=1.0))
 
 
 def _zero_plan(lo, hi):

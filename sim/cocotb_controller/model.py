@@ -15,11 +15,12 @@ from ikseries.sim.servo_model import ServoModel
 __all__ = ["golden_widths", "ControllerModel"]
 
 
-def golden_widths(plan, target) -> list[int]:
+def golden_widths(plan, target, table=None, leg: int = 0) -> list[int]:
     """The golden model's pulse per servo (plan output order) for a target of port integers,
-    saturated to the input ranges as the controller's dispatcher does."""
+    saturated to the input ranges as the controller's dispatcher does; with the core's channel
+    ``table``, the widths of ``leg``'s channels."""
     ints = {i.name: np.array([min(max(v, i.lo), i.hi)]) for i, v in zip(plan.inputs, target)}
-    out = golden.outputs(plan, ints)
+    out = golden.robot_outputs(plan, table, np.array([leg]), ints)
     return [int(out[o.name][0]) for o in plan.outputs]
 
 
@@ -32,8 +33,8 @@ class ControllerModel:
     """Apply good requests with :meth:`request` between engine passes, run a pass with
     :meth:`period`. Requests the hardware would NACK are not modelled (the bench sends none)."""
 
-    def __init__(self, plan, legs: int, period: int):
-        self.plan, self.servos = plan, len(plan.outputs)
+    def __init__(self, plan, legs: int, period: int, table=None):
+        self.plan, self.servos, self.table = plan, len(plan.outputs), table
         self.servo = ServoModel(legs * self.servos, pulse_bits(plan, period), ik_servos=self.servos)
         self.move_time = 0
 
@@ -68,7 +69,7 @@ class ControllerModel:
             legs = [l for l in range(self.servo.channels // self.servos) if f["legs"] >> l & 1]
             targets = f["targets"]
         for leg, t in zip(legs, targets):
-            for j, w in enumerate(golden_widths(self.plan, t)):
+            for j, w in enumerate(golden_widths(self.plan, t, self.table, leg)):
                 self.servo.stage(leg * self.servos + j, w, self.move_time)
         self.servo.commit()
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from cocotb.triggers import FallingEdge, ReadOnly
 
+from ikseries.fit.channels import ChannelTable
 from ikseries.fit.plan import Plan
 
 from .config import TESTS, Design, RunConfig
@@ -54,7 +55,7 @@ class Bench:
         self.ports = Ports(dut, d)
         self.time = Timebase(self.ports.clk)
         self.driver = Driver(self.ports, self.plan.inputs, d.legs, self.rng)
-        self.model = Model(self.plan)
+        self.model = Model(self.plan, None if d.channel_table is None else ChannelTable.from_record(d.channel_table))
         self.rule = timing_rule(d.stream_rule, d.latency, d.initiation_interval)
         self.e1: int | None = None          # first rising edge with rst low (relative edge 1)
 
@@ -122,6 +123,6 @@ class Bench:
     def check_stream(self, targets: dict, mon: Monitor, sb: Scoreboard, exact_latency: bool, legs=None) -> dict:
         """The scoreboard's checks of a streamed sequence against the model; returns the
         expected outputs. o_leg is compared where the core has one."""
-        exp = self.model.outputs(targets)
+        exp = self.model.outputs(targets, legs)
         sb.check(targets, exp, mon, exact_latency, legs if self.ports.o_leg is not None else None)
         return exp

@@ -139,6 +139,9 @@ class Design:
         Leg top: {servo: port}; robot top: {(leg, servo): port}.
     period_start : str or None
         The robot top's period-start port.
+    channel_table : dict or None
+        The robot top's channel table record (:class:`ikseries.fit.channels.ChannelTable`:
+        left legs' mirror, per-channel constants); None: its widths are the plan's.
     """
     module: str
     inputs: tuple[Field, ...]
@@ -152,6 +155,7 @@ class Design:
     stream_rule: str
     pwm: dict
     period_start: str | None
+    channel_table: dict | None = None
 
     @property
     def robot(self) -> bool:
@@ -189,7 +193,8 @@ class Design:
                    latency=_positive_int("manifest latency_cycles", _get(man, "latency_cycles")),
                    initiation_interval=_positive_int("manifest initiation_interval", _get(man, "initiation_interval")),
                    period=_positive_int("manifest pwm period_cycles", periods.pop()),
-                   stream_rule=rule, pwm=pwm, period_start=None if ps is None else ps["port"])
+                   stream_rule=rule, pwm=pwm, period_start=None if ps is None else ps["port"],
+                   channel_table=man.get("channel_table"))
 
     @classmethod
     def read(cls, path) -> "Design":

@@ -16,14 +16,19 @@ class Model:
     ----------
     plan : Plan
         The plan the design was generated from.
+    table : ChannelTable, optional
+        A robot top's channel table (from its manifest): the widths are its channels'.
     """
 
-    def __init__(self, plan):
-        self.plan = plan
+    def __init__(self, plan, table=None):
+        self.plan, self.table = plan, table
 
-    def outputs(self, targets: dict) -> dict:
-        """{servo: int64 array} of the widths for ``targets`` ({input: array})."""
-        return golden.outputs(self.plan, targets)
+    def outputs(self, targets: dict, legs=None) -> dict:
+        """{servo: int64 array} of the widths for ``targets`` ({input: array}) sent to ``legs``
+        (one leg per target, or one for all; None: leg 0)."""
+        n = len(next(iter(targets.values())))
+        legs = np.broadcast_to(np.asarray(0 if legs is None else legs, dtype=np.int64), (n,))
+        return golden.robot_outputs(self.plan, self.table, legs, targets)
 
 
 def pwm_wave(transfers, period: int, n_end: int) -> np.ndarray:

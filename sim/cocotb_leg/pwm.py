@@ -29,17 +29,19 @@ def output_schedule(period: int, ii: int) -> dict:
     return {"A": P // 2, "B": P // 2 + ii, "C": P, "D": P + ii, "F": 2 * P + 5}
 
 
-def pick_targets(plan, servos, period: int, rng, log) -> tuple[dict, dict, bool]:
+def pick_targets(model: Model, servos, period: int, rng, log, leg: int = 0) -> tuple[dict, dict, bool]:
     """Targets A, B, C, D, F chosen by their golden widths: A..D with every width below the
     period and each servo's width differing from the ones already picked; F with a width >=
     the period if there is such a target (constant high across the period boundary), preferring
     short other widths (their pulses in period 4 bound the simulated time).
 
+    ``model``: the bench's (widths of the channels of ``leg``, the leg under test).
+
     Returns ({name: target}, {name: {servo: width}}, whether F has a width >= the period).
     """
-    P = period
+    P, plan = period, model.plan
     pool = random_targets(plan, 4000, rng)
-    w = Model(plan).outputs(pool)
+    w = model.outputs(pool, leg)
     W = np.stack([w[s] for s in servos], axis=1)
     short = np.flatnonzero(np.all((W > 0) & (W < P), axis=1))
     long_ = np.flatnonzero(np.any(W >= P, axis=1) & np.any(W < P, axis=1))

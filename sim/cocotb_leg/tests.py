@@ -98,7 +98,7 @@ async def test_pwm(dut):
     try:
         problem = b.rule.pwm_period_problem(d.period)
         assert problem is None, problem
-        tgt, wid, has_long = pwm.pick_targets(b.plan, b.servos, d.period, b.rng, b.log)
+        tgt, wid, has_long = pwm.pick_targets(b.model, b.servos, d.period, b.rng, b.log, _selected(b))
         sched = pwm.output_schedule(d.period, d.initiation_interval)
         n_end = pwm.window_end(wid, b.servos, d.period)
         timing = b.rule.pwm_timing(sched, n_end)
