@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import phoenix_code
 from .phoenix_code import (LEGS, PhoenixConfig, cdiv, check_angles, driver_angles, leg_ik_exact,
                            leg_ik_firmware)
 
@@ -70,14 +71,8 @@ def pulses_exact(leg: str, x, y, z):
 
 
 def within_limits(leg: str, x, y, z):
-    """True where every exact angle lies inside the leg's Hex_Cfg.h min/max (CheckAngles clamps
-    nothing)."""
-    i = PHOENIX.leg(leg)
-    bounds = (PHOENIX.coxa_minmax[i], PHOENIX.femur_minmax[i], PHOENIX.tibia_minmax[i])
-    ok = np.ones(np.broadcast(np.asarray(x), np.asarray(y), np.asarray(z)).shape, dtype=bool)
-    for a, (lo, hi) in zip(leg_ik_exact(PHOENIX, leg, x, y, z), bounds):
-        ok &= (a >= lo / 10.0) & (a <= hi / 10.0)
-    return ok
+    """True where every exact angle lies inside the leg's Hex_Cfg.h min/max."""
+    return phoenix_code.within_limits(PHOENIX, leg, x, y, z)
 
 
 def walking_box(leg: str) -> dict[str, tuple[float, float]]:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import phoenix_code
 from .phoenix_code import (C4DEC, LEGS, PhoenixConfig, cdiv, check_angles, driver_angles, get_sin_cos,
                            leg_ik_exact, leg_ik_firmware)
 
@@ -80,12 +81,7 @@ def positions_exact(leg: str, x, y, z):
 
 def within_limits(leg: str, x, y, z):
     """True where every exact angle lies inside the leg's Hex_Cfg.h min/max."""
-    i = PHANTOMX.leg(leg)
-    bounds = (PHANTOMX.coxa_minmax[i], PHANTOMX.femur_minmax[i], PHANTOMX.tibia_minmax[i])
-    ok = np.ones(np.broadcast(np.asarray(x), np.asarray(y), np.asarray(z)).shape, dtype=bool)
-    for a, (lo, hi) in zip(leg_ik_exact(PHANTOMX, leg, x, y, z), bounds):
-        ok &= (a >= lo / 10.0) & (a <= hi / 10.0)
-    return ok
+    return phoenix_code.within_limits(PHANTOMX, leg, x, y, z)
 
 
 def stance_xz(leg: str, xz_length: int) -> tuple[int, int]:

@@ -227,3 +227,14 @@ def leg_fk_exact(cfg: PhoenixConfig, leg: str, coxa, femur, tibia):
     rho = cfg.coxa[i] + cfg.femur[i] * np.sin(fdir) + cfg.tibia[i] * np.sin(tdir)
     down = cfg.femur[i] * np.cos(fdir) + cfg.tibia[i] * np.cos(tdir)
     return rho * np.cos(yaw), down, rho * np.sin(yaw)
+
+
+def within_limits(cfg: PhoenixConfig, leg: str, x, y, z):
+    """True where every exact angle of ``leg`` lies inside its Hex_Cfg.h min/max (the firmware's
+    CheckAngles clamps instead; nothing is clamped here)."""
+    i = cfg.leg(leg)
+    bounds = (cfg.coxa_minmax[i], cfg.femur_minmax[i], cfg.tibia_minmax[i])
+    ok = np.ones(np.broadcast(np.asarray(x), np.asarray(y), np.asarray(z)).shape, dtype=bool)
+    for a, (lo, hi) in zip(leg_ik_exact(cfg, leg, x, y, z), bounds):
+        ok &= (a >= lo / 10.0) & (a <= hi / 10.0)
+    return ok
