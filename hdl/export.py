@@ -141,6 +141,29 @@ def robot_verilog(core: RobotCore, name: str) -> str:
     return verilog.convert(FlatRobotTop(core), name=name, emit_src=False)
 
 
+def _shared_manifest(man: dict, core: RobotCore, clk: float) -> None:
+    """A shared robot core's part of :func:`manifest`: the leg fields, one PWM port per channel,
+    the period start and the channel table."""
+    man["reset"]["state"] = ("evaluator idle (o_valid low), PWM outputs low, no pulses on a leg's "
+                             "channels until widths for that leg are transferred on o")
+    man["inputs"]["fields"].insert(0, {
+        "name": "leg", "port": "i_leg", "width": Shape.cast(range(core.legs)).width, "signed": False,
+        "range": [0, core.legs - 1], "value": "index of the leg the target is for"})
+    man["outputs"]["fields"].insert(0, {
+        "name": "leg", "port": "o_leg", "width": Shape.cast(range(core.legs)).width, "signed": False,
+        "range": [0, core.legs - 1], "value": "index of the leg these widths are for"})
+    man["pwm"] = [{"leg": leg, "servo": s, "port": pwm_port(leg, s), "period_cycles": core.period,
+                   "period_us": core.period / clk * 1e6,
+                   "update": "the leg's new widths applied together at the next period start (the one "
+                             "after, for widths transferred in a period's last cycle)"}
+                  for leg in range(core.legs) for s in core.servos]
+    man["period_start"] = {"port": "period_start",
+                           "meaning": "high for one cycle when a PWM period starts"}
+    # the constants after the plan (None: none, the widths are the plan's): a bench's model
+    # applies them as the core does (ikseries.sim.golden.robot_outputs)
+    man["channel_table"] = None if core.channels is None else core.channels.record()
+
+
 def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architecture: dict | None = None) -> dict:
     """Everything a user needs to connect the core: ports, formats, units, timing.
 
@@ -176,7 +199,8 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
         },
         "pwm": [{"servo": s, "port": f"pwm_{s}", "period_cycles": core.period,
                  "period_us": core.period / clk * 1e6,
-                 "update": "new width applied at the next period start"} for s in core.servos],
+                 "update": "new width applied at the next period start (the one after, for a width "
+                           "transferred in a period's last cycle)"} for s in core.servos],
         # each servo's angle -> pulse map and pulse limits (the outputs' clamp), as fitted (none
         # for a core exported without its robot description)
         "calibration": [] if robot.calibration is None else robot.calibration.servo_records(robot.geometry),
@@ -205,21 +229,5 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
                     + " (a behavioural model of the configuration used)",
         }
     if shared:
-        man["reset"]["state"] = ("evaluator idle (o_valid low), PWM outputs low, no pulses on a leg's "
-                                 "channels until widths for that leg are transferred on o")
-        man["inputs"]["fields"].insert(0, {
-            "name": "leg", "port": "i_leg", "width": Shape.cast(range(core.legs)).width, "signed": False,
-            "range": [0, core.legs - 1], "value": "index of the leg the target is for"})
-        man["outputs"]["fields"].insert(0, {
-            "name": "leg", "port": "o_leg", "width": Shape.cast(range(core.legs)).width, "signed": False,
-            "range": [0, core.legs - 1], "value": "index of the leg these widths are for"})
-        man["pwm"] = [{"leg": leg, "servo": s, "port": pwm_port(leg, s), "period_cycles": core.period,
-                       "period_us": core.period / clk * 1e6,
-                       "update": "the leg's new widths applied together at the next period start"}
-                      for leg in range(core.legs) for s in core.servos]
-        man["period_start"] = {"port": "period_start",
-                               "meaning": "high for one cycle when a PWM period starts"}
-        # the constants after the plan (None: none, the widths are the plan's): a bench's model
-        # applies them as the core does (ikseries.sim.golden.robot_outputs)
-        man["channel_table"] = None if core.channels is None else core.channels.record()
+        _shared_manifest(man, core, clk)
     return man
