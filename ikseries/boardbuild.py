@@ -130,5 +130,6 @@ def board_build(robot, plan, spec: BoardSpec, module: str, manifest_text: str, o
         bits = build_bitstream(spec.board, ctl, spec.clock, spec.servo_pins, outdir / BITSTREAM_DIR, name=module)
     except (BitstreamError, DoesNotFitError) as e:
         raise BoardBuildError(str(e)) from None
-    progress(f"bitstream {bits.path.name}: Fmax {bits.fmax_mhz:g} MHz against {spec.clock_hz / 1e6:g} MHz")
+    progress(f"bitstream {bits.path.name}: Fmax {bits.fmax_mhz:g} MHz against {spec.clock_hz / 1e6:g} MHz"
+             f" (nextpnr seed {bits.seed})")
     return BoardBuild(spec, name, text, bits, core)

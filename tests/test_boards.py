@@ -16,7 +16,7 @@ from fractions import Fraction
 
 import pytest
 from amaranth.build import Pins, Resource
-from amaranth.hdl import Elaboratable, Module, Signal
+from amaranth.hdl import Cat, Elaboratable, Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -422,6 +422,35 @@ def test_real_bitstream(name, mhz, tmp_path):
     # nextpnr's constraint on the core clock is what it derives from the PLL: the plan's frequency
     assert float(nextpnr["fmax"][r.clock_net]["constraint"]) == pytest.approx(mhz, rel=1e-4)
     assert (out / "notes.txt").read_text() == "mine"
+
+
+class SlowEcho(EchoServos):
+    """EchoServos whose PWM widths come through a 160-bit carry chain: far too long a path
+    for 48 MHz on an iCE40."""
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.echo = echo = EchoServos(self.n, self.period)
+        wide = Signal(160)
+        m.d.sync += wide.eq(wide + Cat(self.rx[0], wide[:159] ^ wide[1:]))
+        m.d.comb += [echo.rx.eq(self.rx), self.tx.eq(echo.tx), self.pwm.eq(echo.pwm ^ wide[-self.n:])]
+        return m
+
+
+def test_a_top_below_its_clock_on_every_seed_writes_no_bitstream(tmp_path, monkeypatch):
+    """Every seed of NEXTPNR_SEEDS (two here, for time) is tried before the build gives up (the
+    best one's Fmax in the message); with allow_timing_fail the best placement's result is returned."""
+    import ikseries.bitstream as bs
+    assert bs.NEXTPNR_SEEDS[:2] == (1, 2)
+    monkeypatch.setattr(bs, "NEXTPNR_SEEDS", (1, 2))
+    b = BOARDS["icebreaker"]
+    plan = clock_plan(b, 48_000_000)
+    with pytest.raises(BitstreamError, match=r"^the icebreaker top reaches [\d.]+ MHz at best \(nextpnr seeds "
+                                             r"1, 2\), below its core clock 48 MHz: no bitstream written$"):
+        build_bitstream(b, SlowEcho(4), plan, None, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    r = build_bitstream(b, SlowEcho(4), plan, None, tmp_path / "out", allow_timing_fail=True)
+    assert not r.meets_clock and r.seed in (1, 2) and r.path.exists()
 
 
 def test_board_file_bitstream_through_the_core_pll(tmp_path):
