@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from ikseries.robot import RobotError, load_preset, parse_robot
+from test_chain import HEXAPOD_CHAIN, _robot_data
 
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text()
@@ -78,9 +79,10 @@ def test_readme_example_robot_is_the_default_preset():
 def test_readme_blocks_describe_what_their_steps_say():
     conventions, chain, urdf, body, calibration = (block_robot(b) for b in BLOCKS[1:])
     assert conventions.geometry.angle_directions == (1, 1, -1)
-    assert [j.name for j in chain.geometry.joints] == ["coxa", "femur", "tibia"]
+    # "the hexapod leg again": the chain whose IK tests/test_chain.py checks against the closed form
+    assert chain.geometry == parse_robot(_robot_data("hexapod-leg", HEXAPOD_CHAIN)).geometry
     assert [j.name for j in urdf.geometry.joints] == ["base_yaw", "shoulder", "elbow"]
-    assert [leg.side for leg in body.body.legs] == ["right"] * 3 + ["left"] * 3
+    assert body.body == load_preset("phoenix").body
     assert sorted(calibration.calibration.servos) == ["s1", "s2", "s3"]
 
 
