@@ -20,13 +20,13 @@ def pytest_addoption(parser):
     parser.addoption("--all-hashes", action="store_true",
                      help="check the Verilog hash of every recorded configuration (fits five more plans)")
     parser.addoption("--long", action="store_true",
-                     help="also the long runs that repeat a check on a second simulator (the default "
-                          "suite stays within 10 minutes on 2 cores)")
+                     help="also the long runs: a check repeated on a second simulator, the examples/ "
+                          "builds (the default suite stays within 10 minutes on 2 cores)")
 
 
 #: marker -> (option that runs it, reason it is skipped without)
 _OPTIONAL = {"all_hashes": ("--all-hashes", "needs --all-hashes (fits another plan)"),
-             "long": ("--long", "needs --long (a second simulator's long run)")}
+             "long": ("--long", "needs --long (a long run)")}
 
 
 def pytest_configure(config):

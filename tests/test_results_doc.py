@@ -1,18 +1,13 @@
-"""docs/results.md is exactly what bench/results.py makes of the bench JSON in docs/results/,
-and the README's example robot description is a valid one."""
+"""docs/results.md is exactly what bench/results.py makes of the bench JSON in docs/results/."""
 from __future__ import annotations
 
-import dataclasses
 import json
 import re
 import runpy
 import shutil
-import tomllib
 from pathlib import Path
 
 import pytest
-
-from ikseries.robot import load_preset, parse_robot
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "docs" / "results"
@@ -89,17 +84,3 @@ def test_json_missing_a_figure_is_named(tmp_path):
     with pytest.raises(SystemExit, match=r"^fit_benchmark\.json: cannot render its section \(KeyError: 'terms'\); "
                                          r"rerun bench/fit_benchmark\.py$"):
         GENERATOR["main"](["--results", str(tmp_path), "--out", str(tmp_path / "out.md")])
-
-
-def test_readme_example_robot_is_valid_and_matches_the_default_preset():
-    readme = (ROOT / "README.md").read_text()
-    block = re.search(r"```toml\n(.*?)```", readme, re.S).group(1)
-    robot = parse_robot(tomllib.loads(block), "README example")
-    preset = load_preset("cylinder-leg")
-    assert dataclasses.replace(robot, name=preset.name, description=preset.description) == preset
-
-
-def test_readme_keeps_the_setup_and_test_commands():
-    readme = (ROOT / "README.md").read_text()
-    assert '```sh\napt-get install -y iverilog && pip install -e ".[dev]" && ikseries build\n```' in readme
-    assert "```sh\npython -m pytest -n 2 -q\n```" in readme
