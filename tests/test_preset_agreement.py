@@ -139,6 +139,6 @@ def test_built_preset_agrees_with_the_robots_own_ik(name, tmp_path):
     legs, pts = _targets(robot, seed=13)
     built, seen = _golden_pulses_pu(robot, plan, legs, pts)
     worst = float(np.abs(built - _port_pulses_pu(robot, PORTS[name], legs, seen)).max())
-    print(f"{name}: build {seconds:.0f} s, certified bounds {bounds} pu, max |golden - port| = {worst:.3f} pu "
+    print(f"{name}: build {seconds:.0f} s (steps {rep['times_s']}), certified bounds {bounds} pu, max |golden - port| = {worst:.3f} pu "
           f"over {POINTS} points")
     assert worst <= robot.fit.tolerance_pu + AGREEMENT_PU

@@ -90,9 +90,10 @@ def transform_coordinates(leg: int, bx, by, bz):
 
 
 def from_preset_body(xb, yb, zb, body_height: float):
-    """The source's body frame (x towards leg 2, i.e. right, y forward, z up, the coxas 14 mm
-    below its origin: control.py:230's ``- 14``) of a point in the presets' body frame (x
-    forward, y left, z up, origin on the ground; the coxas ``body_height`` above it)."""
+    """The source's body frame (x towards leg 2, i.e. right, y forward, z up; its leg frames'
+    origins, the coxas, at z = 14: control.py:230 ``points[0][2] - 14``) of a point in the
+    presets' body frame (x forward, y left, z up, origin on the ground; the coxas
+    ``body_height`` above it)."""
     xb, yb, zb = (np.asarray(v, dtype=np.float64) for v in (xb, yb, zb))
     return -yb, xb, zb - body_height + MOUNT_DZ
 
