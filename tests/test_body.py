@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from helpers import shared_fit
-from robot_refs import lynxmotion_phoenix as phoenix
+from robot_refs import lynxmotion_phoenix as phoenix, phoenix_code
 from robot_refs.phoenix_code import LEGS
 from ikseries.body import (BodyLeg, body_pulses_pu, body_to_leg, body_to_mount, channel_calibration,
                            channel_pulses_pu, channel_records, channel_table, leg_to_body, mirror, mount_to_body)
@@ -124,16 +124,6 @@ def test_body_leg_frames_round_trip():
     np.testing.assert_allclose(body_to_leg(left, -10.0, 50.0, 0.0), (50.0, -10.0, 0.0), atol=1e-12)
 
 
-def _phoenix_legik(name: str, xb, yb, zb):
-    """tests/robot_refs' LegIK target of a body-frame point (docs/robots.md: LegIK's frame is
-    body-aligned at the coxa, X out on both sides, Y down, Z rear; the preset's body frame is
-    x = -Z, y = X, z = body_height - Y)."""
-    cfg = phoenix.PHOENIX
-    i = cfg.leg(name)
-    x_out = yb - cfg.offset_x[i]
-    return (x_out if name[0] == "L" else -x_out), PHOENIX_BODY_HEIGHT - zb, -xb - cfg.offset_z[i]
-
-
 def test_phoenix_preset_is_the_phoenix_firmware_exact_ik():
     """Body-frame targets of every leg's box: the preset's channel pulses are the Phoenix's own
     (LegIK, the Inv flip, the SSC-32 map; the exact form) to 1e-9 us, inside its per-leg limits."""
@@ -143,7 +133,7 @@ def test_phoenix_preset_is_the_phoenix_firmware_exact_ik():
     for k, name in enumerate(LEGS):
         xb, yb, zb = leg_to_body(r.body.legs[k], lx, ly, lz)
         mine = np.array(body_pulses_pu(r, name, xb, yb, zb)) * r.calibration.pulse_unit_us
-        X, Y, Z = _phoenix_legik(name, xb, yb, zb)
+        X, Y, Z = phoenix_code.legik_target(phoenix.PHOENIX, name, xb, yb, zb, PHOENIX_BODY_HEIGHT)
         assert phoenix.within_limits(name, X, Y, Z).all()
         np.testing.assert_allclose(mine, np.array(phoenix.pulses_exact(name, X, Y, Z)), rtol=0, atol=1e-9)
 

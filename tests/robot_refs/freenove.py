@@ -89,6 +89,15 @@ def transform_coordinates(leg: int, bx, by, bz):
             -bx * math.sin(t) + by * math.cos(t), bz - MOUNT_DZ)
 
 
+def from_preset_body(xb, yb, zb, body_height: float):
+    """The source's body frame (x towards leg 2, i.e. right, y forward, z up; its leg frames'
+    origins, the coxas, at z = 14: control.py:230 ``points[0][2] - 14``) of a point in the
+    presets' body frame (x forward, y left, z up, origin on the ground; the coxas
+    ``body_height`` above it)."""
+    xb, yb, zb = (np.asarray(v, dtype=np.float64) for v in (xb, yb, zb))
+    return -yb, xb, zb - body_height + MOUNT_DZ
+
+
 def calibration_angles(points=(CALIBRATION_POSE,) * 6):
     """control.py:71-82 calibrate(): per leg, the angles at its point.txt point minus those at
     (140, 0, 0), in whole degrees (both through the rounding IK)."""

@@ -79,6 +79,18 @@ def positions_exact(leg: str, x, y, z):
     return tuple(ax12_position_exact(-a if inv else a) for a, inv in zip(angles, invs))
 
 
+#: the hobby PWM servo the phantomx preset puts in the AX-12's place (its comments say why):
+#: 500..2500 us over 180 deg, 1500 us at the AX-12's centre position (driver angle 0)
+HOBBY_CENTRE_US, HOBBY_US_PER_DEG = 1500.0, 2000.0 / 180.0
+
+
+def hobby_pulses_exact(leg: str, x, y, z):
+    """(coxa, femur, tibia) pulse in us (float64, unclamped): :func:`positions_exact`'s driver
+    angle, ``(position - 512) * 300/1024`` deg, on the hobby servo above."""
+    return tuple(HOBBY_CENTRE_US + HOBBY_US_PER_DEG * (p - PF_CONST) * AX_DEG_PER_UNIT
+                 for p in positions_exact(leg, x, y, z))
+
+
 def within_limits(leg: str, x, y, z):
     """True where every exact angle lies inside the leg's Hex_Cfg.h min/max."""
     return phoenix_code.within_limits(PHANTOMX, leg, x, y, z)
@@ -103,4 +115,5 @@ def walking_box(leg: str) -> dict[str, tuple[float, float]]:
 
 __all__ = ["LEGS", "PHANTOMX", "AX_DEG_PER_UNIT", "MAX_BODY_Y", "LEG_LIFT_HEIGHT", "HALF_TRAVEL",
            "ax12_position_firmware", "ax12_position_exact", "positions_firmware", "positions_exact",
-           "within_limits", "stance_xz", "walking_box", "HEX_INIT_XZ", "HEX_MAX_BODY_Y"]
+           "within_limits", "stance_xz", "walking_box", "HEX_INIT_XZ", "HEX_MAX_BODY_Y", "HOBBY_CENTRE_US",
+           "HOBBY_US_PER_DEG", "hobby_pulses_exact"]

@@ -229,6 +229,18 @@ def leg_fk_exact(cfg: PhoenixConfig, leg: str, coxa, femur, tibia):
     return rho * np.cos(yaw), down, rho * np.sin(yaw)
 
 
+def legik_target(cfg: PhoenixConfig, leg: str, xb, yb, zb, body_height: float):
+    """LegIK's target (X, Y, Z) of a point in the presets' body frame (x forward, y left, z up,
+    origin on the ground; the coxas ``body_height`` above it). LegIK's frame is body-aligned at
+    the coxa, X out on both sides (the caller negates a right leg's, Phoenix_Code.h:815-822),
+    Y down, Z rear; the body's is X left, Z rear (Hex_Cfg.h cXXOffsetX/Z), so x = -Z, y = X,
+    z = body_height - Y."""
+    i = cfg.leg(leg)
+    x_out = np.asarray(yb, dtype=np.float64) - cfg.offset_x[i]
+    return (x_out if leg[0] == "L" else -x_out), body_height - np.asarray(zb, dtype=np.float64), \
+        -np.asarray(xb, dtype=np.float64) - cfg.offset_z[i]
+
+
 def within_limits(cfg: PhoenixConfig, leg: str, x, y, z):
     """True where every exact angle of ``leg`` lies inside its Hex_Cfg.h min/max (the firmware's
     CheckAngles clamps instead; nothing is clamped here)."""

@@ -1,0 +1,144 @@
+"""The real-robot hexapod presets against each robot's own IK and calibration (issue 12).
+
+The ports in ``tests/robot_refs/`` re-implement each robot's published formulas from the cited
+source (their ``*_exact`` float64 forms: docs/robots.md says why not the firmware's rounding).
+Fast: the description's reference pulses (:func:`ikseries.body.channel_pulses_pu`, what the fit
+approximates) on every leg agree with the port to :data:`AGREEMENT_PU`. Behind ``--long``: the
+built plan's pulses (the golden model, bit-exact to the RTL) agree with the port to the fit's
+tolerance plus that agreement.
+"""
+from __future__ import annotations
+
+import json
+import time
+import tomllib
+
+import numpy as np
+import pytest
+
+from robot_refs import freenove, lynxmotion_phoenix as phoenix, phantomx, phoenix_code
+from ikseries.body import channel_pulses_pu, channel_table, leg_to_body
+from ikseries.cli import main
+from ikseries.fit.plan import Plan
+from ikseries.robot import load_preset, parse_robot, preset_text
+from ikseries.sim import golden
+
+#: issue 12: the description's pulses agree with the robot's own formulas to this (pu)
+AGREEMENT_PU = 0.05
+#: points per preset, spread over all legs and the walking box
+POINTS = 1000
+PRESETS = ("phoenix", "phantomx", "freenove-hexapod")
+
+
+def _phoenix_code_port(mod, cfg, pulses_us):
+    """The port of a Phoenix-code robot: body frame -> LegIK target -> its exact pulses (us),
+    every target inside the firmware's per-leg limits (CheckAngles would clamp nothing)."""
+    def port(robot, name, xb, yb, zb):
+        target = phoenix_code.legik_target(cfg, name, xb, yb, zb, robot.geometry.body_height)
+        assert mod.within_limits(name, *target).all(), name
+        return pulses_us(name, *target)
+    return port
+
+
+def _freenove_port(robot, name, xb, yb, zb):
+    """Freenove: body frame -> its body frame -> transform_coordinates -> its exact pulses
+    (us), every servo angle inside restrict_value's 0..180 deg (500..2500 us)."""
+    k = robot.body.names.index(name)
+    leg = freenove.transform_coordinates(k, *freenove.from_preset_body(xb, yb, zb, robot.geometry.body_height))
+    pulses = freenove.pulses_exact(k, *leg)
+    assert all(((p >= 500.0) & (p <= 2500.0)).all() for p in pulses), name
+    return pulses
+
+
+PORTS = {
+    "phoenix": _phoenix_code_port(phoenix, phoenix.PHOENIX, phoenix.pulses_exact),
+    "phantomx": _phoenix_code_port(phantomx, phantomx.PHANTOMX, phantomx.hobby_pulses_exact),
+    "freenove-hexapod": _freenove_port,
+}
+
+
+def _targets(robot, seed: int):
+    """:data:`POINTS` (leg index, leg-frame target) pairs, uniform over the legs and the box."""
+    rng = np.random.default_rng(seed)
+    legs = rng.integers(0, robot.legs, POINTS)
+    return legs, np.array([rng.uniform(s.min, s.max, POINTS) for s in robot.workspace.inputs])
+
+
+def _port_pulses_pu(robot, port, legs, pts) -> np.ndarray:
+    """(servo, point) pulses in pu of leg-frame targets ``pts`` on ``legs`` from the port."""
+    out = np.empty((len(robot.servos), len(legs)))
+    for k, leg in enumerate(robot.body.legs):
+        on = legs == k
+        out[:, on] = np.array(port(robot, leg.name, *leg_to_body(leg, *pts[:, on]))) / robot.calibration.pulse_unit_us
+    return out
+
+
+def _reference_pulses_pu(robot, legs, pts) -> np.ndarray:
+    out = np.empty((len(robot.servos), len(legs)))
+    for k in range(robot.legs):
+        on = legs == k
+        out[:, on] = np.array(channel_pulses_pu(robot, k, *pts[:, on]))
+    return out
+
+
+def agreement_pu(robot, port, seed: int = 12) -> float:
+    """max |description's reference - port| (pu) over :data:`POINTS` targets of ``robot``."""
+    legs, pts = _targets(robot, seed)
+    assert np.bincount(legs, minlength=robot.legs).min() >= POINTS // (2 * robot.legs)   # every leg sampled
+    return float(np.abs(_reference_pulses_pu(robot, legs, pts) - _port_pulses_pu(robot, port, legs, pts)).max())
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_preset_pulses_agree_with_the_robots_own_ik(name):
+    worst = agreement_pu(load_preset(name), PORTS[name])
+    print(f"{name}: max |reference - port| = {worst:.3g} pu over {POINTS} points")
+    assert worst <= AGREEMENT_PU
+
+
+def test_agreement_notices_a_wrong_horn_offset():
+    """The comparison can fail: a PhantomX whose servos are centred (1500 us) at the pose
+    where LegIK's angles would be 0 without the horn offsets (Hex_Cfg.h:38-39: femur level,
+    118 mm out, tibia straight down) is 46.3 deg x 22.2 pu/deg off on the tibias."""
+    d = tomllib.loads(preset_text("phantomx"))
+    d["calibration"]["neutral_pose"] = {"x": 118.0, "y": 0.0, "z": -3.0}
+    assert agreement_pu(parse_robot(d), PORTS["phantomx"]) > 1000
+
+
+# -- the built plan ------------------------------------------------------------------------
+def _golden_pulses_pu(robot, plan, legs, pts) -> tuple[np.ndarray, np.ndarray]:
+    """(the golden model's channel pulses (pu), the leg-frame targets the ports saw) for
+    leg-frame targets ``pts`` on ``legs``: the core takes them in the mount frame (a left leg's
+    y negated), at the ports' resolution, as ``ikseries eval --leg`` does."""
+    names = [i.name for i in robot.workspace.inputs]
+    flip = np.array([1.0 if robot.body.legs[k].side == "right" else -1.0 for k in legs])
+    mount = pts.copy()
+    mount[names.index("y")] *= flip
+    ints = golden.quantize_inputs(plan, dict(zip(names, mount)))
+    seen = np.array([ints[i.name] * 2.0 ** -i.frac_bits for i in robot.workspace.inputs])
+    seen[names.index("y")] *= flip
+    outs = golden.robot_outputs(plan, channel_table(robot), legs, ints)
+    return np.array([outs[o.name] / o.ticks_per_pu for o in plan.outputs]), seen
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("name", PRESETS)
+def test_built_preset_agrees_with_the_robots_own_ik(name, tmp_path):
+    """``ikseries build --preset NAME --cocotb icarus``: certified within the tolerance, the
+    RTL bit-exact to the golden model on Icarus, and the golden model's pulses within the
+    tolerance plus :data:`AGREEMENT_PU` of the robot's own IK at :data:`POINTS` targets."""
+    out = tmp_path / "build"
+    start = time.monotonic()
+    assert main(["build", "--preset", name, "--cocotb", "icarus", "-q", "-o", str(out)]) == 0
+    seconds = time.monotonic() - start
+    robot = load_preset(name)
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["cocotb"]["icarus"]["passed"] and rep["simulation"]["mismatches"] == 0
+    bounds = [s["error_pu"]["total"] for s in rep["servos"]]
+    assert max(bounds) <= robot.fit.tolerance_pu
+    plan = Plan.from_json(json.loads((out / "plan.json").read_text()))
+    legs, pts = _targets(robot, seed=13)
+    built, seen = _golden_pulses_pu(robot, plan, legs, pts)
+    worst = float(np.abs(built - _port_pulses_pu(robot, PORTS[name], legs, seen)).max())
+    print(f"{name}: build {seconds:.0f} s (steps {rep['times_s']}), certified bounds {bounds} pu, max |golden - port| = {worst:.3f} pu "
+          f"over {POINTS} points")
+    assert worst <= robot.fit.tolerance_pu + AGREEMENT_PU
