@@ -59,6 +59,18 @@ def test_spotmicro_box_is_the_walking_box_of_its_stride():
         assert (lo[mine], hi[mine]) == pytest.approx(tuple(1000 * v for v in box[theirs]), abs=1e-9), mine
 
 
+def test_spotmicro_left_leg_is_the_mirrored_chain():
+    """The LF leg (the source's is_leg_12 false branch, in its own leg frame) at a target of its
+    hip frame (x forward, y left, z up) has the angles (hip, -shoulder, -knee) of this chain at
+    the mirrored target (x, -y, z): the geometry would mount as a body's left leg."""
+    r = load_preset("spotmicro")
+    x, y, z = _points(r)
+    y = -y                                          # the LF box: the RF one mirrored
+    q = np.array(r.geometry.ik(x, -y, z))
+    lf = np.degrees(np.array(spotmicro.ikine(-y / 1000, z / 1000, -x / 1000, spotmicro.IS_LEG_12["LF"])))
+    np.testing.assert_allclose(lf, q * np.array([[1], [-1], [-1]]), atol=1e-7)
+
+
 def test_mearm_reference_pulses_are_the_arms_own():
     r = load_preset("mearm")
     x, y, z = _points(r)
