@@ -47,6 +47,17 @@ def test_spotmicro_reference_pulses_are_the_robots_own():
     assert err.max() <= AGREEMENT_PU, err
 
 
+def test_spotmicro_pulse_limits_are_the_drivers_clip():
+    """Each servo's limits are its proportional command's clip to +-1 (motion_cmd.cpp:258-267):
+    center -+ range / 2 counts."""
+    r = load_preset("spotmicro")
+    for k, servo in enumerate(r.servos, start=1):
+        _, center, rng, _, _ = spotmicro.SERVOS[f"{SPOT_LEG}_{k}"]
+        lo, hi = r.calibration.limits_us(servo)
+        assert (lo, hi) == pytest.approx(((center - rng / 2) * spotmicro.US_PER_COUNT,
+                                          (center + rng / 2) * spotmicro.US_PER_COUNT), abs=1e-9), servo
+
+
 def test_spotmicro_box_is_the_walking_box_of_its_stride():
     """The box is ``spotmicro.walking_box`` of one stride (read off its x range), turned into
     the preset's frame, and that stride is within the largest one every leg allows."""
