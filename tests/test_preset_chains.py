@@ -88,9 +88,10 @@ def test_mearm_reference_pulses_are_the_arms_own():
     port = mearm_port_pu(x, y, z)
     assert np.isfinite(port).all()                 # solve reaches the whole box
     assert ((port >= mearm.MIN_PULSE_WIDTH) & (port <= mearm.MAX_PULSE_WIDTH)).all()   # no Servo.write clamp
-    mine = np.array(r.pulses_pu(x, y, z))[list(MEARM_SERVOS)]
-    err = np.abs(mine - port).max(axis=1)
+    pulses = np.array(r.pulses_pu(x, y, z))
+    err = np.abs(pulses[list(MEARM_SERVOS)] - port).max(axis=1)
     assert err.max() <= AGREEMENT_PU, err
+    assert np.abs(pulses[2] - 1500.0).max() <= 0.1      # the surplus s3 holds 1500 us
 
 
 def test_mearm_linkage_holds_the_hand_level_and_the_wrist_is_minus_a2():
