@@ -220,10 +220,14 @@ def test_workspace_that_cannot_be_proven_is_refused():
 
 
 def test_presets_are_proven_reachable_in_few_cells():
+    """Every closed-form preset's box, by interval analysis (a chain's is checked on a grid, by
+    parse_robot)."""
     from ikseries.reach import prove_box_reachable
     from ikseries.robot import load_preset
     for name in preset_names():
         r = load_preset(name)
+        if hasattr(r.geometry, "check_box"):    # a chain: no formula for intervals; its own grid check ran
+            continue
         cells = prove_box_reachable(r.geometry, r.workspace.lows, r.workspace.highs)
         assert cells <= 1000, name
 
