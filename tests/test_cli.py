@@ -96,8 +96,7 @@ def test_eval_with_plan(capsys, built, small_toml):
     (["eval", "--preset", "planar-arm", "1", "2", "3"],
      "ikseries: error: eval needs 2 values (x, y) for planar-arm, not 3\n"),
     (["eval", "--preset", "nope", "1", "1", "1"],
-     "ikseries: error: preset must be one of ['cylinder-leg', 'freenove-hexapod', 'hexapod', 'hexapod-leg', 'mearm', 'phantomx', 'phoenix', 'planar-arm', 'quadruped-fore', 'quadruped-hind', 'spotmicro'], not 'nope'
-"),
+     "ikseries: error: preset must be one of ['cylinder-leg', 'freenove-hexapod', 'hexapod', 'hexapod-leg', 'mearm', 'phantomx', 'phoenix', 'planar-arm', 'quadruped-fore', 'quadruped-hind', 'spotmicro'], not 'nope'\n"),
     (["build", "--preset", "cylinder-leg", "also.toml"],
      "ikseries: error: give either a robot description file or --preset, not both\n"),
     (["build", "--cocotb", "modelsim"],
