@@ -9,6 +9,12 @@ becomes after it::
     width = min(max(offset + sign * plan_width, lo), hi)
 
 ``sign`` -1 mirrors the pulse (``offset`` = 2 centre + trim), +1 passes it (``offset`` = trim).
+A table whose channels scale the plan's pulse (a leg's servo with a gain of its own:
+``gain_bits`` > 0) has a fixed-point gain per channel, ``gain / 2**gain_bits``, and an offset at
+the same scale that carries the rounding half::
+
+    width = min(max((offset + sign * gain * plan_width) >> gain_bits, lo), hi)
+
 The constants change no fit and no coefficient: a trim or a limit changes this table only.
 
 This module is the semantics (:meth:`ChannelTable.mirror_inputs`, :meth:`ChannelTable.apply`:
@@ -26,14 +32,19 @@ __all__ = ["TableChannel", "ChannelTable"]
 
 @dataclass(frozen=True)
 class TableChannel:
-    """One channel's constants (ticks): ``width = min(max(offset + sign * w, lo), hi)``."""
+    """One channel's constants (ticks): ``width = min(max((offset + sign * gain * w) >>
+    gain_bits, lo), hi)`` (``gain`` 1 in a table without gains, ``gain_bits`` 0)."""
     sign: int
     offset: int
     lo: int
     hi: int
+    gain: int = 1
 
-    def record(self) -> dict:
-        return {"sign": self.sign, "offset": self.offset, "lo": self.lo, "hi": self.hi}
+    def record(self, gains: bool = False) -> dict:
+        d = {"sign": self.sign, "offset": self.offset, "lo": self.lo, "hi": self.hi}
+        if gains:     # left out without gains: the records (and manifests) they predate
+            d["gain"] = self.gain
+        return d
 
 
 @dataclass(frozen=True)
@@ -44,6 +55,7 @@ class ChannelTable:
     mirror_input: str | None           # the input negated for a mirrored leg (None: no leg is)
     mirrored: tuple[bool, ...]         # per leg
     channels: tuple[TableChannel, ...]
+    gain_bits: int = 0                 # fraction bits of the channels' gains (0: no gains)
 
     def __post_init__(self):
         n = self.legs * len(self.servos)
@@ -53,6 +65,10 @@ class ChannelTable:
         for k, c in enumerate(self.channels):
             if c.sign not in (1, -1) or not c.lo <= c.hi:
                 raise ValueError(f"channel {k} must have sign +1 or -1 and lo <= hi, not {c!r}")
+            if c.gain < 1 or (self.gain_bits == 0 and c.gain != 1):
+                raise ValueError(f"channel {k} must have a gain >= 1 (1 with gain_bits 0), not {c.gain!r}")
+        if self.gain_bits < 0:
+            raise ValueError(f"gain_bits must be >= 0, not {self.gain_bits!r}")
         if any(self.mirrored) != (self.mirror_input is not None):
             raise ValueError("mirror_input must be named exactly when some leg is mirrored")
 
@@ -90,16 +106,20 @@ class ChannelTable:
         n = len(self.servos)
         for k, c in enumerate(self.channels):
             node = plan.nodes[plan.outputs[k % n].node]
-            if c.sign != 1 or c.offset != 0 or c.lo > node.lo or c.hi < node.hi:
+            if self.gain_bits or c.sign != 1 or c.offset != 0 or c.lo > node.lo or c.hi < node.hi:
                 return False
         return True
 
     def sum_range(self, plan, j: int) -> tuple[int, int]:
-        """The range of ``offset + sign * width`` of servo ``j`` over every leg and every
-        width its output node can take (interval analysis: the adder's width)."""
+        """The range of ``offset + sign * gain * width`` of servo ``j`` over every leg and
+        every width its output node can take (interval analysis: the adder's width)."""
         node = plan.nodes[plan.outputs[j].node]
-        ends = [c.offset + c.sign * w for c in self.channels[j::len(self.servos)] for w in (node.lo, node.hi)]
+        ends = [c.offset + c.sign * c.gain * w for c in self.channels[j::len(self.servos)] for w in (node.lo, node.hi)]
         return min(ends), max(ends)
+
+    def gain_range(self, j: int) -> int:
+        """The largest gain of servo ``j``'s channels (the multiplier's constant operand)."""
+        return max(c.gain for c in self.channels[j::len(self.servos)])
 
     # -- semantics ---------------------------------------------------------------------------
     def mirror_inputs(self, plan, legs, ints: dict) -> dict:
@@ -118,17 +138,21 @@ class ChannelTable:
         out = {}
         for j, s in enumerate(self.servos):
             ch = self.channels[j::len(self.servos)]
-            sign, off, lo, hi = (np.array([getattr(c, f) for c in ch], dtype=np.int64)[legs]
-                                 for f in ("sign", "offset", "lo", "hi"))
-            out[s] = np.clip(off + sign * np.asarray(widths[s], dtype=np.int64), lo, hi)
+            sign, off, lo, hi, gain = (np.array([getattr(c, f) for c in ch], dtype=np.int64)[legs]
+                                       for f in ("sign", "offset", "lo", "hi", "gain"))
+            v = off + sign * gain * np.asarray(widths[s], dtype=np.int64)
+            out[s] = np.clip(v >> self.gain_bits, lo, hi)     # >>: the floor, as the hardware's shift
         return out
 
     # -- records ------------------------------------------------------------------------------
     def record(self) -> dict:
-        return {"legs": self.legs, "servos": list(self.servos), "mirror_input": self.mirror_input,
-                "mirrored": list(self.mirrored), "channels": [c.record() for c in self.channels]}
+        d = {"legs": self.legs, "servos": list(self.servos), "mirror_input": self.mirror_input,
+             "mirrored": list(self.mirrored), "channels": [c.record(self.gain_bits > 0) for c in self.channels]}
+        if self.gain_bits:
+            d["gain_bits"] = self.gain_bits
+        return d
 
     @classmethod
     def from_record(cls, d: dict) -> "ChannelTable":
         return cls(d["legs"], tuple(d["servos"]), d["mirror_input"], tuple(d["mirrored"]),
-                   tuple(TableChannel(**c) for c in d["channels"]))
+                   tuple(TableChannel(**c) for c in d["channels"]), d.get("gain_bits", 0))

@@ -237,20 +237,30 @@ class RobotCore(wiring.Component):
                          ev.i.payload[inp.name].eq(Mux(flip, Mux(neg > top, top, neg), tgt[inp.name]))]
 
     def _calibrated(self, m, j, width, leg):
-        """``min(max(offset + sign * width, lo), hi)`` of servo ``j`` with the constants of
-        ``leg``'s channel; the sum at the width its interval over all legs needs."""
+        """``min(max((offset + sign * gain * width) >> gain_bits, lo), hi)`` of servo ``j``
+        with the constants of ``leg``'s channel (a table without gains: no product, no shift);
+        the sum at the width its interval over all legs needs."""
         t, plan = self._table, self._plan
         s = self._servos[j]
         shape = node_shape(plan.nodes[plan.outputs[j].node])
         total = signed(signed_bits(*t.sum_range(plan, j)))
         off, neg = Signal(total, name=f"offset_{s}"), Signal(name=f"mirror_{s}")
         lo, hi = Signal(shape, name=f"lo_{s}"), Signal(shape, name=f"hi_{s}")
+        gain = Signal(range(t.gain_range(j) + 1), name=f"gain_{s}") if t.gain_bits else None
         with m.Switch(leg):
             for k in range(self._legs):
                 c = t.channel(k, s)
                 with m.Case(k):
                     m.d.comb += [off.eq(c.offset), neg.eq(int(c.sign == -1)), lo.eq(c.lo), hi.eq(c.hi)]
+                    if gain is not None:
+                        m.d.comb += gain.eq(c.gain)
         v = Signal(total, name=f"sum_{s}")
         sat = Signal(shape, name=f"channel_{s}")
-        m.d.comb += [v.eq(Mux(neg, off - width, off + width)), sat.eq(Mux(v < lo, lo, Mux(v > hi, hi, v)))]
+        term = width if gain is None else width * gain
+        m.d.comb += v.eq(Mux(neg, off - term, off + term))
+        if gain is not None:
+            q = Signal(signed(total.width - t.gain_bits), name=f"scaled_{s}")
+            m.d.comb += q.eq(v >> t.gain_bits)      # arithmetic: the floor, as the golden model's
+            v = q
+        m.d.comb += sat.eq(Mux(v < lo, lo, Mux(v > hi, hi, v)))
         return sat

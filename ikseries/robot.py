@@ -23,7 +23,7 @@ from .calibration import Calibration
 from .kinematics import UnreachableError
 from .chain.parse import CHAIN_TYPES, parse_chain
 from .reach import ReachUnprovenError, prove_box_reachable
-from .body import Body
+from .body import Body, check_channels
 from .robot_parts import (ARCHITECTURES, DSP_CHOICES, HARDWARE_LABELS, LOWERINGS, PRODUCTS, CalibrationSpec,
                           FitOptions, HardwareOptions, InputSpec, RobotError, Workspace, field_number, field_table,
                           refuse_extra)
@@ -85,18 +85,18 @@ class Robot:
 
     @property
     def fitted(self) -> "Robot":
-        """The robot its plan is fitted for: with mirrored legs, ``fit.tolerance_pu`` less the
-        largest error a mirrored channel adds to the plan's (:func:`ikseries.body.mirror_margin_pu`),
-        so that every channel, mirrored or not, stays within the tolerance; else the robot itself."""
-        from .body import mirror_margin_pu
+        """The robot its plan is fitted for: with a body, ``fit.tolerance_pu`` less what its
+        channel table adds to the plan's error and divided by the largest gain it applies
+        (:func:`ikseries.body.fit_tolerance_pu`), so that every channel, mirrored, scaled or
+        not, stays within the tolerance; else the robot itself."""
+        from .body import fit_tolerance_pu
 
-        margin = mirror_margin_pu(self) if self.body is not None else 0.0
-        if not margin:
+        tol = fit_tolerance_pu(self) if self.body is not None else self.fit.tolerance_pu
+        if tol == self.fit.tolerance_pu:
             return self
-        tol = self.fit.tolerance_pu - margin
         if tol <= 0:
-            raise RobotError(f"fit.tolerance_pu must exceed the {margin:.4g} pu a mirrored leg's channel adds "
-                             f"(its 2 * centre rounded to whole PWM ticks), not {self.fit.tolerance_pu!r}")
+            raise RobotError(f"fit.tolerance_pu must exceed the error the channel table adds (a mirrored leg's "
+                             f"2 * centre, a scaled channel's gain, rounded to PWM ticks), not {self.fit.tolerance_pu!r}")
         return dataclasses.replace(self, fit=dataclasses.replace(self.fit, tolerance_pu=tol))
 
     def fit_record(self) -> dict:
@@ -263,6 +263,9 @@ def _check_reachable(robot: Robot) -> None:
     except (UnreachableError, ReachUnprovenError) as e:
         raise RobotError(f"workspace: {e}") from None
     cal.check_box(robot.geometry, ws.names, grid, angles)
+    if robot.body is not None:
+        neutral = [np.array([cal.neutral_pose[n]]) for n in ws.names]
+        check_channels(robot, ws.names, [np.concatenate([p, g]) for p, g in zip(neutral, grid)])
 
 
 def _check_pulses(robot: Robot) -> None:

@@ -75,7 +75,7 @@ _LEG = {"name": "A", "x": 0.0, "y": 0.0, "z": 0.0, "yaw": 0.0, "side": "right"}
                         "which applies the mirror and the channel table), not 1"),
     (with_body([_LEG, {**_LEG, "name": "B", "x": "far"}]), "body.legs[1].x must be a number, not 'far'"),
     (with_body([_LEG, {**_LEG, "name": "B", "roll": 1.0}]),
-     "unknown field body.legs[1].roll (expected one of: name, side, x, y, yaw, z)"),
+     "unknown field body.legs[1].roll (expected one of: name, servos, side, x, y, yaw, z)"),
     (with_body([_LEG, {**_LEG, "name": "1B"}]),
      "body.legs[1].name must be an ASCII letter followed by at most 15 ASCII letters, digits, '-' and '_', "
      "not '1B'"),
