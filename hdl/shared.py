@@ -51,7 +51,9 @@ class RobotCore(wiring.Component):
     ``mirror_input`` is negated on the way in (combinationally, into the evaluator's input
     register; the one port value whose negation does not fit saturates) and each width
     becomes ``min(max(offset + sign * width, lo), hi)`` with its channel's constants, picked
-    by the leg, in an output register. Interval analysis over every leg's constants and every
+    by the leg, in an output register; a table with gains multiplies first, ``min(max((offset
+    + sign * gain * width) >> gain_bits, lo), hi)`` (one constant-operand product per servo,
+    a DSP-sized one). Interval analysis over every leg's constants and every
     width the plan can yield sizes the adder (no overflow for any input); the limits lie in
     the plan's output range, so the widths keep its shape.
 

@@ -21,9 +21,13 @@ the union of the box and its mirror, which would cost accuracy on every leg).
 
 The mirror's ``2 centre`` is rounded to whole ticks, so a mirrored channel's error is the
 plan's plus that rounding (at most half a tick; the channel records give it per channel as
-``mirror_error_ticks``). The fit reserves it (:func:`mirror_margin_pu`,
-:attr:`ikseries.robot.Robot.fitted`): the plan is certified to the tolerance less that margin,
-so every channel stays within the tolerance.
+``mirror_error_ticks``). A leg may calibrate its servos on its own (``[body.legs.servos.<servo>]``):
+limits and a trim change its table entry only; a whole linear map of the plan's servo angle
+makes its channel ``scale * plan pulse + shift``, a fixed-point gain in the table, and that
+channel's error is ``|scale|`` times the plan's plus the table's rounding. The fit reserves
+both (:func:`fit_tolerance_pu`, :attr:`ikseries.robot.Robot.fitted`): the plan is certified
+to the least over the channels of ``(tolerance - rounding) / |scale|``, so every channel stays
+within the tolerance.
 
 :func:`channel_calibration` is the one place the per-channel constants (direction, centre,
 trim, limits) are read from the description; :func:`channel_table` turns them into the
@@ -42,7 +46,8 @@ from .calibration import LinearMap, ServoOverride
 from .fit.channels import ChannelTable, TableChannel
 from .robot_parts import RobotError, field_number, field_table, refuse_extra
 
-__all__ = ["BodyLeg", "Body", "SIDES", "MIRROR_INPUT", "mirror_margin_pu", "body_to_mount", "mount_to_body", "mirror", "body_to_leg",
+__all__ = ["BodyLeg", "Body", "SIDES", "MIRROR_INPUT", "GAIN_WIDTH", "mirror_margin_pu", "fit_tolerance_pu",
+           "gain_bits", "channel_errors", "channel_error_ticks", "check_channels", "body_to_mount", "mount_to_body", "mirror", "body_to_leg",
            "leg_to_body", "ChannelCalibration", "channel_calibration", "channel_table", "channel_pulses_pu", "body_pulses_pu",
            "channel_records"]
 

@@ -367,19 +367,27 @@ def _channels_section(r: dict) -> list[str]:
     if not chans:
         return []
     pins = {c["channel"]: c["pin"] for c in (r.get("board") or {}).get("channels", [])}
+    gains = "scale" in chans[0]
     head = ["channel", "leg", "servo", "side", "mount x, y, z mm, yaw deg", "direction", "centre ticks",
-            "trim ticks", "min ticks", "max ticks", "mirrored", "port", *(["pin"] if pins else [])]
+            "trim ticks", "min ticks", "max ticks", "mirrored", *(["scale", "error ticks"] if gains else []),
+            "port", *(["pin"] if pins else [])]
+    why = ("a channel is scale x width + offset, the gain and offset rounded to fixed point: that rounding and "
+           "the final one add the error column to its error, and the plan is fitted to the tolerance less it, "
+           "over the largest scale" if gains else
+           "a mirrored channel is 2 centre - width, 2 centre rounded to whole ticks: that rounding, at most half a "
+           "tick, adds to its error")
     out = ["## Channels", "",
-           "The per-channel calibration is applied after the shared plan (a mirrored channel is "
-           "2 centre - width, 2 centre rounded to whole ticks: that rounding, at most half a tick, adds to "
-           "its error); changing it changes no fit.", "", _row(head), _row(["---"] * len(head))]
+           f"The per-channel calibration is applied after the shared plan ({why}); changing it changes no "
+           "fit.", "", _row(head), _row(["---"] * len(head))]
     for c in chans:
         m = c["mount"]
         mount = "-" if m is None else f"{m['x']:g}, {m['y']:g}, {m['z']:g}, {m['yaw']:g}"
+        mirrored = ("yes" if c["mirrored"] else "no") if gains else \
+            (f"yes ({c['mirror_error_ticks']:.3f} tick)" if c["mirrored"] else "no")
         out.append(_row([str(c["channel"]), f"{c['leg']} {c['leg_name']}", c["servo"], c["side"], mount,
                          f"{c['direction']:+d}", f"{c['centre_ticks']:.3f}", str(c["trim_ticks"]),
-                         str(c["min_ticks"]), str(c["max_ticks"]),
-                         f"yes ({c['mirror_error_ticks']:.3f} tick)" if c["mirrored"] else "no", c.get("port", "-"),
+                         str(c["min_ticks"]), str(c["max_ticks"]), mirrored,
+                         *([f"{c['scale']:.6f}", f"{c['error_ticks']:.3f}"] if gains else []), c.get("port", "-"),
                          *([pins.get(c["channel"], "-")] if pins else [])]))
     return out + [""]
 

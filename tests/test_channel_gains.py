@@ -194,3 +194,17 @@ def test_spotmicro_table_has_gains_within_a_dsp_operand():
     assert 0 < table.gain_bits < GAIN_WIDTH
     assert all(0 < c.gain < 1 << GAIN_WIDTH for c in table.channels)
     assert [c.gain == 1 << table.gain_bits for c in table.channels[:3]] == [True] * 3    # RF: the plan's
+
+
+def test_report_lists_the_scale_and_error_of_every_channel():
+    from ikseries.body import channel_records
+    from ikseries.report import _channels_section
+    r = load_preset("spotmicro")
+    lines = _channels_section({"channels": channel_records(r)})
+    head = next(line for line in lines if line.startswith("| channel"))
+    assert "| scale | error ticks |" in head
+    rows = [line for line in lines if line.startswith("| ") and line[2].isdigit()]
+    assert len(rows) == 12
+    rec = channel_records(r)[3]                                      # RB s1: scaled and turned
+    assert rec["scale"] == pytest.approx(12.162642045454545 / -11.71875)
+    assert f"| {rec['scale']:.6f} | {rec['error_ticks']:.3f} |" in rows[3]
