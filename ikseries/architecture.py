@@ -35,7 +35,7 @@ from .hdl.architectures.modulo import Modulo
 from .hdl.architectures.options import primitive_families
 from .hdl.architectures.pipelined import Pipelined
 from .hdl.architectures.shared import Shared
-from .body import channel_table
+from .channels import channel_table
 
 __all__ = ["ArchitectureError", "Choice", "Tried", "AUTO_ORDER", "FASTEST_ORDER", "candidates",
            "choose_architecture", "cost_model", "synth_candidate", "build_target"]

@@ -18,7 +18,7 @@ from fractions import Fraction
 from amaranth.back import verilog
 
 from .bitstream import BitstreamError, BitstreamResult, build_bitstream
-from .body import channel_table
+from .channels import channel_table
 from .constraints.boards import Board, BoardError, board
 from .constraints.pll import ClockPlan, ClockPlanError, clock_plan
 from .hdl.controller import RobotController

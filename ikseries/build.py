@@ -7,7 +7,7 @@ import shutil
 from pathlib import Path
 
 from . import steps
-from .body import channel_records
+from .channels import channel_records
 from .boardbuild import BITSTREAM_DIR, BoardBuildError, BoardSpec, board_build, controller_module, robot_on_board
 from .buildrecord import (BuildRecordError, OutputDirError, check_output_dir, recorded_files, staging,
                           write_record)

@@ -213,7 +213,8 @@ def _eval_leg(robot, args):
     or (``--body``) in the body frame; the core takes it in the leg's mount frame."""
     import numpy as np
 
-    from .body import body_to_leg, channel_pulses_pu, channel_table, mirror
+    from .body import body_to_leg, mirror
+    from .channels import channel_pulses_pu, channel_table
     from .kinematics import UnreachableError
     from .robot import RobotError
     from .sim import golden

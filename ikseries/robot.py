@@ -23,7 +23,8 @@ from .calibration import Calibration
 from .kinematics import UnreachableError
 from .chain.parse import CHAIN_TYPES, parse_chain
 from .reach import ReachUnprovenError, prove_box_reachable
-from .body import Body, check_channels
+from .body import Body
+from .channels import check_channels
 from .robot_parts import (ARCHITECTURES, DSP_CHOICES, HARDWARE_LABELS, LOWERINGS, PRODUCTS, CalibrationSpec,
                           FitOptions, HardwareOptions, InputSpec, RobotError, Workspace, field_number, field_table,
                           refuse_extra)
@@ -87,9 +88,9 @@ class Robot:
     def fitted(self) -> "Robot":
         """The robot its plan is fitted for: with a body, ``fit.tolerance_pu`` less what its
         channel table adds to the plan's error and divided by the largest gain it applies
-        (:func:`ikseries.body.fit_tolerance_pu`), so that every channel, mirrored, scaled or
+        (:func:`ikseries.channels.fit_tolerance_pu`), so that every channel, mirrored, scaled or
         not, stays within the tolerance; else the robot itself."""
-        from .body import fit_tolerance_pu
+        from .channels import fit_tolerance_pu
 
         tol = fit_tolerance_pu(self) if self.body is not None else self.fit.tolerance_pu
         if tol == self.fit.tolerance_pu:

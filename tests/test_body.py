@@ -13,8 +13,8 @@ import pytest
 from helpers import shared_fit
 from robot_refs import lynxmotion_phoenix as phoenix, phoenix_code
 from robot_refs.phoenix_code import LEGS
-from ikseries.body import (BodyLeg, body_pulses_pu, body_to_leg, body_to_mount, channel_calibration,
-                           channel_pulses_pu, channel_records, channel_table, leg_to_body, mirror, mount_to_body)
+from ikseries.body import BodyLeg, body_to_leg, body_to_mount, leg_to_body, mirror, mount_to_body
+from ikseries.channels import body_pulses_pu, channel_calibration, channel_pulses_pu, channel_records, channel_table
 from ikseries.fit.channels import ChannelTable, TableChannel
 from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
 from ikseries.hdl.export import robot_verilog
@@ -424,7 +424,7 @@ def test_report_lists_every_channel():
 def test_a_mirrored_legs_margin_is_reserved_by_the_fit(phoenix_small):
     """The plan of a robot with left legs is certified to the tolerance less the largest error
     a mirrored channel adds (its 2 centre rounded to ticks): every channel within tolerance."""
-    from ikseries.body import mirror_margin_pu
+    from ikseries.channels import mirror_margin_pu
     r, plan = phoenix_small
     margin = mirror_margin_pu(r)
     assert 0 < margin <= 0.5 / r.ticks_per_pu

@@ -11,7 +11,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from ikseries.body import (GAIN_WIDTH, channel_calibration, channel_errors, channel_pulses_pu, channel_table,
+from ikseries.channels import (GAIN_WIDTH, channel_calibration, channel_errors, channel_pulses_pu, channel_table,
                            fit_tolerance_pu, gain_bits)
 from ikseries.fit.channels import ChannelTable, TableChannel
 from ikseries.hdl.shared import TABLE_LATENCY, RobotCore
@@ -197,7 +197,7 @@ def test_spotmicro_table_has_gains_within_a_dsp_operand():
 
 
 def test_report_lists_the_scale_and_error_of_every_channel():
-    from ikseries.body import channel_records
+    from ikseries.channels import channel_records
     from ikseries.report import _channels_section
     r = load_preset("spotmicro")
     lines = _channels_section({"channels": channel_records(r)})

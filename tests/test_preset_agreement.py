@@ -2,7 +2,7 @@
 
 The ports in ``tests/robot_refs/`` re-implement each robot's published formulas from the cited
 source (their ``*_exact`` float64 forms: docs/robots.md says why not the firmware's rounding).
-Fast: the description's reference pulses (:func:`ikseries.body.channel_pulses_pu`, what the fit
+Fast: the description's reference pulses (:func:`ikseries.channels.channel_pulses_pu`, what the fit
 approximates) on every leg agree with the port to :data:`AGREEMENT_PU`. Behind ``--long``: the
 built plan's pulses (the golden model, bit-exact to the RTL) agree with the port to the fit's
 tolerance plus that agreement.
@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from robot_refs import freenove, lynxmotion_phoenix as phoenix, phantomx, phoenix_code
-from ikseries.body import channel_pulses_pu, channel_table, leg_to_body
+from ikseries.body import leg_to_body
+from ikseries.channels import channel_pulses_pu, channel_table
 from ikseries.cli import main
 from ikseries.fit.plan import Plan
 from ikseries.robot import load_preset, parse_robot, preset_text

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ikseries.body import body_pulses_pu, channel_calibration, channel_pulses_pu, channel_table
+from ikseries.channels import body_pulses_pu, channel_calibration, channel_pulses_pu, channel_table
 from ikseries.robot import load_preset
 from robot_refs import mearm, spotmicro
 
