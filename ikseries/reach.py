@@ -16,7 +16,8 @@ from .fit import interval as ia
 from .joints import ANGLE_SLACK_DEG, Check
 from .kinematics import UnreachableError, format_point
 
-__all__ = ["raise_first_unreachable", "prove_box_reachable", "ReachUnprovenError", "REACH_MAX_CELLS"]
+__all__ = ["raise_first_unreachable", "prove_box_reachable", "ReachUnprovenError", "REACH_MAX_CELLS", "check_no_wrap",
+           "WRAP_JUMP_DEG"]
 
 
 def raise_first_unreachable(names: Sequence[str], coords: Sequence[np.ndarray],
@@ -146,3 +147,31 @@ def prove_box_reachable(geometry, lo, hi, *, max_cells: int = REACH_MAX_CELLS) -
         lo2[rows, axis] = mid
         cl, ch = np.concatenate([cl, lo2]), np.concatenate([hi1, ch])
     return evaluated
+
+
+#: neighbouring grid targets whose servo angles differ by more than this (deg) straddle a wrap
+#: (a jump of nearly a full turn; a pass through a singular pose jumps by about half a turn, and
+#: is left to the reach proof and the singularity checks, which name it as such)
+WRAP_JUMP_DEG = 270.0
+
+
+def check_no_wrap(geometry, names: Sequence[str], shape: tuple[int, ...], coords: Sequence[np.ndarray],
+                  angles: Sequence[np.ndarray]) -> None:
+    """Fail (:class:`UnreachableError`, one line) where a servo angle wraps inside the box: two
+    neighbouring targets of the grid (``coords``, flat in C order over ``shape``) whose angles
+    differ by more than :data:`WRAP_JUMP_DEG`, a jump of a full turn no servo can follow and no
+    polynomial can fit (the angle is continuous everywhere else)."""
+    labels = getattr(geometry, "servo_names", geometry.servos)
+    for s, label, a in zip(geometry.servos, labels, angles):
+        grid = np.reshape(np.asarray(a, dtype=np.float64), shape)
+        for axis in range(len(shape)):
+            jump = np.abs(np.diff(grid, axis=axis)) > WRAP_JUMP_DEG
+            if not np.any(jump):
+                continue
+            i = np.unravel_index(int(np.flatnonzero(jump)[0]), jump.shape)
+            j = tuple(v + (k == axis) for k, v in enumerate(i))
+            at = [np.ravel_multi_index(p, shape) for p in (i, j)]
+            p, q = (format_point(names, [np.ravel(c)[n] for c in coords]) for n in at)
+            raise UnreachableError(f"servo {s} ({label}) angle wraps inside the box: {grid[i]:.4g} deg at target "
+                                   f"{p}, {grid[j]:.4g} deg at its neighbour {q} (a jump of a full turn no servo "
+                                   "can follow); move the box off the angle's wrap")

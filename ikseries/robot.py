@@ -22,7 +22,7 @@ from .joints import CONVENTION_FIELDS, geometry_record
 from .calibration import Calibration
 from .kinematics import UnreachableError
 from .chain.parse import CHAIN_TYPES, parse_chain
-from .reach import ReachUnprovenError, prove_box_reachable
+from .reach import ReachUnprovenError, check_no_wrap, prove_box_reachable
 from .body import Body
 from .channels import check_channels
 from .robot_parts import (ARCHITECTURES, DSP_CHOICES, HARDWARE_LABELS, LOWERINGS, PRODUCTS, CalibrationSpec,
@@ -254,13 +254,19 @@ def _check_reachable(robot: Robot) -> None:
     cal.check_neutral(robot.geometry)
     axes = [np.linspace(lo, hi, 9) for lo, hi in zip(ws.lows, ws.highs)]
     grid = [g.ravel() for g in np.meshgrid(*axes, indexing="ij")]
+    shape = tuple(len(a) for a in axes)
     try:
         angles = robot.geometry.ik(*grid)
         check = getattr(robot.geometry, "check_box", None)
-        if check is not None:
-            check(ws.lows, ws.highs)
-        else:
-            prove_box_reachable(robot.geometry, ws.lows, ws.highs)
+        try:
+            if check is not None:
+                check(ws.lows, ws.highs)
+            else:
+                prove_box_reachable(robot.geometry, ws.lows, ws.highs)
+        except ReachUnprovenError:      # a wrap is one reason the proof fails: name it if it is that
+            check_no_wrap(robot.geometry, ws.names, shape, grid, angles)
+            raise
+        check_no_wrap(robot.geometry, ws.names, shape, grid, angles)
     except (UnreachableError, ReachUnprovenError) as e:
         raise RobotError(f"workspace: {e}") from None
     cal.check_box(robot.geometry, ws.names, grid, angles)

@@ -210,12 +210,24 @@ def test_workspace_unreachable_between_grid_points_is_found():
 
 
 def test_workspace_that_cannot_be_proven_is_refused():
-    # femur = tibia: the reach hole is the single point on the femur axis, never sampled; the
-    # coxa axis (x = y = 0) is in the box too, where atan2 has no interval enclosure
+    """femur = tibia: the reach hole is the single point on the femur axis, never sampled, which
+    the reach proof cannot close; the femur angle wraps around it, and that is what is named."""
     with pytest.raises(RobotError) as e:
         parse_robot(_pocket(60.0))
+    assert str(e.value).startswith("workspace: servo s2 (femur) angle wraps inside the box: ")
+
+
+def test_a_box_the_reach_proof_cannot_close_is_refused_in_one_line():
+    """Without a wrap on the grid, the reach proof's own message: the box, its cells and what to do."""
+    import numpy as np
+
+    from ikseries.kinematics import CylinderLeg
+    from ikseries.reach import ReachUnprovenError, prove_box_reachable
+    with pytest.raises(ReachUnprovenError) as e:
+        prove_box_reachable(CylinderLeg(30.0, 60.0, 60.0, 30.0, 50.0), np.array([0.0, -10.0, -57.0]),
+                            np.array([30.0, 10.0, -44.5]), max_cells=50)
     msg = str(e.value)
-    assert msg.startswith("workspace: could not establish that every target is reachable: after ")
+    assert msg.startswith("could not establish that every target is reachable: after ")
     assert "cells of interval analysis" in msg and "keep the box clear of the reach and joint limits" in msg
 
 
@@ -238,3 +250,25 @@ def test_with_hardware_checks_the_refresh_bound():
     with pytest.raises(RobotError, match=r"^hardware.min_refresh_hz must be at most 8e\+06 Hz \(one target per "
                                          r"clock cycle at hardware.clock_hz = 48000000 shared by legs = 6\), not 10000000.0$"):
         with_hardware(r, legs=6, architecture="auto", min_refresh_hz=1e7)
+
+
+def _planar_box(x, y):
+    d = tomllib.loads(preset_text("planar-arm"))
+    d["geometry"]["phi"] = 90.0
+    d["workspace"]["x"].update(min=float(x[0]), max=float(x[1]))
+    d["workspace"]["y"].update(min=float(y[0]), max=float(y[1]))
+    d["calibration"]["neutral_pose"] = {"x": sum(x) / 2, "y": sum(y) / 2}
+    d["calibration"]["pu_per_degree"] = 0.1          # pulses in range for any angle: the wrap alone fails
+    return d
+
+
+def test_an_angle_that_wraps_inside_the_box_is_refused_where_it_wraps():
+    """The planar arm's link 2 points along +x inside this box: its absolute angle jumps from
+    about 0 to about 360 deg between two grid neighbours, named in one line before any fit
+    (not the reach proof's open cells)."""
+    with pytest.raises(RobotError) as e:
+        parse_robot(_planar_box((0.0, 25.0), (35.0, 55.0)))
+    assert str(e.value) == ("workspace: servo s2 (link2) angle wraps inside the box: 4.7 deg at target "
+                            "(x=3.125, y=35), 358.6 deg at its neighbour (x=6.25, y=35) (a jump of a full turn "
+                            "no servo can follow); move the box off the angle's wrap")
+    parse_robot(_planar_box((-10.0, 10.0), (40.0, 60.0)))      # link 2 stays above +x: accepted
