@@ -170,11 +170,13 @@ def channel_error_ticks(c: ChannelCalibration, t: TableChannel, f: int, widths: 
     """How far channel ``c``'s table entry ``t`` can put its pulse from ``scale * w + shift +
     trim`` (ticks) for plan widths ``w`` in ``widths``: the rounded offset, and with gains the
     rounded gain over the widths (largest at their ends: it is linear in ``w``) and the final
-    rounding (half a tick)."""
+    rounding (half a tick; none when the gain and offset are whole ticks)."""
     if f == 0:
         return abs(t.offset - c.trim - c.shift)
     off = (t.offset - (1 << (f - 1))) / 2 ** f
-    return 0.5 + max(abs(off + t.sign * t.gain / 2 ** f * w - (c.scale * w + c.shift + c.trim)) for w in widths)
+    whole = t.gain % (1 << f) == 0 and (t.offset - (1 << (f - 1))) % (1 << f) == 0    # no fraction to round
+    return (0.0 if whole else 0.5) + max(abs(off + t.sign * t.gain / 2 ** f * w - (c.scale * w + c.shift + c.trim))
+                                         for w in widths)
 
 
 def channel_errors(robot) -> list[tuple[float, float]]:

@@ -208,3 +208,18 @@ def test_report_lists_the_scale_and_error_of_every_channel():
     rec = channel_records(r)[3]                                      # RB s1: scaled and turned
     assert rec["scale"] == pytest.approx(12.162642045454545 / -11.71875)
     assert f"| {rec['scale']:.6f} | {rec['error_ticks']:.3f} |" in rows[3]
+
+
+def test_a_channel_of_whole_gain_and_offset_adds_no_rounding():
+    """SpotMicro's RF channels are the plan's own (scale 1, shift 0) in a table with gains: gain
+    2**F and offset the rounding half alone, so the shift leaves the width as it is (error 0,
+    in the golden model too); the scaled channels carry at least the final half tick."""
+    from ikseries.channels import channel_error_ticks
+    r = load_preset("spotmicro")
+    cal, table = channel_calibration(r), channel_table(r)
+    limits = r.pulse_limits_ticks()
+    errs = [channel_error_ticks(c, t, table.gain_bits, limits[c.servo]) for c, t in zip(cal, table.channels)]
+    assert errs[:3] == [0.0, 0.0, 0.0] and min(errs[3:]) >= 0.5
+    w = np.arange(limits["s1"][0], limits["s1"][1] + 1, 97)
+    out = table.apply(np.zeros(len(w), dtype=np.int64), {"s1": w, "s2": w, "s3": w})
+    assert np.array_equal(out["s1"], w)
