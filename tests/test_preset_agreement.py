@@ -96,6 +96,29 @@ def test_preset_pulses_agree_with_the_robots_own_ik(name):
     assert worst <= AGREEMENT_PU
 
 
+def test_phoenix_channels_clamp_at_each_legs_own_joint_limits():
+    """Every Phoenix channel saturates where the firmware's CheckAngles clamps that leg's joint
+    (Hex_Cfg.h's per-leg min/max, mirrored left/right), as the SSC-32 pulse of the limit angle
+    after the Inv flip, in whole PWM ticks; inside the box no channel reaches its clamp."""
+    r = load_preset("phoenix")
+    cfg, tick_us = phoenix.PHOENIX, r.hardware.clock_hz * 1e-6
+    table = channel_table(r)
+    for k, leg in enumerate(phoenix.LEGS):
+        i = cfg.leg(leg)
+        for j, (mm, inv) in enumerate(zip((cfg.coxa_minmax[i], cfg.femur_minmax[i], cfg.tibia_minmax[i]),
+                                          (cfg.coxa_inv[i], cfg.femur_inv[i], cfg.tibia_inv[i]))):
+            us = sorted(float(phoenix.ssc32_pulse_exact((-a if inv else a) / 10.0)) for a in mm)
+            c = table.channel(k, r.servos[j])
+            assert (c.lo, c.hi) == (int(np.ceil(us[0] * tick_us)), int(np.floor(us[1] * tick_us))), (leg, j)
+    assert table.gain_bits == 0 and len({(c.lo, c.hi) for c in table.channels}) > 3    # per leg, not one clamp
+    pts = np.random.default_rng(5).uniform(r.workspace.lows, r.workspace.highs, size=(2000, 3)).T
+    for k in range(len(phoenix.LEGS)):
+        pulses = np.array(channel_pulses_pu(r, k, *pts)) * r.ticks_per_pu
+        for j, p in enumerate(pulses):
+            c = table.channel(k, r.servos[j])
+            assert c.lo < p.min() and p.max() < c.hi, (k, j)
+
+
 def test_agreement_notices_a_wrong_horn_offset():
     """The comparison can fail: a PhantomX whose servos are centred (1500 us) at the pose
     where LegIK's angles would be 0 without the horn offsets (Hex_Cfg.h:38-39: femur level,
