@@ -321,6 +321,20 @@ def controller_cells(res: dict) -> list[str]:
     return lines[:-1]
 
 
+def chain_fit(res: dict) -> list[str]:
+    """Lines of the ``bench/chain_fit.py`` section from its JSON ``res``."""
+    base = res["results"][0]["fit_cpu_s"]
+    rows = [(r["robot"], num(r["fit_cpu_s"], ".1f"), num(r["certify_cpu_s"], ".1f"),
+             num(r["fit_cpu_s"] - r["certify_cpu_s"], ".1f"), num(r["fit_cpu_s"] / base, ".2f"), r["plan_multipliers"],
+             " / ".join(f"{s['evaluated']:,}" for s in r["servos"]),
+             " / ".join(num(s["certified_total_pu"], ".4f") for s in r["servos"])) for r in res["results"]]
+    head = ("description", "fit CPU s", "of which certify", "the rest", "÷ closed form", "plan mults",
+            "cells evaluated (per servo)", "certified (pu)")
+    return [f"Preset `{res['preset']}` fitted (and certified) as its closed form and as a generic serial chain, "
+            f"one after the other in one run. Chain ÷ closed form: {res['ratio']:.2f}x CPU (target "
+            f"≤ {res['target_ratio']:g}x).", "", *table(head, rows)]
+
+
 SECTIONS = {
     "fit_benchmark": ("Fits of every preset", "Per preset and servo: what the fit costs and achieves.",
                       fit_benchmark),
@@ -355,4 +369,6 @@ SECTIONS = {
                     "(speed, acceleration, timed moves, failsafe) for a hexapod.", servo_cells),
     "controller_cells": ("Robot controller area", "Yosys counts of the hexapod robot controller, "
                          "its parts and what it adds beyond its IK core.", controller_cells),
+    "chain_fit": ("A chain against its closed form", "The hexapod leg fitted and certified as formulas and "
+                  "as a serial chain (numeric IK, Krawczyk enclosures), CPU seconds in one run.", chain_fit),
 }

@@ -5,24 +5,29 @@ servo angles (:meth:`Chain.measure_rows`: the fixed tip coordinates, the tool an
 goal of the targets (:meth:`Chain.goal_rows`). Over a cell of targets whose goal box is ``P``:
 
 - value: with ``q~`` the float Newton solution at the cell centre's goal (continued from the
-  home pose, :mod:`.solve`), ``Y`` the float inverse of ``J(q~) = dm/dq`` and a box ``Q``
-  around ``q~``, the Krawczyk operator ``K(Q) = q~ - Y (m(q~) - P) + C (Q - q~)`` with ``C``
-  enclosing ``I - Y J(z)`` over ``Q``. If ``K(Q)`` lies inside the interior of ``Q``, every
-  ``J`` over ``Q`` is nonsingular and every ``p`` in ``P`` has exactly one solution in ``Q``,
-  which lies in ``K(Q)`` (Krawczyk 1969; Moore, Kearfott & Cloud, *Introduction to Interval
-  Analysis*, 2009, sec. 8.4). ``C`` is ``I - Y J(q~)`` plus ``[Y m''(Q)] (Q - q~)`` (the
-  second derivatives preconditioned before magnitudes are taken, :meth:`_Centre.contraction`),
-  and the second-order form ``K2`` (Taylor about ``q~``) is tested too (:meth:`_Centre.step`).
-  ``Q`` starts at ``q~ +- 1.5 |Y (m(q~) - P)|`` (the linear estimate) and is inflated to 1.5
-  times the last enclosure up to :data:`TRIES` times; once proven, one more step over the
-  hull of the enclosure and ``q~`` tightens it (for cells; a point's is tight at once).
-- which solution: the centre's continued solution lies in ``Q`` (``q~`` does, within the
+  home pose, :mod:`.solve`) and ``Y`` the float inverse of ``J(q~) = dm/dq``, the test runs in
+  the coordinates ``u``, ``q = q~ + Y u``, in which the solutions of a goal box lie in a box
+  aligned with it (``u`` is about the goal's displacement): a box in ``q`` would have to hold
+  the whole parallelepiped ``q~ + Y (P - m(q~))``, and the second-order terms over its corners
+  make the test fail on cells a few mm wide. For ``phi(u) = u - (m(q~ + Y u) - p)`` and a box
+  ``U`` about 0, the Krawczyk operator ``K(U) = (P - m(q~)) + C U`` with ``C`` enclosing
+  ``I - J(z) Y`` over ``q~ + Y U``. If ``K(U)`` lies inside the interior of ``U``, every ``J Y``
+  over ``U`` is nonsingular and every ``p`` in ``P`` has exactly one solution in ``q~ + Y U``,
+  which lies in ``q~ + Y K(U)`` (Krawczyk 1969; Moore, Kearfott & Cloud, *Introduction to
+  Interval Analysis*, 2009, sec. 8.4). ``C`` is ``I - J(q~) Y`` plus ``[Y^T m''(Q) Y] U`` (the
+  second derivatives turned into ``u`` before magnitudes are taken, :meth:`_Centre.step`), and
+  the second-order form ``K2`` (Taylor about 0) is tested too. ``U`` starts at
+  ``+- 1.5 |P - m(q~)|`` and is inflated to 1.5 times the last ``K`` (not clipped to ``U``)
+  up to :data:`TRIES` times; once proven, one more step over the hull of the enclosure and 0
+  tightens it (for cells; a point's is tight at once).
+- which solution: the centre's continued solution lies in ``Q = q~ + Y U`` (``q~`` does, within the
   Newton residual), and the unique solution in ``Q`` moves continuously with ``p`` across the
   (convex) box ``P`` without meeting a singular pose, so it is the home branch's over the
   whole cell: the continuation to any target of the cell can pass through the centre.
 - gradient: differentiating ``m(q(x)) = g(x)``, ``J(q) dq/dx = dg/dx``, enclosed for every
   ``q`` in the enclosure and ``dg/dx`` in its own by the preconditioned fixed point
-  ``X = Y B + (I - Y J) X`` (:func:`_solve`), with ``C`` over the enclosure;
+  ``X = Y B + (I - Y J) X`` (:func:`_solve`), with ``I - Y J`` over the enclosure written in
+  ``u`` as well (:meth:`_Centre.contraction`);
 - Hessian: once more, ``J(q) d2q/dx_j dx_k = d2g/dx_j dx_k - m''(q)[dq/dx_j, dq/dx_k]``, the
   same solve (:func:`_second`).
 
@@ -45,8 +50,8 @@ __all__ = ["ChainEnclosureError", "enclosed_angles", "enclose", "TRIES"]
 TRIES = 6
 #: the first Q and every inflation: this many times the linear estimate / K(Q), about q~
 INFLATE = 1.5
-#: absolute slack of Q (deg) besides the relative one: a point cell's Q is not degenerate
-SLACK_DEG = 1e-12
+#: absolute slack of U (the solved quantities' units: mm, deg): a point cell's U is not degenerate
+SLACK = 1e-12
 #: iterations X <- (Y B + (I - Y J) X) intersected with X of the derivative solve
 SOLVE_STEPS = 3
 
@@ -82,17 +87,30 @@ def _sum(a, axis: int):
     return slo, shi
 
 
+def _scale_bounds(lo, hi, y):
+    """Outward-rounded enclosure of [lo, hi] * y for floats ``y`` (broadcasting): two products,
+    not the four of two intervals."""
+    p, q = lo * y, hi * y
+    return ia._down(np.minimum(p, q)), ia._up(np.maximum(p, q))
+
+
 def _matmul(a, b):
-    """Interval matrices ``a`` (n, k, N) times ``b`` (k, m, N): (n, m, N)."""
+    """Interval matrices ``a`` (n, k, N) times ``b`` (k, m, N): (n, m, N). Either may instead be
+    a float array (an exact matrix, such as the preconditioner)."""
     out = None
-    for t in range(a[0].shape[1]):
-        p = ia._mul_bounds(a[0][:, t, None], a[1][:, t, None], b[0][None, t], b[1][None, t])
+    for t in range((a if isinstance(a, np.ndarray) else a[0]).shape[1]):
+        if isinstance(a, np.ndarray):
+            p = _scale_bounds(b[0][None, t], b[1][None, t], a[:, t, None])
+        elif isinstance(b, np.ndarray):
+            p = _scale_bounds(a[0][:, t, None], a[1][:, t, None], b[None, t])
+        else:
+            p = ia._mul_bounds(a[0][:, t, None], a[1][:, t, None], b[0][None, t], b[1][None, t])
         out = p if out is None else _add(out, p)
     return out
 
 
 def _matvec(a, v):
-    """Interval matrices ``a`` (n, k, N) times interval vectors ``v`` (k, N): (n, N)."""
+    """Interval (or float) matrices ``a`` (n, k, N) times interval vectors ``v`` (k, N): (n, N)."""
     p = _matmul(a, (v[0][:, None], v[1][:, None]))
     return p[0][:, 0], p[1][:, 0]
 
@@ -141,10 +159,34 @@ def _derivatives(chain, qlo, qhi):
     return _stack(rows, size), matrix(jac), matrix(hess)
 
 
+def _full(pairs, n: int):
+    """The symmetric tensors (r, n, n, N) of second derivatives stored as pairs (r, mq, N)."""
+    a, b = ia.hessian_pairs(n)
+    index = np.zeros((n, n), dtype=int)
+    index[a, b] = index[b, a] = np.arange(len(a))
+    return pairs[0][:, index], pairs[1][:, index]
+
+
+def _times_y(m, y):
+    """sum_k m[..., k, :] y[k, t, :]: interval tensors ``m`` (..., n, N) times the float
+    matrices ``y`` (n, n, N), giving (..., n, N)."""
+    lead, (n, size) = m[0].shape[:-2], m[0].shape[-2:]
+    flat = (int(np.prod(lead)), n, size)                         # explicit: size may be 0
+    p = _matmul((m[0].reshape(flat), m[1].reshape(flat)), y)
+    return p[0].reshape(lead + (n, size)), p[1].reshape(lead + (n, size))
+
+
+def _contract(c0, slopes, d):
+    """c0 - sum_t slopes[:, :, t] d_t: ``c0`` (n, n, N), ``slopes`` (n, n, n, N), ``d`` (n, N)."""
+    t = ia._mul_bounds(slopes[0], slopes[1], d[0][None, None], d[1][None, None])
+    return _sub(c0, _sum(t, 2))
+
+
 class _Centre:
     """The float solutions ``qt`` (n, N) at the cell centres and what every step needs there:
     ``y`` the float inverse of the Jacobian (NaN where singular), ``f0`` the enclosure of
-    m(q~) and ``c0`` of I - Y J(q~)."""
+    m(q~), ``c0`` of I - Y J(q~) (the derivative solves) and ``c0u`` of I - J(q~) Y (the
+    Krawczyk test in the coordinates u, q = q~ + Y u)."""
 
     def __init__(self, chain, qt):
         self.chain, self.qt = chain, qt
@@ -156,57 +198,65 @@ class _Centre:
         y = np.linalg.inv(jac)
         y[bad] = np.nan
         self.y, self.f0 = np.moveaxis(y, 0, -1), f0
-        self.c0 = _eye_minus(_matmul((self.y, self.y), j0))
+        self.c0 = _eye_minus(_matmul(self.y, j0))
+        self.c0u = _eye_minus(_matmul(j0, self.y))
 
     def part(self, cells) -> "_Centre":
         out = object.__new__(_Centre)
         out.chain, out.qt, out.y = self.chain, self.qt[:, cells], self.y[:, :, cells]
         out.f0 = (self.f0[0][:, cells], self.f0[1][:, cells])
         out.c0 = (self.c0[0][:, :, cells], self.c0[1][:, :, cells])
+        out.c0u = (self.c0u[0][:, :, cells], self.c0u[1][:, :, cells])
         return out
 
-    def slopes(self, q):
-        """[Y m''(Q)] (n, mq, N): the second derivatives over boxes ``q``, preconditioned."""
-        _, _, hess = _derivatives(self.chain, q[0], q[1])
-        return _matmul((self.y, self.y), hess)
+    def hull(self, u):
+        """The boxes (n, N) enclosing q~ + Y u over the boxes ``u``."""
+        return _add((self.qt, self.qt), _matvec(self.y, u))
 
-    def contraction(self, yh, dq):
-        """An enclosure (n, n, N) of I - Y J(z) for every z in the boxes q~ + ``dq``, from
-        ``yh`` = [Y m''] over them.
+    def slopes(self, u):
+        """Over the boxes q~ + Y ``u``: the second derivatives preconditioned, [Y m''] (n, mq, N),
+        and in the coordinates u, T = Y^T m'' Y (n, n, n, N; row, then the two u axes)."""
+        q = self.hull(u)
+        _, _, hess = _derivatives(self.chain, q[0], q[1])
+        n = self.qt.shape[0]
+        a = _times_y(_full(hess, n), self.y)                          # sum_k m''_rjk Y_kt
+        t = _times_y((np.swapaxes(a[0], 1, 2), np.swapaxes(a[1], 1, 2)), self.y)   # sum_j Y_js (...)_rjt
+        return _matmul(self.y, hess), t
+
+    def contraction(self, yh, u):
+        """An enclosure (n, n, N) of I - Y J(z) for every z = q~ + Y u with u in the boxes
+        ``u``, from ``yh`` = [Y m''] over a box containing those z.
 
         J_rj(z) - J_rj(q~) = sum_k hbar_rjk (z - q~)_k with hbar_rjk an average of m''_rjk on
-        the segment from q~ to z, the same z for every row r; so Y (J(z) - J(q~)) lies in
-        sum_k [Y m'']_(., j, k) dq_k: preconditioning before the magnitudes are taken keeps
-        the cancellations of Y J ~ I that plain interval arithmetic on J(Q) loses."""
-        n = self.qt.shape[0]
-        a, b = ia.hessian_pairs(n)
-        index = np.zeros((n, n), dtype=int)
-        index[a, b] = index[b, a] = np.arange(len(a))
-        t = ia._mul_bounds(yh[0][:, index], yh[1][:, index], dq[0][None, None], dq[1][None, None])
-        return _sub(self.c0, _sum(t, 2))
+        the segment from q~ to z, and (z - q~)_k = sum_t Y_kt u_t; so Y (J(z) - J(q~)) lies in
+        sum_t (sum_k [Y m'']_(., j, k) Y_kt) u_t. Preconditioning before the magnitudes are
+        taken keeps the cancellations of Y J ~ I that plain interval arithmetic on J(Q) loses,
+        and u, unlike z - q~, varies over a box aligned with the cell's goal box."""
+        return _contract(self.c0, _times_y(_full(yh, self.qt.shape[0]), self.y), u)
 
-    def step(self, residual, q):
-        """Enclosures over boxes ``q`` (containing q~) given the residual m(q~) - P: the
-        Krawczyk operator K, the second-order form K2, ||C||_inf (N,) of its contraction C and
-        [Y m''(Q)] (:meth:`slopes`).
+    def step(self, base, u):
+        """Enclosures over boxes ``u`` (containing 0) given ``base`` = P - m(q~): the Krawczyk
+        operator K, the second-order form K2, ||C||_inf (N,) of its contraction C and [Y m'']
+        over q~ + Y u (:meth:`slopes`).
 
-        With phi(z) = z - Y (m(z) - p), K = q~ - Y (m(q~) - P) + C (Q - q~) and K2 = q~ - Y (m(q~)
-        - P) + (I - Y J(q~)) (Q - q~) - 1/2 [Y m''(Q)][Q - q~, Q - q~] (Taylor's theorem per row,
-        with the same z in every row) both enclose phi(Q) over P. K inside the interior of Q
-        proves one solution per p in Q (Krawczyk); so does K2 inside Q (Brouwer: phi maps Q
-        into itself) with ||C|| < 1 (phi contracts: at most one fixed point), needing about
-        half the nonlinearity's margin. Either way the solutions lie in K, K2 and Q."""
-        dq = _sub(q, (self.qt, self.qt))
-        yh = self.slopes(q)
-        c = self.contraction(yh, dq)
-        base = _sub((self.qt, self.qt), _matvec((self.y, self.y), residual))
-        k = _add(base, _matvec(c, dq))
+        With phi(u) = u - (m(q~ + Y u) - p), whose Jacobian is I - J(q~ + Y u) Y, K = (P - m(q~))
+        + C U with C enclosing I - J Y over U (as in :meth:`contraction`, with T for the slopes),
+        and K2 = (P - m(q~)) + (I - J(q~) Y) U - 1/2 T(U)[U, U] (Taylor's theorem per row, with
+        the same point in every entry of a row) both enclose phi(U) over P. K inside the
+        interior of U proves one solution per p in U (Krawczyk); so does K2 inside U (Brouwer:
+        phi maps U into itself) with ||C|| < 1 (phi contracts: at most one fixed point), needing
+        about half the nonlinearity's margin. Either way the solutions lie in K, K2 and U, and
+        q = q~ + Y u."""
+        yh, t = self.slopes(u)
+        c = _contract(self.c0u, t, u)
+        k = _add(base, _matvec(c, u))
         n = self.qt.shape[0]
         a, b = ia.hessian_pairs(n)
         half = np.where(a == b, 0.5, 1.0)[None, :, None]              # off-diagonal pairs count twice
-        outer = ia._outer_self(dq)                                   # dq_a dq_b, squares >= 0
-        quad = _sum(ia._mul_bounds(half * yh[0], half * yh[1], outer[0][None], outer[1][None]), 1)
-        k2 = _sub(_add(base, _matvec(self.c0, dq)), quad)
+        outer = ia._outer_self(u)                                    # u_a u_b, squares >= 0
+        tp = (half * t[0][:, a, b], half * t[1][:, a, b])
+        quad = _sum(ia._mul_bounds(tp[0], tp[1], outer[0][None], outer[1][None]), 1)
+        k2 = _sub(_add(base, _matvec(self.c0u, u)), quad)
         beta = np.max(_sum((_mag(c), _mag(c)), 1)[1], axis=0)
         return k, k2, beta, yh
 
@@ -223,35 +273,36 @@ def _meet(*boxes):
 
 
 def _value(centre: _Centre, goal, tighten: bool):
-    """The Krawczyk enclosure (lo, hi) (n, N) of the solutions for goal boxes ``goal`` (n, N),
-    the cells (N,) where none was proven and [Y m''] (n, mq, N) over a box containing it."""
-    qt = centre.qt
-    residual = _sub(centre.f0, goal)
-    r = ia._up(INFLATE * _mag(_matvec((centre.y, centre.y), residual)))
-    r = ia._up(r + SLACK_DEG + 2.0 ** -40 * np.abs(qt))
-    n, size = qt.shape
-    e_lo, e_hi = np.full(qt.shape, np.nan), np.full(qt.shape, np.nan)
+    """The Krawczyk enclosure of the solutions for goal boxes ``goal`` (n, N), in the
+    coordinates u (q = q~ + Y u), the cells (N,) where none was proven and [Y m''] (n, mq, N)
+    over a box containing q~ + Y u."""
+    base = _sub(goal, centre.f0)
+    r = ia._up(ia._up(INFLATE * _mag(base)) + SLACK)
+    n, size = centre.qt.shape
+    e_lo, e_hi = np.full((n, size), np.nan), np.full((n, size), np.nan)
     yh = (np.full((n, n * (n + 1) // 2, size), np.nan),) * 2
     yh = (yh[0], yh[1].copy())
-    todo = np.flatnonzero(np.all(np.isfinite(r), axis=0))     # a singular preconditioner: no test
+    # a singular preconditioner: no test
+    todo = np.flatnonzero(np.all(np.isfinite(r), axis=0) & np.all(np.isfinite(centre.y), axis=(0, 1)))
     for _ in range(TRIES):
         s = (slice(None), todo)
-        q = (ia._down(qt[s] - r[s]), ia._up(qt[s] + r[s]))
-        k, k2, beta, slopes = centre.part(todo).step((residual[0][s], residual[1][s]), q)
-        inside = _proven(k, k2, beta, q)
-        e = _meet(k, k2, q)
+        u = (-r[s], r[s])
+        k, k2, beta, slopes = centre.part(todo).step((base[0][s], base[1][s]), u)
+        inside = _proven(k, k2, beta, u)
+        e = _meet(k, k2, u)
         done = todo[inside]
         e_lo[:, done], e_hi[:, done] = e[0][:, inside], e[1][:, inside]
         yh[0][:, :, done], yh[1][:, :, done] = slopes[0][:, :, inside], slopes[1][:, :, inside]
-        spread = np.fmax(ia._up(e[1] - qt[s]), ia._up(qt[s] - e[0]))
-        r[:, todo] = np.where(inside, r[s], ia._up(INFLATE * spread + SLACK_DEG))
+        guess = _meet(k, k2)                 # not clipped to U: a degenerate side of U must grow
+        spread = np.fmax(guess[1], -guess[0])
+        r[:, todo] = np.where(inside, r[s], ia._up(INFLATE * spread + SLACK))
         todo = todo[~inside & np.all(np.isfinite(spread), axis=0)]     # a NaN or infinite K: no hope
         if not len(todo):
             break
     failed = np.any(np.isnan(e_lo), axis=0)
-    if tighten:   # once more over the hull of the enclosure and q~: the solutions lie in its K, K2
-        hull = (np.where(failed, qt, np.fmin(e_lo, qt)), np.where(failed, qt, np.fmax(e_hi, qt)))
-        k, k2, _, yh = centre.step(residual, hull)
+    if tighten:   # once more over the hull of the enclosure and 0: the solutions lie in its K, K2
+        hull = (np.where(failed, 0.0, np.fmin(e_lo, 0.0)), np.where(failed, 0.0, np.fmax(e_hi, 0.0)))
+        k, k2, _, yh = centre.step(base, hull)
         e_lo, e_hi = _meet(k, k2, hull)
     return (e_lo, e_hi), failed, yh
 
@@ -290,7 +341,7 @@ def _second(y, grad, yh, hess_g):
     diag = (a == b)[:, None, None]
     t = (np.where(diag, t1[0], both[0]), np.where(diag, t1[1], both[1]))      # (mq, m2, N)
     s = ia._mul_bounds(yh[0][:, :, None], yh[1][:, :, None], t[0][None], t[1][None])
-    return _sub(_matmul((y, y), hess_g), _sum(s, 1))
+    return _sub(_matmul(y, hess_g), _sum(s, 1))
 
 
 def _start(chain, qt) -> tuple[_Centre, np.ndarray]:
@@ -315,14 +366,15 @@ def enclose(centre: _Centre, goal, order: int, tighten: bool = True):
     (glo, ghi), g1, g2 = _rows(goal, size, n_in)
     unknown = np.any(np.isnan(glo) | np.isnan(ghi), axis=0)
     glo, ghi = np.where(unknown, qt, glo), np.where(unknown, qt, ghi)   # a stand-in: the cell fails
-    q, failed, yh = _value(centre, (glo, ghi), tighten)
+    u, failed, yh = _value(centre, (glo, ghi), tighten)
+    q = centre.hull(u)
     failed |= unknown | np.any(np.isnan(q[0]) | np.isnan(q[1]), axis=0)
     if order == 0:
         return [ia.Interval(q[0][i], q[1][i], order=0) for i in range(n)], failed
-    q = (np.where(failed, qt, q[0]), np.where(failed, qt, q[1]))
+    u = (np.where(failed, 0.0, u[0]), np.where(failed, 0.0, u[1]))
     yh = (np.where(failed, 0.0, yh[0]), np.where(failed, 0.0, yh[1]))
-    c = centre.contraction(yh, _sub(q, (qt, qt)))
-    d1, bad = _solve(c, _matmul((centre.y, centre.y), g1))
+    c = centre.contraction(yh, u)
+    d1, bad = _solve(c, _matmul(centre.y, g1))
     failed |= bad
     d2 = _solve(c, _second(centre.y, d1, yh, g2))[0] if order >= 2 else None
     return [ia.Interval(q[0][i], q[1][i], (d1[0][i], d1[1][i]),

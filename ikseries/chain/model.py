@@ -1,7 +1,9 @@
 """The ``chain`` geometry: a serial chain of revolute joints, its FK and its numeric IK."""
 from __future__ import annotations
 
+import hashlib
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +20,9 @@ DEG2RAD = math.pi / 180.0
 #: geometry.target values: the tip coordinates a target gives (a subset of the base frame's
 #: x, y, z), or "cylindrical": (r, theta, z) around the chain's neutral point
 TARGETS = ("xyz", "xy", "xz", "yz", "cylindrical")
+#: goal sets whose continued Newton solutions :meth:`Chain.solve` keeps (most recent first out last)
+SOLVED_SETS = 4
+_SOLVED: OrderedDict = OrderedDict()      # (chain, shape, SHA-256 of the goals) -> Solution
 
 
 @dataclass(frozen=True)
@@ -253,8 +258,19 @@ class Chain(Geometry):
         return tuple(out)
 
     def solve(self, *coords) -> solve.Solution:
-        """The continued Newton solution of targets (no range check); see :func:`solve.continued`."""
-        return solve.continued(self, self.goal(*coords))
+        """The continued Newton solution of targets (no range check); see :func:`solve.continued`.
+
+        The solutions of the last few goal sets are kept (:data:`SOLVED_SETS`): a fit asks for
+        the IK of its sample sets more than once (the reference pulses, then the features of
+        every candidate variable set), and each answer is a copy of the one solve."""
+        goal = self.goal(*coords)
+        key = (self, np.shape(goal), hashlib.sha256(np.ascontiguousarray(goal).tobytes()).digest())
+        if key not in _SOLVED:
+            _SOLVED[key] = solve.continued(self, goal)
+            while len(_SOLVED) > SOLVED_SETS:
+                _SOLVED.popitem(last=False)
+        _SOLVED.move_to_end(key)
+        return _SOLVED[key].copy()
 
     def ik(self, *coords):
         """Servo angles (deg) per joint for target arrays, on the home pose's branch.

@@ -38,23 +38,30 @@ DAMPING = 1e-12
 def newton(chain, q, goal, iters):
     """Damped Newton on ``chain.system``: servo angles ``q`` (N, n, deg) moved towards goals
     ``goal`` (N, m); returns the new angles, the residual per target (mm, max norm) and the
-    Jacobian at the last iterate evaluated."""
+    Jacobian at the last iterate evaluated. Only the targets not yet within a tenth of
+    :data:`TOL_MM` are stepped and evaluated again (a converged target's angles, residual and
+    Jacobian stay as they are)."""
     q = np.array(q, dtype=np.float64)
+    goal = np.asarray(goal, dtype=np.float64)
     mu = DAMPING * chain.reach ** 2
+    f, jac = chain.system(q, goal)
+    res = np.max(np.abs(f), axis=1)
+    live = np.flatnonzero(res > 0.1 * TOL_MM)
     for _ in range(iters):
-        f, jac = chain.system(q, goal)
-        res = np.max(np.abs(f), axis=1)
-        live = res > 0.1 * TOL_MM
-        if not np.any(live):
-            return q, res, jac
-        jl, fl = jac[live], f[live]
+        if not len(live):
+            break
+        rows = slice(None) if len(live) == len(q) else live      # no gathers while every target moves
+        jl, fl = jac[rows], f[rows]
         jt = np.swapaxes(jl, 1, 2)
         step = -np.linalg.solve(jt @ jl + mu * np.eye(q.shape[1]), (jt @ fl[..., None]))[..., 0]
         big = np.max(np.abs(step), axis=1, keepdims=True)
         step = step * np.minimum(1.0, MAX_STEP_RAD / np.maximum(big, 1e-300))
-        q[live] += np.degrees(step)
-    f, jac = chain.system(q, goal)
-    return q, np.max(np.abs(f), axis=1), jac
+        q[rows] += np.degrees(step)
+        fl, jl = chain.system(q[rows], goal[rows])
+        f[rows], jac[rows] = fl, jl
+        res[rows] = np.max(np.abs(fl), axis=1)
+        live = live[res[live] > 0.1 * TOL_MM]
+    return q, res, jac
 
 
 def determinant_sign(jac) -> np.ndarray:
@@ -74,6 +81,11 @@ class Solution:
     residual: np.ndarray
     crossed: np.ndarray
     crossed_at: np.ndarray
+
+    def copy(self) -> "Solution":
+        """The same solutions in arrays of their own."""
+        return Solution(self.chain, self.angles.copy(), self.residual.copy(), self.crossed.copy(),
+                        self.crossed_at.copy())
 
     @property
     def ok(self) -> np.ndarray:
