@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -23,6 +24,7 @@ TARGETS = ("xyz", "xy", "xz", "yz", "cylindrical")
 #: goal sets whose continued Newton solutions :meth:`Chain.solve` keeps (most recent first out last)
 SOLVED_SETS = 4
 _SOLVED: OrderedDict = OrderedDict()      # (chain, shape, SHA-256 of the goals) -> Solution
+_SOLVED_LOCK = threading.Lock()           # the cache is the process's: threads share it
 
 
 @dataclass(frozen=True)
@@ -265,12 +267,17 @@ class Chain(Geometry):
         every candidate variable set), and each answer is a copy of the one solve."""
         goal = self.goal(*coords)
         key = (self, np.shape(goal), hashlib.sha256(np.ascontiguousarray(goal).tobytes()).digest())
-        if key not in _SOLVED:
-            _SOLVED[key] = solve.continued(self, goal)
+        with _SOLVED_LOCK:
+            hit = _SOLVED.get(key)
+            if hit is not None:
+                _SOLVED.move_to_end(key)
+                return hit.copy()
+        sol = solve.continued(self, goal)
+        with _SOLVED_LOCK:
+            _SOLVED[key] = sol
             while len(_SOLVED) > SOLVED_SETS:
                 _SOLVED.popitem(last=False)
-        _SOLVED.move_to_end(key)
-        return _SOLVED[key].copy()
+        return sol.copy()
 
     def ik(self, *coords):
         """Servo angles (deg) per joint for target arrays, on the home pose's branch.
