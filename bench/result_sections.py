@@ -331,8 +331,9 @@ def chain_fit(res: dict) -> list[str]:
     head = ("description", "fit CPU s", "of which certify", "the rest", "÷ closed form", "plan mults",
             "cells evaluated (per servo)", "certified (pu)")
     return [f"Preset `{res['preset']}` fitted (and certified) as its closed form and as a generic serial chain, "
-            f"one after the other in one run. Chain ÷ closed form: {res['ratio']:.2f}x CPU (target "
-            f"≤ {res['target_ratio']:g}x).", "", *table(head, rows)]
+            "one after the other in one run, then each real robot's preset (a body's legs share one plan, "
+            f"fitted once). Chain ÷ closed form: {res['ratio']:.2f}x CPU (target ≤ {res['target_ratio']:g}x, "
+            "for every robot too).", "", *table(head, rows)]
 
 
 SECTIONS = {
