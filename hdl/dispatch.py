@@ -57,7 +57,6 @@ class _Regs:
         self.legs_phase = Signal()                          # the fields being read are coordinates
         self.move_time = Signal(d._time_bits)
         self.kind = Signal(range(len(_BUILT)))              # the answer being built
-        self.fid, self.fk = Signal(range(d._max_fields)), Signal(range(4))  # its field and byte
         self.b = Signal(range(d._region))                   # its byte
         self.settle = Signal()                              # a counter read is under way
         self.unsupported = Signal()                         # NACK reason
@@ -182,7 +181,6 @@ class Dispatcher(wiring.Component):
         self._shape = P.Shape(legs, self._coords, self._channels)
         self._max_request = P.max_request_payload(self._shape)
         self._identity = answer_constant(_C["identity"].answer, identity)
-        self._max_fields = max(len(f) for f in _BUILT)
         # three regions of one size in the memory: widths, the answer being built, identity;
         # an address is the region above the offset, so no adder
         biggest = max([self._channels, len(self._identity)] + [answer_bytes(f) for f in _BUILT])
@@ -327,7 +325,7 @@ class Dispatcher(wiring.Component):
         self._start_build(m, r, _NACK)
 
     def _start_build(self, m, r, kind: int):
-        m.d.sync += [r.kind.eq(kind), r.fid.eq(0), r.fk.eq(0), r.b.eq(0), r.settle.eq(0)]
+        m.d.sync += [r.kind.eq(kind), r.b.eq(0), r.settle.eq(0)]
         m.next = "BUILD"
 
     def _ack(self, m, r):
@@ -587,37 +585,44 @@ class Dispatcher(wiring.Component):
                 _NACK: {"request": r.cmd, "reason": reason}}
 
     def _build(self, m, r, wr):
-        byte, field_end, answer_end = Signal(8), Signal(), Signal()
+        byte, answer_end, length = Signal(8), Signal(), Signal.like(r.ans_len)
         sources = self._sources(r)
-        fid_bits, fk_bits = len(r.fid), len(r.fk)
-        # the answers' bytes by where they come from: one multiplexer input per distinct source
-        # byte (the six receiver counters' bytes are one, counter_data's), bytes past a field's
-        # signal zero
-        cases = {}
-        with m.Switch(Cat(r.fid, r.kind)):
-            for kind, fields in enumerate(_BUILT):
-                for i, f in enumerate(fields):
-                    n, sig = f.group_bytes(None), sources[kind][f.name]
-                    assert len(answer_byte_map((f,))) == n and len(sig) <= 8 * n, f.name
-                    with m.Case(kind << fid_bits | i):
-                        m.d.comb += [field_end.eq(r.fk == n - 1), answer_end.eq(i == len(fields) - 1)]
-                        if f.name in P.RECEIVER_COUNTERS:
-                            m.d.comb += self.counter_addr.eq(P.RECEIVER_COUNTERS.index(f.name))
-                    for k in range((len(sig) + 7) // 8):
-                        cases.setdefault((id(sig), k), (sig, k, []))[2].append((kind << fid_bits | i) << fk_bits | k)
-        with m.Switch(Cat(r.fk, r.fid, r.kind)):
+        b_bits = len(r.b)
+        # the answers' bytes by where they come from, selected by the answer kind and the byte
+        # index: one multiplexer input per distinct source byte (the six receiver counters' bytes
+        # are one, counter_data's), bytes past a field's signal zero
+        cases, addr = {}, {}
+        for kind, fields in enumerate(_BUILT):
+            at = 0
+            for f in fields:
+                n, sig = f.group_bytes(None), sources[kind][f.name]
+                assert len(answer_byte_map((f,))) == n and len(sig) <= 8 * n, f.name
+                for k in range(n):
+                    key = kind << b_bits | at
+                    if f.name in P.RECEIVER_COUNTERS:
+                        addr.setdefault(P.RECEIVER_COUNTERS.index(f.name), []).append(key)
+                    if 8 * k < len(sig):
+                        cases.setdefault((id(sig), k), (sig, k, []))[2].append(key)
+                    at += 1
+            with m.If((r.kind == kind) & (r.b == at - 1)):
+                m.d.comb += [answer_end.eq(1), length.eq(at)]
+        # two switches: a byte of a counter selects both its address and its byte (a switch
+        # takes only its first matching case)
+        with m.Switch(Cat(r.b, r.kind)):
+            for a, at in addr.items():
+                with m.Case(*at):
+                    m.d.comb += self.counter_addr.eq(a)
+        with m.Switch(Cat(r.b, r.kind)):
             for sig, k, at in cases.values():
                 with m.Case(*at):
                     m.d.comb += byte.eq(sig[8 * k:8 * k + 8])
-        # each byte is written a cycle after its field is selected: the counters are a memory
+        # each byte is written a cycle after it is selected: the counters are a memory
         with m.If(~r.settle):
             m.d.sync += r.settle.eq(1)
         with m.Else():
             m.d.comb += [wr.en.eq(1), wr.addr.eq(self._region_addr(1, r.b)), wr.data.eq(byte)]
-            m.d.sync += [r.settle.eq(0), r.b.eq(r.b + 1), r.fk.eq(r.fk + 1)]
-            with m.If(field_end):
-                m.d.sync += [r.fk.eq(0), r.fid.eq(r.fid + 1)]
-                with m.If(answer_end):
-                    m.d.comb += self.status.ready.eq(r.kind == _CHANNEL)
-                    m.d.sync += r.ans_len.eq(r.b + 1)
-                    m.next = "ANSWER"
+            m.d.sync += [r.settle.eq(0), r.b.eq(r.b + 1)]
+            with m.If(answer_end):
+                m.d.comb += self.status.ready.eq(r.kind == _CHANNEL)
+                m.d.sync += r.ans_len.eq(length)
+                m.next = "ANSWER"
