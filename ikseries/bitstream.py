@@ -251,6 +251,14 @@ def _place(board, top, clock_plan, build_dir: Path, seed: int, env, timeout, fil
     return _measure(board, top, clock_plan, build_dir, seconds, files, path, seed)
 
 
+def _path_words(path: dict) -> str:
+    """``path`` (:func:`ikseries.pnr._critical_path`) as the end of a one-line message."""
+    if not path:
+        return ""
+    return (f" (critical path {path['from']} -> {path['to']}: {path['delay_ns']:g} ns, {path['logic_ns']:g} logic + "
+            f"{path['routing_ns']:g} routing)")
+
+
 def build_bitstream(board: Board, design, clock_plan: ClockPlan, servo_pins=None, outdir=".", *,
                     name: str | None = None, allow_timing_fail: bool = False,
                     timeout: float | None = None) -> BitstreamResult:
@@ -302,7 +310,8 @@ def build_bitstream(board: Board, design, clock_plan: ClockPlan, servo_pins=None
         if not result.meets_clock and not allow_timing_fail:
             raise BitstreamError(f"the {board.name} top reaches {result.fmax_mhz:g} MHz at best (nextpnr seeds "
                                  f"{', '.join(map(str, NEXTPNR_SEEDS))}), below its core clock "
-                                 f"{float(clock_plan.achieved_hz) / 1e6:.9g} MHz: no bitstream written")
+                                 f"{float(clock_plan.achieved_hz) / 1e6:.9g} MHz: no bitstream written"
+                                 f"{_path_words(result.critical_path)}")
         (stage / names["record"]).write_text(json.dumps(result.record(), indent=1, sort_keys=True) + "\n")
         _install({names["bitstream"]: build_dir / f"{_TOP}{board.bitstream_suffix}",
                   names["report"]: build_dir / "report.json", names["log"]: build_dir / f"{_TOP}.tim",

@@ -439,14 +439,17 @@ class SlowEcho(EchoServos):
 
 def test_a_top_below_its_clock_on_every_seed_writes_no_bitstream(tmp_path, monkeypatch):
     """Every seed of NEXTPNR_SEEDS (two here, for time) is tried before the build gives up (the
-    best one's Fmax in the message); with allow_timing_fail the best placement's result is returned."""
+    best one's Fmax and critical path in the message); with allow_timing_fail the best placement's
+    result is returned."""
     import ikseries.bitstream as bs
     assert bs.NEXTPNR_SEEDS[:2] == (1, 2)
     monkeypatch.setattr(bs, "NEXTPNR_SEEDS", (1, 2))
     b = BOARDS["icebreaker"]
     plan = clock_plan(b, 48_000_000)
     with pytest.raises(BitstreamError, match=r"^the icebreaker top reaches [\d.]+ MHz at best \(nextpnr seeds "
-                                             r"1, 2\), below its core clock 48 MHz: no bitstream written$"):
+                                             r"1, 2\), below its core clock 48 MHz: no bitstream written "
+                                             r"\(critical path \S+ -> \S+: [\d.]+ ns, [\d.]+ logic \+ [\d.]+ "
+                                             r"routing\)$"):
         build_bitstream(b, SlowEcho(4), plan, None, tmp_path / "out")
     assert not (tmp_path / "out").exists()
     r = build_bitstream(b, SlowEcho(4), plan, None, tmp_path / "out", allow_timing_fail=True)
