@@ -170,7 +170,8 @@ class FrameReceiver(wiring.Component):
     counter_addr : In(range(len(RECEIVER_COUNTERS)))
         Index of an error counter in :data:`~ikseries.hdl.protocol.RECEIVER_COUNTERS`: ``crc``,
         ``framing``, ``overrun``, ``bad_length``, ``unknown_command``, ``dropped`` (a good frame
-        completed while ``o`` was still held).
+        completed while ``o`` still held the previous one, untaken by the end of the new one's
+        CRC check).
     counter_data : Out(counter_bits)
         That counter, one cycle after ``counter_addr`` (a block RAM read); saturating, zero from
         reset, up to 10 cycles behind its event.
@@ -181,15 +182,16 @@ class FrameReceiver(wiring.Component):
 
     Throughput
     ----------
-    One byte per cycle while hunting, one per 8 cycles inside a frame, plus one cycle after each
+    One byte per cycle while hunting, one per 8 cycles inside a frame, plus two cycles after each
     frame's last byte.
     """
 
     #: pulses of ``tick`` that abandon a frame: with one per idle bit time, a pause of at most
     #: RX_TIMEOUT_BYTES byte times never does and one of a byte time more always does
     timeout_ticks = P.BYTE_BITS * P.RX_TIMEOUT_BYTES + P.BYTE_BITS // 2
-    #: cycles from the frame's last byte valid on ``i`` to ``o.valid``
-    latency = SerialCRC.cycles_per_byte + 1
+    #: cycles from the frame's last byte valid on ``i`` to ``o.valid`` (the CRC's steps through
+    #: it, the check, the offer)
+    latency = SerialCRC.cycles_per_byte + 2
 
     def __init__(self, shape: P.Shape, counter_bits: int = P.COUNTER_BITS):
         if not isinstance(shape, P.Shape):
@@ -346,9 +348,14 @@ class FrameReceiver(wiring.Component):
                     with frame_state():
                         m.next = after
             with m.State("check"):      # the CRC register has taken the last byte
+                m.next = "offer"
                 with m.If(check.crc != 0):
                     m.d.comb += events["crc"].eq(1)
-                with m.Elif(self.o.valid & ~self.o.ready):
+                    m.next = "hunt"
+            # a cycle later, so that whether the previous frame is still offered is a register
+            # (o.valid, cleared by a transfer in the check cycle), not the dispatcher's ready
+            with m.State("offer"):
+                with m.If(self.o.valid):
                     m.d.comb += events["dropped"].eq(1)
                 with m.Else():
                     m.d.comb += good.eq(1)
