@@ -1,22 +1,24 @@
 """The structure search of one servo: the cheapest polynomial that meets its budget.
 
-Per candidate variable set the degree rises until a Lawson near-minimax fit meets the
-approximation budget on the check set; the best set is then tried piecewise; the winner is
-pruned term by term while every removal saves a multiplier.
+Per candidate variable set the degree rises until the minimax fit (:mod:`.minimax`) over the fit
+and check samples meets the approximation budget; the best set is then tried piecewise; the
+winner is pruned term by term while every removal saves a multiplier.
 """
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from .context import FitError
 from .lowering import structure_cost
-from .polyfit import Basis, fit_least_squares, lawson
+from .minimax import minimax, region_ids
+from .polyfit import Basis
 from .structure import FeatureSet, ServoFit
 
-__all__ = ["Cells", "Rows", "Working", "fit_terms", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "PRUNE_REJECTS"]
+__all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "PRUNE_REJECTS"]
 
 MAX_DEGREE = 12
 PRUNE_REJECTS = 3
@@ -24,13 +26,14 @@ CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (table
 
 
 class Rows:
-    """Points (features, shape (N, n)) and target ticks of a fit or check set, with the
-    points' monomial columns kept (:class:`~.polyfit.Basis`)."""
+    """The pool of one fit: points (features, shape (N, n)) and target ticks of the fit and check
+    samples together, with the points' monomial columns kept (:class:`~.polyfit.Basis`) and their
+    regions (:func:`~.minimax.region_ids`)."""
 
-    __slots__ = ("x", "t", "basis")
+    __slots__ = ("x", "t", "basis", "_regions")
 
     def __init__(self, x: np.ndarray, t: np.ndarray):
-        self.x, self.t, self.basis = x, t, Basis(x)
+        self.x, self.t, self.basis, self._regions = x, t, Basis(x), None
 
     def __getstate__(self):
         return (self.x, self.t)
@@ -44,109 +47,93 @@ class Rows:
     def matrix(self, terms) -> np.ndarray:
         return self.basis.matrix(terms)
 
-
-class Working:
-    """The rows a Lawson fit works on: the fit set and the check rows ``extra`` added by
-    exchange rounds (in the order added), with the final Lawson weights ``w``."""
-
-    __slots__ = ("fit", "check", "extra", "w")
-
-    def __init__(self, fit: Rows, check: Rows, extra: np.ndarray, w):
-        self.fit, self.check, self.extra, self.w = fit, check, extra, w
-
-    def matrix(self, terms) -> np.ndarray:
-        if not len(self.extra):
-            return self.fit.matrix(terms)
-        return np.concatenate([self.fit.matrix(terms), self.check.matrix(terms)[self.extra]])
-
     @property
-    def target(self) -> np.ndarray:
-        return np.concatenate([self.fit.t, self.check.t[self.extra]])
+    def regions(self) -> np.ndarray:
+        if self._regions is None:
+            self._regions = region_ids(self.x)
+        return self._regions
+
+    def fit(self, terms, budget_ticks, start=None):
+        """The minimax fit of ``terms`` (:class:`~.minimax.MinimaxFit`), refused once it cannot
+        meet ``budget_ticks``; ``start``: pool rows to begin with."""
+        return minimax(self.basis, self.t, list(terms), budget_ticks, self.regions, start)
+
+    def error(self, terms, coef) -> float:
+        """Max |error| of coefficients ``coef`` of ``terms`` over the pool."""
+        return float(np.max(np.abs(self.basis.residual(list(terms), coef, self.t))))
 
 
-def fit_terms(terms, fit_set: Rows, check_set: Rows, budget_ticks, rounds: int = 4, warm: Working | None = None,
-              iterations: int = 30):
-    """Lawson near-minimax on the fit set, then exchange rounds adding the worst check
-    points. Returns (coefficients, max error over fit and check sets, :class:`Working`)
-    (the working rows and Lawson weights warm-start a fit of a subset of the terms)."""
-    ca = check_set.matrix(terms)
-    if warm is None:
-        work = Working(fit_set, check_set, np.zeros(0, dtype=np.intp), None)
-    else:
-        work = warm
-    w = work.w
-    for _ in range(rounds):
-        c, err, w = lawson(work.matrix(terms), work.target, iterations, w)
-        cerr = np.abs(ca @ c - check_set.t)
-        err = max(err, float(cerr.max()))
-        if err <= budget_ticks:
-            break
-        worst = np.argsort(cerr)[-500:]
-        work = Working(fit_set, check_set, np.concatenate([work.extra, worst]), None)
-        w = None if warm is None else np.concatenate([w, np.full(len(worst), w.max())])
-    return c, err, Working(fit_set, check_set, work.extra, w)
+class CellsFit(NamedTuple):
+    """Minimax fit of one polynomial in every cell: coefficients (cells, terms) (None when
+    refused), max error over the cells (a lower bound when refused), per cell its
+    :class:`~.minimax.MinimaxFit` (the state a related fit warm-starts from)."""
+    coef: np.ndarray | None
+    error: float
+    states: list
+    refused: bool
 
 
 @dataclass
 class Cells:
-    """Fit and check sets of one servo polynomial, per cell of a piecewise fit (a single cell
-    otherwise); each set is a :class:`Rows` of features (N, n) and target ticks."""
-    fit: list
-    check: list
+    """The pool (:class:`Rows`: fit and check samples, features (N, n) and target ticks) of one
+    servo polynomial per cell of a piecewise fit (a single cell otherwise)."""
+    rows: list
 
     @classmethod
     def whole(cls, fit_set, check_set) -> "Cells":
-        return cls([Rows(*fit_set)], [Rows(*check_set)])
+        return cls([Rows(np.concatenate([fit_set[0], check_set[0]]), np.concatenate([fit_set[1], check_set[1]]))])
 
     @classmethod
     def cut(cls, fs: FeatureSet, port, fit_set, check_set, raw) -> "Cells":
         """Rows of each cell of ``fs.cut``, the cut variable replaced by the offset in the cell;
         ``raw`` = real values of the cut port at the fit and check rows."""
-        out = cls([], [])
+        out = cls([])
         for c in range(fs.cut.cells):
-            for dst, (x, t), v in ((out.fit, fit_set, raw[0]), (out.check, check_set, raw[1])):
+            xs, ts = [], []
+            for (x, t), v in ((fit_set, raw[0]), (check_set, raw[1])):
                 sel, off = fs.cut.rows(port, v, c)
                 xc = x[sel].copy()
                 xc[:, fs.cut.var] = off
-                dst.append(Rows(xc, t[sel]))
+                xs.append(xc)
+                ts.append(t[sel])
+            out.rows.append(Rows(np.concatenate(xs), np.concatenate(ts)))
         return out
 
     def poly(self, terms, coef: np.ndarray) -> dict:
         """{exponents: coefficient} (a tuple per cell when piecewise) from coef (cells, terms)."""
-        if len(self.fit) == 1:
+        if len(self.rows) == 1:
             return {e: float(v) for e, v in zip(terms, coef[0])}
         return {e: tuple(float(v) for v in coef[:, j]) for j, e in enumerate(terms)}
 
     def coef(self, poly: dict, terms) -> np.ndarray:
-        return np.array([[poly[e] for e in terms]]) if len(self.fit) == 1 else \
+        return np.array([[poly[e] for e in terms]]) if len(self.rows) == 1 else \
             np.array([poly[e] for e in terms]).T
 
-    def lsq_error(self, terms) -> float:
-        err = 0.0
-        for rows in self.fit:
-            a = rows.matrix(terms)
-            err = max(err, float(np.max(np.abs(a @ fit_least_squares(a, rows.t) - rows.t))))
-        return err
-
-    def fit_terms(self, terms, budget_ticks, rounds: int = 4, warm=None, iterations: int = 30):
-        """:func:`fit_terms` in every cell: (coef (cells, terms), max error, states)."""
+    def fit_terms(self, terms, budget_ticks, warm=None) -> CellsFit:
+        """The minimax fit in every cell, refused as soon as one cell's is; ``warm``: the states
+        of a related fit (their active rows start this one's)."""
         coefs, err, states = [], 0.0, []
-        for c, (fit_set, check_set) in enumerate(zip(self.fit, self.check)):
-            cf, e, st = fit_terms(terms, fit_set, check_set, budget_ticks, rounds,
-                                  None if warm is None else warm[c], iterations)
-            coefs.append(cf)
-            err, states = max(err, e), states + [st]
-        return np.array(coefs), err, states
+        for c, rows in enumerate(self.rows):
+            st = rows.fit(terms, budget_ticks, None if warm is None else warm[c].active)
+            if st.refused:
+                return CellsFit(None, st.error, states + [st], True)
+            coefs.append(st.coef)
+            err, states = max(err, st.error), states + [st]
+        return CellsFit(np.array(coefs), err, states, False)
 
     def forget_columns(self) -> None:
         """Drop the kept monomial columns (they can take hundreds of MB per servo)."""
-        for rows in self.fit + self.check:
+        for rows in self.rows:
             rows.basis = Basis(rows.x)
+
+
+def _fit_note(fit: CellsFit) -> str:
+    return f"minimax error above {fit.error:.4g} ticks" if fit.refused else f"max fit error {fit.error:.4g} ticks"
 
 
 def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> ServoFit:
     """The cheapest (fewest multipliers) polynomial over any candidate variable set whose
-    near-minimax fit meets ``budget_ticks`` on the check set, then pruned.
+    minimax fit over the fit and check samples meets ``budget_ticks``, then pruned.
 
     ``sets[kind]`` = (fit set, check set), each (features, target ticks); ``raw[port]`` = the
     real values of an input port at the fit and check rows. Per candidate the total degree
@@ -154,8 +141,10 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     plan found. Then the best variable set is tried piecewise: cut along each of its
     variables that is an input port into ``CUT_CELLS`` cells (coefficient tables, a lower
     degree); a piecewise plan wins only with strictly fewer multipliers, the fewest cells first.
+    The candidates of one kind share their pool (and its monomial columns).
     """
     best = None
+    pools: dict = {}
 
     def search(fs, data):
         nonlocal best
@@ -164,17 +153,17 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
             cost = structure_cost(ctx, fs, terms, name)
             if best is not None and cost >= best[0]:
                 return
-            if data.lsq_error(terms) > 8 * budget_ticks:
-                continue
-            c, err, state = data.fit_terms(terms, budget_ticks)
+            fit = data.fit_terms(terms, budget_ticks)
             progress(f"  {name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
-                     f"{len(terms)} terms, {cost} multipliers, max fit error {err:.4g} ticks")
-            if err <= budget_ticks:
-                best = (cost, ServoFit(name, fs, deg, data.poly(terms, c), err), state, data)
+                     f"{len(terms)} terms, {cost} multipliers, {_fit_note(fit)}")
+            if not fit.refused and fit.error <= budget_ticks:
+                best = (cost, ServoFit(name, fs, deg, data.poly(terms, fit.coef), fit.error), fit.states, data)
                 return
 
     for fs in candidates:
-        search(fs, Cells.whole(*sets[fs.kind]))
+        if fs.kind not in pools:
+            pools[fs.kind] = Cells.whole(*sets[fs.kind])
+        search(fs, pools[fs.kind])
     if best is None:
         raise FitError(f"servo {name}: no polynomial up to total degree {MAX_DEGREE} reaches the "
                        f"approximation budget of {budget_ticks:g} ticks")
@@ -187,6 +176,7 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
             fs = base.piecewise(var, ports[nm], cells)
             if fs.cut.cells > 1:
                 search(fs, Cells.cut(fs, ports[nm], *sets[base.kind], raw[nm]))
+    pools.clear()
     cost, sf, state, data = best
     return prune(ctx, sf, cost, data, state, budget_ticks, progress)
 
@@ -196,17 +186,18 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
 
     Only removals that save a multiplier are tried (in a nested Horner scheme most
     inner coefficients cost an add, not a multiply), least important first
-    (|coefficient| x largest |monomial| on the check set, the largest over the cells); stops
-    after ``PRUNE_REJECTS`` refused removals in a row. Each trial refit is warm-started from
-    the current fit's working set and Lawson weights (one exchange round). The result carries
-    its fit data (``refit``) for the coefficient refit after quantization.
+    (|coefficient| x largest |monomial| over the pool, the largest over the cells); stops
+    after ``PRUNE_REJECTS`` refused removals in a row. Each trial's minimax fit starts from the
+    current fit's active rows. The result carries its fit data (``refit``) for the coefficient
+    refit after quantization.
     """
     terms = list(sf.poly)
     coef = data.coef(sf.poly, terms)
     rejected: set = set()
+    costs: dict = {}           # the scan after a refusal meets the same term lists again
     misses = 0
     while misses < PRUNE_REJECTS:
-        scale = np.max([[rows.basis.magnitude(t) for t in terms] for rows in data.check], axis=0)
+        scale = np.max([[rows.basis.magnitude(t) for t in terms] for rows in data.rows], axis=0)
         order = np.argsort(np.max(np.abs(coef), axis=0) * scale, kind="stable")
         pick = None
         for i in order:
@@ -214,17 +205,18 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
             if sum(t) == 0 or t in rejected:
                 continue
             rest = terms[:i] + terms[i + 1:]
-            c2 = structure_cost(ctx, sf.features, rest, sf.name)
-            if c2 < cost:
-                pick = (t, rest, c2)
+            if tuple(rest) not in costs:
+                costs[tuple(rest)] = structure_cost(ctx, sf.features, rest, sf.name)
+            if costs[tuple(rest)] < cost:
+                pick = (t, rest, costs[tuple(rest)])
                 break
         if pick is None:
             break
         t, rest, c2 = pick
-        c, err, st = data.fit_terms(rest, budget_ticks, rounds=1, warm=state, iterations=12)
-        if err <= budget_ticks:
-            terms, coef, cost, misses, state = rest, c, c2, 0, st
-            sf = ServoFit(sf.name, sf.features, sf.degree, data.poly(terms, c), err)
+        fit = data.fit_terms(rest, budget_ticks, warm=state)
+        if not fit.refused and fit.error <= budget_ticks:
+            terms, coef, cost, misses, state = rest, fit.coef, c2, 0, fit.states
+            sf = ServoFit(sf.name, sf.features, sf.degree, data.poly(terms, fit.coef), fit.error)
         else:
             rejected.add(t)
             misses += 1

@@ -183,7 +183,7 @@ def test_coefficients_are_reoptimised_on_their_grid(fitted):
             assert all(c * 2.0 ** frac == round(c * 2.0 ** frac) for c in np.ravel(list(poly.values())))
             naive = np.round(data.coef(sf.poly, terms) * 2.0 ** frac) / 2.0 ** frac
             assert err <= max(float(np.max(np.abs(vander(cpts, terms) @ n - ctarget)))
-                              for n, (cpts, ctarget) in zip(naive, data.check))
+                              for n, (cpts, ctarget) in zip(naive, data.rows))
 
 
 def test_piecewise_cells_of_the_fit_are_the_cells_of_the_plan():

@@ -1,0 +1,216 @@
+"""Discrete minimax (Chebyshev, L-inf) polynomial fits on a large point set, by exchange.
+
+The problem ``min_c max_i |a_i . c - b_i|`` over a pool of points is a linear programme whose
+dual, ``max sum_i y_i b_i`` subject to ``sum_i y_i a_i = 0`` and ``sum_i |y_i| = 1``, has a
+basis of ``n + 1`` signed points (a *reference*). :class:`_Exchange` runs the primal simplex
+method on that dual over an *active* subset of the pool: its multipliers are the coefficients
+``c`` and the levelled error ``t`` of the reference; a point whose error exceeds ``t`` enters,
+and one reference point leaves by the ratio test (the Stiefel exchange in several variables).
+:func:`minimax` wraps it in rounds over the whole pool: the subset's optimum is checked on
+every point, the worst violators (the worst of each region of the pool, so that one round
+reaches every local maximum) join the subset, until no point errs by more than ``t`` (within
+``GAP``).
+
+Every reference's ``t`` is a lower bound of the pool's minimax error (weak duality: a feasible
+dual point), so a structure that cannot meet a budget is refused as soon as ``t`` passes it,
+usually after a few dozen pivots on a few hundred points; a fit that meets it is returned at
+its optimum, which leaves the certifier the most room.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+__all__ = ["MinimaxFit", "minimax", "subset_minimax", "region_ids", "GAP", "REGIONS"]
+
+#: relative gap between the error over the pool and the reference's level at which a fit within
+#: its budget is taken as optimal (``_TIGHT`` for one that is not, until its level passes the budget)
+GAP = 1e-3
+_TIGHT = 1e-4
+_PER_ROUND = 2               # rows joining the subset per round, times (terms + 1)
+#: regions of the pool (a grid over its coordinates) whose worst violators join the subset per round
+REGIONS = 128
+_ROUNDS = 60                 # exchange rounds over the pool before the best fit seen is returned
+_REFACTOR = 25               # pivots between refactorisations of the basis inverse
+
+
+@dataclass(frozen=True)
+class MinimaxFit:
+    """A minimax fit over a pool of points.
+
+    Attributes
+    ----------
+    coef : ndarray
+        Coefficients (one per term).
+    error : float
+        Max |error| over the pool of ``coef``; when ``refused``, the lower bound instead.
+    lower : float
+        The reference's levelled error: no coefficients do better on the pool.
+    active : ndarray of int
+        The pool rows the exchange worked on (warm-starts a related fit).
+    refused : bool
+        The lower bound exceeds the budget: no coefficients of these terms meet it.
+    """
+    coef: np.ndarray
+    error: float
+    lower: float
+    active: np.ndarray
+    refused: bool = False
+
+
+def region_ids(points: np.ndarray, regions: int = REGIONS) -> np.ndarray:
+    """Region of each point (N, n): a grid of about ``regions`` cells over the bounding box of its
+    non-constant coordinates."""
+    lo, hi = points.min(0), points.max(0)
+    live = hi > lo
+    dims = int(live.sum())
+    if dims == 0:
+        return np.zeros(len(points), dtype=np.intp)
+    per = int(np.ceil(regions ** (1 / dims)))
+    q = ((points[:, live] - lo[live]) / (hi - lo)[live] * per).astype(np.intp)
+    return np.ravel_multi_index(np.clip(q, 0, per - 1).T, (per,) * dims)
+
+
+def _start(a: np.ndarray) -> tuple[list, np.ndarray]:
+    """A feasible reference among rows ``a`` (k, n): ``n`` rows spanning R^n best (QR with column
+    pivoting of a^T), one more, and the signs of the null vector of the n x (n + 1) system."""
+    n = a.shape[1]
+    _, _, piv = scipy.linalg.qr(a.T, mode="economic", pivoting=True)
+    ref = [int(i) for i in piv[:n + 1]]
+    mu = np.linalg.svd(a[ref].T)[2][-1]
+    return ref, np.where(mu >= 0, 1.0, -1.0)
+
+
+class _Exchange:
+    """The primal simplex on the dual LP over rows ``a`` (k, n) and targets ``b``: the reference
+    ``ref`` (row positions) with signs ``sig``, the inverse of its basis and the multipliers
+    ``w`` = (coefficients, level) kept up to date by rank-one updates, refactorised every
+    ``_REFACTOR`` pivots."""
+
+    def __init__(self, a: np.ndarray, b: np.ndarray, ref, sig):
+        self.a, self.b = a, b
+        self.ref, self.sig = np.array(ref, dtype=np.intp), np.array(sig, dtype=np.float64)
+        self._refactor()
+
+    def _refactor(self) -> None:
+        basis = np.vstack([(self.a[self.ref] * self.sig[:, None]).T, np.ones(len(self.ref))])
+        self.inv = np.linalg.inv(basis)
+        self.w = self.inv.T @ (self.sig * self.b[self.ref])
+        self.since = 0
+
+    def extend(self, a: np.ndarray, b: np.ndarray, ref) -> None:
+        """The same reference (at its new positions ``ref``) among more rows."""
+        self.a, self.b, self.ref = a, b, np.asarray(ref, dtype=np.intp)
+
+    def run(self, budget: float, tol: float) -> tuple[np.ndarray, float, str]:
+        """Pivot until no row errs by more than ``t + tol`` ("optimal") or the level ``t``
+        exceeds ``budget`` ("refused"); returns (coefficients, t, how). After ``2 (n + 1)``
+        pivots in a row that do not raise ``t``, Bland's rule (the first violator enters) avoids
+        cycling."""
+        n1 = len(self.ref)
+        stall, last = 0, -np.inf
+        for _ in range(50 * n1):
+            if self.w[-1] > budget:
+                self._refactor()         # a refusal is a proof: not from a drifted inverse
+                if self.w[-1] > budget:
+                    return self.w[:-1].copy(), float(self.w[-1]), "refused"
+            t = float(self.w[-1])
+            stall, last = (stall + 1 if t <= last else 0), max(t, last)
+            r = self.b - self.a @ self.w[:-1]
+            v = np.abs(r)
+            v -= t
+            i = int(v.argmax())
+            if v[i] <= tol:
+                return self.w[:-1].copy(), t, "optimal"
+            if stall > 2 * n1:
+                i = int(np.flatnonzero(v > tol)[0])
+            if not self._pivot(i, 1.0 if r[i] > 0 else -1.0, float(v[i])):
+                return self.w[:-1].copy(), t, "stuck"
+        return self.w[:-1].copy(), float(self.w[-1]), "pivots"
+
+    def _pivot(self, i: int, s: float, gain: float) -> bool:
+        """Row ``i`` with sign ``s`` (reduced cost ``gain``) enters; the Harris ratio test picks
+        the leaving point among the near-ties with the largest pivot element."""
+        inv = self.inv
+        d = inv[:, :-1] @ (s * self.a[i])
+        d += inv[:, -1]
+        pos = d > 1e-9 * np.abs(d).max()
+        if not pos.any():
+            return False
+        z = np.maximum(inv[:, -1], 0.0)
+        dp = np.where(pos, d, 1.0)
+        theta = np.where(pos, (z + 1e-12) / dp, np.inf).min()
+        j = int(np.where(pos & (z / dp <= theta), d, -np.inf).argmax())
+        row = inv[j] / d[j]
+        self.w += gain * row         # the multipliers of the new basis
+        inv -= d[:, None] * row
+        inv[j] = row
+        self.ref[j], self.sig[j] = i, s
+        self.since += 1
+        if self.since >= _REFACTOR:
+            self._refactor()
+        return True
+
+
+def _new_rows(err: np.ndarray, level: float, regions: np.ndarray, active: np.ndarray, count: int) -> np.ndarray:
+    """Up to ``count`` rows not in ``active`` erring by more than ``level``: the worst of each
+    region (the first such row on a tie), the worst regions first."""
+    out = err > level
+    out[active] = False
+    viol = np.flatnonzero(out)
+    ev, rv = err[viol], regions[viol]
+    worst = np.full(int(regions.max()) + 1, -np.inf)
+    np.maximum.at(worst, rv, ev)
+    hit = viol[ev == worst[rv]]
+    _, first = np.unique(regions[hit], return_index=True)
+    reps = hit[first]
+    return np.sort(reps[np.argsort(-err[reps], kind="stable")[:count]])
+
+
+def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.ndarray,
+            start: np.ndarray | None = None) -> MinimaxFit:
+    """The minimax fit of ``terms`` (columns of ``basis``, a :class:`~.polyfit.Basis`) to
+    ``target`` over all its points, or its refusal once no fit can meet ``budget``.
+
+    ``start``: pool rows to begin with (e.g. the active rows of a related fit); a stride over the
+    pool is added. ``regions``: :func:`region_ids` of the pool's points.
+    """
+    m, n = len(target), len(terms)
+    norm = np.array([basis.norm(t) for t in terms])
+    stride = np.arange(0, m, max(1, m // (4 * (n + 1))))
+    active = stride if start is None else np.union1d(start, stride)
+    a = basis.rows(terms, active) / norm
+    ex = _Exchange(a, target[active], *_start(a))
+    tol = 2e-7 * budget
+    best = None
+    for _ in range(_ROUNDS):
+        c, t, how = ex.run(budget, tol)
+        if how == "refused":
+            return MinimaxFit(c / norm, t, t, active, refused=True)
+        err = np.abs(basis.residual(terms, c / norm, target))
+        e = float(err.max())
+        if best is None or e < best.error:
+            best = MinimaxFit(c / norm, e, t, active)
+        if e <= t * (1 + (GAP if e <= budget else _TIGHT)) + tol:
+            break
+        new = _new_rows(err, t * (1 + _TIGHT / 2), regions, active, _PER_ROUND * (n + 1))
+        if not len(new):
+            break
+        kept = active[ex.ref]
+        active = np.union1d(active, new)
+        a = basis.rows(terms, active) / norm
+        ex.extend(a, target[active], list(np.searchsorted(active, kept)))
+    return best
+
+
+def subset_minimax(a: np.ndarray, b: np.ndarray, tol: float) -> np.ndarray:
+    """Minimax coefficients over the rows ``a`` (k, n) alone (a small subset, e.g. a fit's
+    active rows), optimal within ``tol``: the simplex from a fresh reference, columns normalised."""
+    norm = np.linalg.norm(a, axis=0)
+    norm[norm == 0] = 1.0
+    an = a / norm
+    ex = _Exchange(an, b, *_start(an))
+    c, _, _ = ex.run(np.inf, tol)
+    return c / norm
