@@ -29,14 +29,15 @@ def round_and_refit(sf: ServoFit, frac: int):
     coefs, worst = [], 0.0
     for orig, state, rows in zip(data.coef(sf.poly, terms), states, data.rows):
         a, b = rows.basis.rows(terms, state.active), rows.t[state.active]
+        ref = np.searchsorted(state.active, state.reference)
         coef = orig.copy()
         fixed = np.zeros(len(terms), dtype=bool)
         for k in range(len(terms)):
             coef[k] = np.round(coef[k] * grid) / grid
             fixed[k] = True
             free = ~fixed
-            if free.any():
-                coef[free] = subset_minimax(a[:, free], b - a[:, fixed] @ coef[fixed], 2e-7 * budget)
+            if free.any():        # each refit starts among the previous one's reference
+                coef[free], ref = subset_minimax(a[:, free], b - a[:, fixed] @ coef[fixed], 2e-7 * budget, ref)
         err = rows.error(terms, coef)
         naive = np.round(orig * grid) / grid
         naive_err = rows.error(terms, naive)

@@ -89,11 +89,18 @@ def output_multipliers(plan: Plan) -> dict:
 def structure_cost(ctx, fs: FeatureSet, terms: list, servo: str | None = None) -> float:
     """Cost (``ctx.cost_model``) of the evaluation of ``servo`` (its output clamp; None: the
     first servo's) with the coordinate stage for ``terms``, known before fitting: the
-    structure alone decides it."""
+    structure alone decides it (kept in ``ctx.structure_costs``)."""
+    limits = ctx.robot.pulse_limits_ticks()[servo or ctx.robot.servos[0]]
+    key = (fs, tuple(terms), tuple(limits))
+    if key not in ctx.structure_costs:
+        ctx.structure_costs[key] = _trial_cost(ctx, fs, terms, limits)
+    return ctx.structure_costs[key]
+
+
+def _trial_cost(ctx, fs: FeatureSet, terms: list, limits) -> float:
     # distinct coefficients: equal ones would share Horner sub-expressions
     cells = fs.cut.cells if fs.cut else 0
     sf = ServoFit("cost", fs, 0, {e: (1.0 + k / 4096,) * cells if cells else 1.0 + k / 4096
                                   for k, e in enumerate(terms)}, 0.0, frac=16)
-    limits = ctx.robot.pulse_limits_ticks()
-    plan = build_plan(ctx, [sf], 16, mixed=False, limits={"cost": limits[servo or ctx.robot.servos[0]]})
+    plan = build_plan(ctx, [sf], 16, mixed=False, limits={"cost": limits})
     return ctx.cost_model.cost(plan, "cost")

@@ -18,6 +18,7 @@ its optimum, which leaves the certifier the most room.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,14 +51,20 @@ class MinimaxFit:
         The reference's levelled error: no coefficients do better on the pool.
     active : ndarray of int
         The pool rows the exchange worked on (warm-starts a related fit).
+    reference : ndarray of int
+        The pool rows of the final reference (``n + 1`` of ``active``).
     refused : bool
         The lower bound exceeds the budget: no coefficients of these terms meet it.
+    optimal : bool
+        ``error`` is within ``GAP`` of ``lower``.
     """
     coef: np.ndarray
     error: float
     lower: float
     active: np.ndarray
+    reference: np.ndarray
     refused: bool = False
+    optimal: bool = False
 
 
 def region_ids(points: np.ndarray, regions: int = REGIONS) -> np.ndarray:
@@ -170,12 +177,13 @@ def _new_rows(err: np.ndarray, level: float, regions: np.ndarray, active: np.nda
 
 
 def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.ndarray,
-            start: np.ndarray | None = None) -> MinimaxFit:
+            start: np.ndarray | None = None, settle: bool = True) -> MinimaxFit:
     """The minimax fit of ``terms`` (columns of ``basis``, a :class:`~.polyfit.Basis`) to
     ``target`` over all its points, or its refusal once no fit can meet ``budget``.
 
     ``start``: pool rows to begin with (e.g. the active rows of a related fit); a stride over the
-    pool is added. ``regions``: :func:`region_ids` of the pool's points.
+    pool is added. ``regions``: :func:`region_ids` of the pool's points. Without ``settle`` the
+    first coefficients that meet the budget are returned (``optimal`` False): enough to decide.
     """
     m, n = len(target), len(terms)
     norm = np.array([basis.norm(t) for t in terms])
@@ -188,12 +196,15 @@ def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.n
     for _ in range(_ROUNDS):
         c, t, how = ex.run(budget, tol)
         if how == "refused":
-            return MinimaxFit(c / norm, t, t, active, refused=True)
+            return MinimaxFit(c / norm, t, t, active, active[ex.ref], refused=True)
         err = np.abs(basis.residual(terms, c / norm, target))
         e = float(err.max())
         if best is None or e < best.error:
-            best = MinimaxFit(c / norm, e, t, active)
+            best = MinimaxFit(c / norm, e, t, active, active[ex.ref])
         if e <= t * (1 + (GAP if e <= budget else _TIGHT)) + tol:
+            best = dataclasses.replace(best, optimal=True)
+            break
+        if not settle and e <= budget:
             break
         new = _new_rows(err, t * (1 + _TIGHT / 2), regions, active, _PER_ROUND * (n + 1))
         if not len(new):
@@ -205,12 +216,19 @@ def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.n
     return best
 
 
-def subset_minimax(a: np.ndarray, b: np.ndarray, tol: float) -> np.ndarray:
+def subset_minimax(a: np.ndarray, b: np.ndarray, tol: float, near: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """Minimax coefficients over the rows ``a`` (k, n) alone (a small subset, e.g. a fit's
-    active rows), optimal within ``tol``: the simplex from a fresh reference, columns normalised."""
+    active rows), optimal within ``tol``, and the rows of their reference.
+
+    ``near``: rows of a related fit's reference (e.g. with one more term); the first reference
+    is chosen among them, so that the exchange starts close to the optimum.
+    """
     norm = np.linalg.norm(a, axis=0)
     norm[norm == 0] = 1.0
     an = a / norm
-    ex = _Exchange(an, b, *_start(an))
+    cand = np.arange(len(a)) if near is None or len(near) < a.shape[1] + 1 else np.asarray(near)
+    ref, sig = _start(an[cand])
+    ex = _Exchange(an, b, cand[ref], sig)
     c, _, _ = ex.run(np.inf, tol)
-    return c / norm
+    return c / norm, ex.ref.copy()

@@ -53,10 +53,11 @@ class Rows:
             self._regions = region_ids(self.x)
         return self._regions
 
-    def fit(self, terms, budget_ticks, start=None):
+    def fit(self, terms, budget_ticks, start=None, settle=True):
         """The minimax fit of ``terms`` (:class:`~.minimax.MinimaxFit`), refused once it cannot
-        meet ``budget_ticks``; ``start``: pool rows to begin with."""
-        return minimax(self.basis, self.t, list(terms), budget_ticks, self.regions, start)
+        meet ``budget_ticks``; ``start``: pool rows to begin with; without ``settle`` the first
+        coefficients within the budget."""
+        return minimax(self.basis, self.t, list(terms), budget_ticks, self.regions, start, settle)
 
     def error(self, terms, coef) -> float:
         """Max |error| of coefficients ``coef`` of ``terms`` over the pool."""
@@ -109,12 +110,13 @@ class Cells:
         return np.array([[poly[e] for e in terms]]) if len(self.rows) == 1 else \
             np.array([poly[e] for e in terms]).T
 
-    def fit_terms(self, terms, budget_ticks, warm=None) -> CellsFit:
+    def fit_terms(self, terms, budget_ticks, warm=None, settle=True) -> CellsFit:
         """The minimax fit in every cell, refused as soon as one cell's is; ``warm``: the states
-        of a related fit (their active rows start this one's)."""
+        of a related fit (their active rows start this one's); without ``settle`` the first
+        coefficients within the budget (enough to decide)."""
         coefs, err, states = [], 0.0, []
         for c, rows in enumerate(self.rows):
-            st = rows.fit(terms, budget_ticks, None if warm is None else warm[c].active)
+            st = rows.fit(terms, budget_ticks, None if warm is None else warm[c].active, settle)
             if st.refused:
                 return CellsFit(None, st.error, states + [st], True)
             coefs.append(st.coef)
@@ -153,7 +155,7 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
             cost = structure_cost(ctx, fs, terms, name)
             if best is not None and cost >= best[0]:
                 return
-            fit = data.fit_terms(terms, budget_ticks)
+            fit = data.fit_terms(terms, budget_ticks, settle=False)
             progress(f"  {name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
                      f"{len(terms)} terms, {cost} multipliers, {_fit_note(fit)}")
             if not fit.refused and fit.error <= budget_ticks:
@@ -178,6 +180,10 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
                 search(fs, Cells.cut(fs, ports[nm], *sets[base.kind], raw[nm]))
     pools.clear()
     cost, sf, state, data = best
+    if not all(st.optimal for st in state):     # the search only needed to know it fits
+        terms = list(sf.poly)
+        fit = data.fit_terms(terms, budget_ticks, warm=state)
+        sf, state = dataclasses.replace(sf, poly=data.poly(terms, fit.coef), fit_error_ticks=fit.error), fit.states
     return prune(ctx, sf, cost, data, state, budget_ticks, progress)
 
 
@@ -194,7 +200,6 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
     terms = list(sf.poly)
     coef = data.coef(sf.poly, terms)
     rejected: set = set()
-    costs: dict = {}           # the scan after a refusal meets the same term lists again
     misses = 0
     while misses < PRUNE_REJECTS:
         scale = np.max([[rows.basis.magnitude(t) for t in terms] for rows in data.rows], axis=0)
@@ -205,10 +210,9 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
             if sum(t) == 0 or t in rejected:
                 continue
             rest = terms[:i] + terms[i + 1:]
-            if tuple(rest) not in costs:
-                costs[tuple(rest)] = structure_cost(ctx, sf.features, rest, sf.name)
-            if costs[tuple(rest)] < cost:
-                pick = (t, rest, costs[tuple(rest)])
+            c2 = structure_cost(ctx, sf.features, rest, sf.name)
+            if c2 < cost:
+                pick = (t, rest, c2)
                 break
         if pick is None:
             break
