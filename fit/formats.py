@@ -23,7 +23,7 @@ def round_and_refit(sf: ServoFit, frac: int):
     Returns (poly, max error over the pool) or None without fit data."""
     if sf.refit is None:
         return None
-    data, states, budget = sf.refit
+    data, states, _ = sf.refit
     terms = sorted(sf.poly, key=lambda e: (-sum(e), e))
     grid = 2.0 ** frac
     coefs, worst = [], 0.0
@@ -37,7 +37,7 @@ def round_and_refit(sf: ServoFit, frac: int):
             fixed[k] = True
             free = ~fixed
             if free.any():        # each refit starts among the previous one's reference
-                coef[free], ref = subset_minimax(a[:, free], b - a[:, fixed] @ coef[fixed], 2e-7 * budget, ref)
+                coef[free], ref = subset_minimax(a[:, free], b - a[:, fixed] @ coef[fixed], ref)
         err = rows.error(terms, coef)
         naive = np.round(orig * grid) / grid
         naive_err = rows.error(terms, naive)

@@ -31,6 +31,8 @@ __all__ = ["MinimaxFit", "minimax", "subset_minimax", "region_ids", "GAP", "REGI
 GAP = 1e-3
 _TIGHT = 1e-4
 _PER_ROUND = 2               # rows joining the subset per round, times (terms + 1)
+_SLACK = 2e-7                # a row errs by more than the level t if by more than t (1 + _SLACK) + floor
+_FLOOR = 1e-12               # ... floor = _FLOOR * max |target| (rounding noise of the residuals)
 #: regions of the pool (a grid over its coordinates) whose worst violators join the subset per round
 REGIONS = 128
 _ROUNDS = 60                 # exchange rounds over the pool before the best fit seen is returned
@@ -111,8 +113,8 @@ class _Exchange:
         """The same reference (at its new positions ``ref``) among more rows."""
         self.a, self.b, self.ref = a, b, np.asarray(ref, dtype=np.intp)
 
-    def run(self, budget: float, tol: float) -> tuple[np.ndarray, float, str]:
-        """Pivot until no row errs by more than ``t + tol`` ("optimal") or the level ``t``
+    def run(self, budget: float, floor: float) -> tuple[np.ndarray, float, str]:
+        """Pivot until no row errs by more than ``t (1 + _SLACK) + floor`` ("optimal") or the level ``t``
         exceeds ``budget`` ("refused"); returns (coefficients, t, how). After ``2 (n + 1)``
         pivots in a row that do not raise ``t``, Bland's rule (the first violator enters) avoids
         cycling."""
@@ -128,6 +130,7 @@ class _Exchange:
             r = self.b - self.a @ self.w[:-1]
             v = np.abs(r)
             v -= t
+            tol = _SLACK * abs(t) + floor
             i = int(v.argmax())
             if v[i] <= tol:
                 return self.w[:-1].copy(), t, "optimal"
@@ -191,17 +194,17 @@ def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.n
     active = stride if start is None else np.union1d(start, stride)
     a = basis.rows(terms, active) / norm
     ex = _Exchange(a, target[active], *_start(a))
-    tol = 2e-7 * budget
+    floor = _FLOOR * float(np.abs(target).max())
     best = None
     for _ in range(_ROUNDS):
-        c, t, how = ex.run(budget, tol)
+        c, t, how = ex.run(budget, floor)
         if how == "refused":
             return MinimaxFit(c / norm, t, t, active, active[ex.ref], refused=True)
         err = np.abs(basis.residual(terms, c / norm, target))
         e = float(err.max())
         if best is None or e < best.error:
             best = MinimaxFit(c / norm, e, t, active, active[ex.ref])
-        if e <= t * (1 + (GAP if e <= budget else _TIGHT)) + tol:
+        if e <= t * (1 + (GAP if e <= budget else _TIGHT)) + floor:
             best = dataclasses.replace(best, optimal=True)
             break
         if not settle and e <= budget:
@@ -216,10 +219,10 @@ def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.n
     return best
 
 
-def subset_minimax(a: np.ndarray, b: np.ndarray, tol: float, near: np.ndarray | None = None
+def subset_minimax(a: np.ndarray, b: np.ndarray, near: np.ndarray | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Minimax coefficients over the rows ``a`` (k, n) alone (a small subset, e.g. a fit's
-    active rows), optimal within ``tol``, and the rows of their reference.
+    active rows) and the rows of their reference.
 
     ``near``: rows of a related fit's reference (e.g. with one more term); the first reference
     is chosen among them, so that the exchange starts close to the optimum.
@@ -230,5 +233,5 @@ def subset_minimax(a: np.ndarray, b: np.ndarray, tol: float, near: np.ndarray | 
     cand = np.arange(len(a)) if near is None or len(near) < a.shape[1] + 1 else np.asarray(near)
     ref, sig = _start(an[cand])
     ex = _Exchange(an, b, cand[ref], sig)
-    c, _, _ = ex.run(np.inf, tol)
+    c, _, _ = ex.run(np.inf, _FLOOR * float(np.abs(b).max()))
     return c / norm, ex.ref.copy()
