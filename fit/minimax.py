@@ -33,6 +33,7 @@ _TIGHT = 1e-4
 _PER_ROUND = 2               # rows joining the subset per round, times (terms + 1)
 _SLACK = 2e-7                # a row errs by more than the level t if by more than t (1 + _SLACK) + floor
 _FLOOR = 1e-12               # ... floor = _FLOOR * max |target| (rounding noise of the residuals)
+_RANK = 1e-12                # columns dependent to within this (relative) are dependent
 #: regions of the pool (a grid over its coordinates) whose worst violators join the subset per round
 REGIONS = 128
 _ROUNDS = 60                 # exchange rounds over the pool before the best fit seen is returned
@@ -82,14 +83,26 @@ def region_ids(points: np.ndarray, regions: int = REGIONS) -> np.ndarray:
     return np.ravel_multi_index(np.clip(q, 0, per - 1).T, (per,) * dims)
 
 
-def _start(a: np.ndarray) -> tuple[list, np.ndarray]:
+def _start(a: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """A feasible reference among rows ``a`` (k, n): ``n`` rows spanning R^n best (QR with column
-    pivoting of a^T), one more, and the signs of the null vector of the n x (n + 1) system."""
+    pivoting of a^T), one more, and the signs of the null vector of the n x (n + 1) system; None
+    if the rows do not span R^n."""
     n = a.shape[1]
-    _, _, piv = scipy.linalg.qr(a.T, mode="economic", pivoting=True)
-    ref = [int(i) for i in piv[:n + 1]]
+    if len(a) < n + 1:
+        return None
+    _, r, piv = scipy.linalg.qr(a.T, mode="economic", pivoting=True)
+    if not abs(r[n - 1, n - 1]) > _RANK * abs(r[0, 0]):
+        return None
+    ref = piv[:n + 1]
     mu = np.linalg.svd(a[ref].T)[2][-1]
     return ref, np.where(mu >= 0, 1.0, -1.0)
+
+
+def _independent(a: np.ndarray) -> np.ndarray:
+    """Indices of a largest set of linearly independent columns of ``a`` (QR with pivoting)."""
+    _, r, piv = scipy.linalg.qr(a, mode="economic", pivoting=True)
+    d = np.abs(np.diag(r))
+    return np.sort(piv[:int(np.sum(d > _RANK * d[0]))]) if len(d) and d[0] > 0 else np.zeros(0, dtype=np.intp)
 
 
 class _Exchange:
@@ -187,13 +200,33 @@ def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.n
     ``start``: pool rows to begin with (e.g. the active rows of a related fit); a stride over the
     pool is added. ``regions``: :func:`region_ids` of the pool's points. Without ``settle`` the
     first coefficients that meet the budget are returned (``optimal`` False): enough to decide.
+    Terms that are linearly dependent over the pool (e.g. powers of an offset that takes two
+    values in a cell) are fitted by an independent subset of them, the others' coefficients 0.
     """
     m, n = len(target), len(terms)
     norm = np.array([basis.norm(t) for t in terms])
     stride = np.arange(0, m, max(1, m // (4 * (n + 1))))
     active = stride if start is None else np.union1d(start, stride)
     a = basis.rows(terms, active) / norm
-    ex = _Exchange(a, target[active], *_start(a))
+    first = _start(a)
+    if first is None:            # the rows so far do not span the terms: the whole pool decides
+        full = basis.matrix(terms) / norm
+        cols = _independent(full)
+        if len(cols) < n:
+            fit = minimax(basis, target, [terms[j] for j in cols], budget, regions, start, settle)
+            coef = np.zeros(n)
+            coef[cols] = fit.coef
+            return dataclasses.replace(fit, coef=coef)
+        _, _, piv = scipy.linalg.qr(full.T, mode="economic", pivoting=True)
+        active = np.union1d(active, piv[:n + 1])
+        a = basis.rows(terms, active) / norm
+        first = _start(a)
+    return _rounds(basis, target, terms, budget, regions, settle, norm, active, _Exchange(a, target[active], *first))
+
+
+def _rounds(basis, target, terms, budget, regions, settle, norm, active, ex) -> MinimaxFit:
+    """The exchange rounds of :func:`minimax` from the exchange ``ex`` over the ``active`` rows."""
+    n = len(terms)
     floor = _FLOOR * float(np.abs(target).max())
     best = None
     for _ in range(_ROUNDS):
@@ -225,13 +258,26 @@ def subset_minimax(a: np.ndarray, b: np.ndarray, near: np.ndarray | None = None
     active rows) and the rows of their reference.
 
     ``near``: rows of a related fit's reference (e.g. with one more term); the first reference
-    is chosen among them, so that the exchange starts close to the optimum.
+    is chosen among them, so that the exchange starts close to the optimum. Columns dependent
+    over the rows get coefficient 0 (an independent subset is fitted).
     """
     norm = np.linalg.norm(a, axis=0)
     norm[norm == 0] = 1.0
     an = a / norm
-    cand = np.arange(len(a)) if near is None or len(near) < a.shape[1] + 1 else np.asarray(near)
-    ref, sig = _start(an[cand])
-    ex = _Exchange(an, b, cand[ref], sig)
+    first = None
+    if near is not None:
+        near = np.asarray(near)
+        first = _start(an[near])
+        first = None if first is None else (near[first[0]], first[1])
+    if first is None:
+        first = _start(an)
+    if first is None:
+        cols = _independent(an)
+        coef = np.zeros(a.shape[1])
+        if len(cols):
+            coef[cols], ref = subset_minimax(a[:, cols], b)
+            return coef, ref
+        return coef, np.zeros(0, dtype=np.intp)
+    ex = _Exchange(an, b, *first)
     c, _, _ = ex.run(np.inf, _FLOOR * float(np.abs(b).max()))
     return c / norm, ex.ref.copy()

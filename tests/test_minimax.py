@@ -94,3 +94,31 @@ def test_regions_grid_the_varying_coordinates_only():
     assert ids.min() == 0 and len(np.unique(ids)) <= 16
     assert len(np.unique(region_ids(x[:, :2], 16))) == 16      # one varying coordinate: 16 slabs
     assert np.all(region_ids(np.ones((5, 2))) == 0)
+
+
+def test_terms_dependent_over_the_pool_are_fitted_by_an_independent_subset():
+    """An offset that takes two values in a cell: its square is affine in it over the pool."""
+    rng = np.random.default_rng(7)
+    x = np.column_stack([rng.choice([-0.5, 0.5], 4000), rng.uniform(-1, 1, 4000)])
+    target = 100 * np.sin(x[:, 1] + x[:, 0]) + 30 * x[:, 0]
+    terms = total_degree_terms(3, ["any", "any"])
+    fit = minimax(Basis(x), target, terms, 1e9, region_ids(x))
+    a = vander(x, terms)
+    keep = np.flatnonzero(fit.coef != 0)
+    _, best = _lp_minimax(a[:, keep], target)
+    assert len(keep) < len(terms) and np.linalg.matrix_rank(a) == len(keep)
+    assert np.abs(a @ fit.coef - target).max() <= best * (1 + 2 * GAP)
+    coef, _ = subset_minimax(a[::10], target[::10])
+    assert np.count_nonzero(coef) == len(keep)
+
+
+def test_rows_that_do_not_span_the_terms_are_completed_from_the_pool():
+    """The first rows (a stride) see x = 0 only; the few rows with x != 0 join them."""
+    rng = np.random.default_rng(8)
+    x = np.column_stack([np.zeros(4000), rng.uniform(-1, 1, 4000)])
+    x[1:11, 0] = rng.uniform(0.5, 1, 10)
+    target = 10 * x[:, 0] + np.cos(3 * x[:, 1])
+    terms = [(0, 0), (1, 0), (0, 1), (0, 2)]
+    fit = minimax(Basis(x), target, terms, 1e9, region_ids(x))
+    _, best = _lp_minimax(vander(x, terms), target)
+    assert np.all(fit.coef != 0) and fit.error <= best * (1 + 2 * GAP)
