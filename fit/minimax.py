@@ -149,7 +149,13 @@ class _Exchange:
                 return self.w[:-1].copy(), t, "optimal"
             if stall > 2 * n1:
                 i = int(np.flatnonzero(v > tol)[0])
-            if not self._pivot(i, 1.0 if r[i] > 0 else -1.0, float(v[i])):
+            s = 1.0 if r[i] > 0 else -1.0
+            if np.any((self.ref == i) & (self.sig == s)):    # a reference row errs by more than t:
+                if self.since == 0:                         # the inverse has drifted, or (just
+                    return self.w[:-1].copy(), t, "stuck"   # refactorised) is too inaccurate
+                self._refactor()
+                continue
+            if not self._pivot(i, s, float(v[i])):
                 return self.w[:-1].copy(), t, "stuck"
         return self.w[:-1].copy(), float(self.w[-1]), "pivots"
 
@@ -166,14 +172,21 @@ class _Exchange:
         dp = np.where(pos, d, 1.0)
         theta = np.where(pos, (z + 1e-12) / dp, np.inf).min()
         j = int(np.where(pos & (z / dp <= theta), d, -np.inf).argmax())
+        was = self.ref[j], self.sig[j]
+        self.ref[j], self.sig[j] = i, s
+        if self.since + 1 >= _REFACTOR:
+            try:
+                self._refactor()
+            except np.linalg.LinAlgError:              # numerically singular: keep the old basis
+                self.ref[j], self.sig[j] = was
+                self._refactor()
+                return False
+            return True
         row = inv[j] / d[j]
         self.w += gain * row         # the multipliers of the new basis
         inv -= d[:, None] * row
         inv[j] = row
-        self.ref[j], self.sig[j] = i, s
         self.since += 1
-        if self.since >= _REFACTOR:
-            self._refactor()
         return True
 
 
@@ -221,22 +234,34 @@ def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.n
         active = np.union1d(active, piv[:n + 1])
         a = basis.rows(terms, active) / norm
         first = _start(a)
-    return _rounds(basis, target, terms, budget, regions, settle, norm, active, _Exchange(a, target[active], *first))
+    frame = _frame(a) / norm[:, None]
+    a = basis.rows(terms, active) @ frame
+    return _rounds(basis, target, terms, budget, regions, settle, frame, active, _Exchange(a, target[active], *first))
 
 
-def _rounds(basis, target, terms, budget, regions, settle, norm, active, ex) -> MinimaxFit:
-    """The exchange rounds of :func:`minimax` from the exchange ``ex`` over the ``active`` rows."""
+def _frame(a: np.ndarray) -> np.ndarray:
+    """The upper triangular T with ``a @ T`` orthonormal columns (QR of ``a``, of full column
+    rank): the exchange works in these coordinates, where the reference systems of high-degree
+    monomials stay well conditioned (the same references and signs: T is invertible)."""
+    r = np.linalg.qr(a, mode="r")
+    return scipy.linalg.solve_triangular(r, np.eye(a.shape[1]))
+
+
+def _rounds(basis, target, terms, budget, regions, settle, frame, active, ex) -> MinimaxFit:
+    """The exchange rounds of :func:`minimax` from the exchange ``ex`` over the ``active`` rows,
+    in the coordinates ``frame`` (coefficients = frame @ the exchange's)."""
     n = len(terms)
     floor = _FLOOR * float(np.abs(target).max())
     best = None
     for _ in range(_ROUNDS):
-        c, t, how = ex.run(budget, floor)
+        u, t, how = ex.run(budget, floor)
+        c = frame @ u
         if how == "refused":
-            return MinimaxFit(c / norm, t, t, active, active[ex.ref], refused=True)
-        err = np.abs(basis.residual(terms, c / norm, target))
+            return MinimaxFit(c, t, t, active, active[ex.ref], refused=True)
+        err = np.abs(basis.residual(terms, c, target))
         e = float(err.max())
         if best is None or e < best.error:
-            best = MinimaxFit(c / norm, e, t, active, active[ex.ref])
+            best = MinimaxFit(c, e, t, active, active[ex.ref])
         if e <= t * (1 + (GAP if e <= budget else _TIGHT)) + floor:
             best = dataclasses.replace(best, optimal=True)
             break
@@ -247,8 +272,7 @@ def _rounds(basis, target, terms, budget, regions, settle, norm, active, ex) -> 
             break
         kept = active[ex.ref]
         active = np.union1d(active, new)
-        a = basis.rows(terms, active) / norm
-        ex.extend(a, target[active], list(np.searchsorted(active, kept)))
+        ex.extend(basis.rows(terms, active) @ frame, target[active], np.searchsorted(active, kept))
     return best
 
 
@@ -278,6 +302,7 @@ def subset_minimax(a: np.ndarray, b: np.ndarray, near: np.ndarray | None = None
             coef[cols], ref = subset_minimax(a[:, cols], b)
             return coef, ref
         return coef, np.zeros(0, dtype=np.intp)
-    ex = _Exchange(an, b, *first)
-    c, _, _ = ex.run(np.inf, _FLOOR * float(np.abs(b).max()))
-    return c / norm, ex.ref.copy()
+    frame = _frame(an)
+    ex = _Exchange(an @ frame, b, *first)
+    u, _, _ = ex.run(np.inf, _FLOOR * float(np.abs(b).max()))
+    return (frame @ u) / norm, ex.ref.copy()
