@@ -76,6 +76,9 @@ class FitContext:
     structure_costs : dict
         The costs priced so far (:func:`ikseries.fit.lowering.structure_cost`: a trial plan
         each; servos of one leg try the same structures).
+    trial_builders : dict
+        Per (feature bits, lowering) a plan builder holding the coordinate stage, on which
+        :func:`ikseries.fit.lowering.trial_plan` builds one servo's plan at a time.
     """
     robot: object
     inputs: tuple[PlanInput, ...]
@@ -85,6 +88,7 @@ class FitContext:
     mixed: bool
     cost_model: CostModel = DEFAULT_COST_MODEL
     structure_costs: dict = field(default_factory=dict, compare=False, repr=False)
+    trial_builders: dict = field(default_factory=dict, compare=False, repr=False)
 
     @classmethod
     def for_robot(cls, robot, quantization_share: float, cost_model: CostModel = DEFAULT_COST_MODEL

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 
 from .context import FormatError
-from .lowering import build_plan
+from .lowering import trial_plan
 from .minimax import subset_minimax
 from .structure import ServoFit
 
@@ -52,7 +52,7 @@ def _rounding_pu(ctx, sf: ServoFit, fv: int) -> float:
     """Certified rounding bound (pu) of ``sf`` alone in a plan with features of ``fv`` bits
     (infinite when an intermediate would overflow 63 bits)."""
     try:
-        plan = build_plan(ctx, [sf], fv)
+        plan = trial_plan(ctx, sf, fv)
     except OverflowError:
         return np.inf
     return plan.rounding_bounds()[plan.outputs[0].preround] / ctx.ticks_per_pu

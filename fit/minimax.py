@@ -8,8 +8,9 @@ method on that dual over an *active* subset of the pool: its multipliers are the
 and one reference point leaves by the ratio test (the Stiefel exchange in several variables).
 :func:`minimax` wraps it in rounds over the whole pool: the subset's optimum is checked on
 every point, the worst violators (the worst of each region of the pool, so that one round
-reaches every local maximum) join the subset, until no point errs by more than ``t`` (within
-``GAP``).
+reaches many of the error's local maxima, not one of them many times) join the subset, until no
+point errs by more than ``t`` (within ``GAP``). The exchange works in coordinates orthonormal
+over the first active rows: references of high-degree monomials stay well conditioned.
 
 Every reference's ``t`` is a lower bound of the pool's minimax error (weak duality: a feasible
 dual point), so a structure that cannot meet a budget is refused as soon as ``t`` passes it,
@@ -102,7 +103,9 @@ def _independent(a: np.ndarray) -> np.ndarray:
     """Indices of a largest set of linearly independent columns of ``a`` (QR with pivoting)."""
     _, r, piv = scipy.linalg.qr(a, mode="economic", pivoting=True)
     d = np.abs(np.diag(r))
-    return np.sort(piv[:int(np.sum(d > _RANK * d[0]))]) if len(d) and d[0] > 0 else np.zeros(0, dtype=np.intp)
+    if not len(d) or not d[0] > 0:
+        return np.zeros(0, dtype=np.intp)
+    return np.sort(piv[:int(np.sum(d > _RANK * d[0]))])
 
 
 class _Exchange:
@@ -127,8 +130,8 @@ class _Exchange:
         self.a, self.b, self.ref = a, b, np.asarray(ref, dtype=np.intp)
 
     def run(self, budget: float, floor: float) -> tuple[np.ndarray, float, str]:
-        """Pivot until no row errs by more than ``t (1 + _SLACK) + floor`` ("optimal") or the level ``t``
-        exceeds ``budget`` ("refused"); returns (coefficients, t, how). After ``2 (n + 1)``
+        """Pivot until no row errs by more than ``t (1 + _SLACK) + floor`` ("optimal") or the
+        level ``t`` exceeds ``budget`` ("refused"); returns (coefficients, t, how). After ``2 (n + 1)``
         pivots in a row that do not raise ``t``, Bland's rule (the first violator enters) avoids
         cycling."""
         n1 = len(self.ref)
@@ -236,7 +239,8 @@ def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.n
         first = _start(a)
     frame = _frame(a) / norm[:, None]
     a = basis.rows(terms, active) @ frame
-    return _rounds(basis, target, terms, budget, regions, settle, frame, active, _Exchange(a, target[active], *first))
+    ex = _Exchange(a, target[active], *first)
+    return _rounds(basis, target, terms, budget, regions, settle, frame, active, ex)
 
 
 def _frame(a: np.ndarray) -> np.ndarray:

@@ -18,10 +18,13 @@ from .minimax import minimax, region_ids
 from .polyfit import Basis
 from .structure import FeatureSet, ServoFit
 
-__all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "PRUNE_REJECTS"]
+__all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "PRUNE_REJECTS", "FINALISTS",
+           "FINALIST_MARGIN"]
 
 MAX_DEGREE = 12
 PRUNE_REJECTS = 3
+FINALISTS = 2                    # the cheapest structures found that are pruned (the fewest multipliers after wins),
+FINALIST_MARGIN = 3              # those costing at most this much more than the cheapest
 CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
 
 
@@ -130,72 +133,91 @@ class Cells:
 
 
 def _fit_note(fit: CellsFit) -> str:
-    return f"minimax error above {fit.error:.4g} ticks" if fit.refused else f"max fit error {fit.error:.4g} ticks"
+    if fit.refused:
+        return f"minimax error above {fit.error:.4g} ticks"
+    settled = all(st.optimal for st in fit.states)
+    return f"max fit error {fit.error:.4g} ticks" + ("" if settled else " (within the budget, not settled)")
 
 
 def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> ServoFit:
     """The cheapest (fewest multipliers) polynomial over any candidate variable set whose
-    minimax fit over the fit and check samples meets ``budget_ticks``, then pruned.
+    minimax fit over the fit and check samples meets ``budget_ticks``, pruned.
 
     ``sets[kind]`` = (fit set, check set), each (features, target ticks); ``raw[port]`` = the
     real values of an input port at the fit and check rows. Per candidate the total degree
     rises until the fit meets the budget or the structure already costs more than the best
-    plan found. Then the best variable set is tried piecewise: cut along each of its
-    variables that is an input port into ``CUT_CELLS`` cells (coefficient tables, a lower
-    degree); a piecewise plan wins only with strictly fewer multipliers, the fewest cells first.
-    The candidates of one kind share their pool (and its monomial columns).
+    plan found. Then the best variable set is tried piecewise, with either term set (total
+    degree or tensor): cut along each of its variables that is an input port into
+    ``CUT_CELLS`` cells (coefficient tables, a lower degree); a piecewise plan wins only with
+    strictly fewer multipliers, the fewest cells first. The ``FINALISTS`` cheapest structures
+    found (those within ``FINALIST_MARGIN`` of the cheapest) are each pruned (a cheaper one may
+    prune less), the fewest multipliers after pruning winning (on a tie the cheaper before). The
+    candidates of one kind share their pool (and its monomial columns).
     """
-    best = None
+    found: list = []           # (cost, ServoFit, states, Cells) of every new best, costs falling
     pools: dict = {}
 
     def search(fs, data):
-        nonlocal best
         for deg in range(1, MAX_DEGREE + 1):
             terms = fs.terms(deg)
             cost = structure_cost(ctx, fs, terms, name)
-            if best is not None and cost >= best[0]:
+            if found and cost >= found[-1][0]:
                 return
             fit = data.fit_terms(terms, budget_ticks, settle=False)
             progress(f"  {name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
                      f"{len(terms)} terms, {cost} multipliers, {_fit_note(fit)}")
             if not fit.refused and fit.error <= budget_ticks:
-                best = (cost, ServoFit(name, fs, deg, data.poly(terms, fit.coef), fit.error), fit.states, data)
+                found.append((cost, ServoFit(name, fs, deg, data.poly(terms, fit.coef), fit.error), fit.states, data))
                 return
 
     for fs in candidates:
         if fs.kind not in pools:
             pools[fs.kind] = Cells.whole(*sets[fs.kind])
         search(fs, pools[fs.kind])
-    if best is None:
+    if not found:
         raise FitError(f"servo {name}: no polynomial up to total degree {MAX_DEGREE} reaches the "
                        f"approximation budget of {budget_ticks:g} ticks")
-    base = best[1].features
     ports = {i.name: i for i in ctx.inputs}
-    for var, nm in enumerate(base.names):
-        if nm not in ports or base.allowed[var] == "none":
-            continue
-        for cells in CUT_CELLS:
-            fs = base.piecewise(var, ports[nm], cells)
-            if fs.cut.cells > 1:
-                search(fs, Cells.cut(fs, ports[nm], *sets[base.kind], raw[nm]))
+    for base in _cut_bases(found[-1][1].features, candidates):
+        for var, nm in enumerate(base.names):
+            if nm not in ports or base.allowed[var] == "none":
+                continue
+            for cells in CUT_CELLS:
+                fs = base.piecewise(var, ports[nm], cells)
+                if fs.cut.cells > 1:
+                    search(fs, Cells.cut(fs, ports[nm], *sets[base.kind], raw[nm]))
     pools.clear()
-    cost, sf, state, data = best
-    if not all(st.optimal for st in state):     # the search only needed to know it fits
+    finalists = [e for e in found[::-1][:FINALISTS] if e[0] <= found[-1][0] + FINALIST_MARGIN]
+    pruned = [_settle_and_prune(ctx, entry, budget_ticks, progress) for entry in finalists]
+    return min(pruned, key=lambda p: p[0])[1]
+
+
+def _cut_bases(fs: FeatureSet, candidates) -> list:
+    """The variable sets tried piecewise: ``fs`` and its twin with the other term set."""
+    twins = [c for c in candidates if c.tensor != fs.tensor and dataclasses.replace(c, tensor=fs.tensor) == fs]
+    return [fs, *twins[:1]]
+
+
+def _settle_and_prune(ctx, entry, budget_ticks, progress) -> tuple:
+    """(cost, ServoFit) of a structure the search found (cost, fit, states, Cells) once its
+    coefficients are optimal (the search only needed to know it fits) and it is pruned."""
+    cost, sf, state, data = entry
+    if not all(st.optimal for st in state):
         terms = list(sf.poly)
         fit = data.fit_terms(terms, budget_ticks, warm=state)
         sf, state = dataclasses.replace(sf, poly=data.poly(terms, fit.coef), fit_error_ticks=fit.error), fit.states
     return prune(ctx, sf, cost, data, state, budget_ticks, progress)
 
 
-def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progress) -> ServoFit:
+def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progress) -> tuple:
     """Drop terms while the refitted polynomial still meets the budget.
 
     Only removals that save a multiplier are tried (in a nested Horner scheme most
     inner coefficients cost an add, not a multiply), least important first
     (|coefficient| x largest |monomial| over the pool, the largest over the cells); stops
     after ``PRUNE_REJECTS`` refused removals in a row. Each trial's minimax fit starts from the
-    current fit's active rows. The result carries its fit data (``refit``) for the coefficient
-    refit after quantization.
+    current fit's active rows. Returns the cost and the fit, which carries its fit data
+    (``refit``) for the coefficient refit after quantization.
     """
     terms = list(sf.poly)
     coef = data.coef(sf.poly, terms)
@@ -217,14 +239,17 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
         if pick is None:
             break
         t, rest, c2 = pick
-        fit = data.fit_terms(rest, budget_ticks, warm=state)
+        fit = data.fit_terms(rest, budget_ticks, warm=state, settle=False)
         if not fit.refused and fit.error <= budget_ticks:
             terms, coef, cost, misses, state = rest, fit.coef, c2, 0, fit.states
             sf = ServoFit(sf.name, sf.features, sf.degree, data.poly(terms, fit.coef), fit.error)
         else:
             rejected.add(t)
             misses += 1
+    if not all(st.optimal for st in state):     # the trials only needed to know they fit
+        fit = data.fit_terms(terms, budget_ticks, warm=state)
+        sf, state = dataclasses.replace(sf, poly=data.poly(terms, fit.coef), fit_error_ticks=fit.error), fit.states
     progress(f"  {sf.name}: pruned to {len(terms)} terms, {cost} multipliers, "
              f"max fit error {sf.fit_error_ticks:.4g} ticks")
     data.forget_columns()
-    return dataclasses.replace(sf, refit=(data, state, budget_ticks))
+    return cost, dataclasses.replace(sf, refit=(data, state, budget_ticks))
