@@ -22,7 +22,7 @@ __all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "CUT
            "FINALIST_MARGIN"]
 
 MAX_DEGREE = 12
-PRUNE_REJECTS = 3
+PRUNE_REJECTS = 5                # refused removals in a row that end pruning (a refusal is cheap: a lower bound)
 FINALISTS = 2                    # the cheapest structures found that are pruned (the fewest multipliers after wins),
 FINALIST_MARGIN = 3              # those costing at most this much more than the cheapest
 CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
