@@ -29,6 +29,12 @@ def demote(markdown: str, levels: int = 1) -> list[str]:
     return [("#" * levels + line) if line.startswith("#") else line for line in markdown.splitlines()] + [""]
 
 
+def _fit_seconds(r: dict) -> str:
+    """Wall and CPU seconds of a preset's fit, with those of its certifications when recorded."""
+    cert = f"; {r['certify_cpu_s']:.1f}" if "certify_cpu_s" in r else ""
+    return f"{r['fit_s']:.1f} ({r['fit_cpu_s']:.1f}{cert})"
+
+
 def fit_benchmark(res: dict) -> list[str]:
     """Lines of the ``bench/fit_benchmark.py`` section from its JSON ``res``."""
     rows, notes = [], []
@@ -40,11 +46,11 @@ def fit_benchmark(res: dict) -> list[str]:
             certified = num(s["certified_max_pu"]) + ("" if s["certified"] else " (cell budget spent)")
             rows.append((r["preset"] if k == 0 else "", s["servo"], s["variables"], s["degree"], s["terms"],
                          s["multiplications"], s["coefficient_bits"], num(s["sampled_max_pu"]), certified,
-                         f"{r['fit_s']:.1f} ({r['fit_cpu_s']:.1f})" if k == 0 else ""))
+                         _fit_seconds(r) if k == 0 else ""))
         notes.append(f"- {r['preset']}: tolerance ±{r['tolerance_pu']:g} pu, sampled on {r['points']:,} points, "
                      f"{r['plan_multipliers']} multipliers in the whole plan")
     head = ("preset", "servo", "variables", "degree", "terms", "mults", "coefficient bits", "sampled (pu)",
-            "certified (pu)", "fit + certify, wall s (CPU s)")
+            "certified (pu)", "fit + certify, wall s (CPU s; certify CPU s)")
     return ["*mults*: multiplications per evaluation of the servo, its share of the coordinate stage "
             "included. *sampled*: max |emitted − exact pulse| on the sampled points; *certified*: the "
             "proven bound over the continuous workspace box.", "", *table(head, rows), *notes, ""]

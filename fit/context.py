@@ -6,7 +6,7 @@ re-derives it from the robot description.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from .cost import DEFAULT_COST_MODEL, CostModel
 from .features import coordinate_stage
@@ -73,6 +73,12 @@ class FitContext:
         ``fit.lowering = "mixed"``: the Horner/Estrin mix of least depth, else nested Horner.
     cost_model : CostModel
         What a servo's structure costs (:mod:`ikseries.fit.cost`); the fit keeps the cheapest.
+    structure_costs : dict
+        The costs priced so far (:func:`ikseries.fit.lowering.structure_cost`: a trial plan
+        each; servos of one leg try the same structures).
+    trial_builders : dict
+        Per (feature bits, lowering) a plan builder holding the coordinate stage, on which
+        :func:`ikseries.fit.lowering.trial_plan` builds one servo's plan at a time.
     """
     robot: object
     inputs: tuple[PlanInput, ...]
@@ -81,6 +87,8 @@ class FitContext:
     operand_bits: tuple[int, int] | None
     mixed: bool
     cost_model: CostModel = DEFAULT_COST_MODEL
+    structure_costs: dict = field(default_factory=dict, compare=False, repr=False)
+    trial_builders: dict = field(default_factory=dict, compare=False, repr=False)
 
     @classmethod
     def for_robot(cls, robot, quantization_share: float, cost_model: CostModel = DEFAULT_COST_MODEL

@@ -3,7 +3,7 @@
 Pipeline (one module per step, each a function of an explicit :class:`~.context.FitContext`
 returning new immutable values): sample the workspace -> reference pulses (ticks) -> per servo,
 the candidate variable sets and their symmetries (:mod:`.structure`) -> the cheapest polynomial
-whose near-minimax fit meets the approximation budget (:mod:`.search`) -> the narrowest
+whose minimax fit meets the approximation budget (:mod:`.search`, :mod:`.minimax`) -> the narrowest
 fixed-point formats whose *certified* rounding bound meets the quantization budget
 (:mod:`.formats`) -> plan (:mod:`.lowering`) -> certified error over the continuous workspace
 (:mod:`.certify`).
@@ -113,7 +113,8 @@ def _plan_meta(ctx: FitContext, fits: list[ServoFit], fv: int, mults: dict) -> d
     return {
         "robot": robot.name,
         "budget_pu": vars(ctx.budget),
-        "method": {"fit": "Lawson near-minimax + exchange on a check set; per servo the variable set "
+        "method": {"fit": "discrete minimax (exchange on active points) over the fit and check samples; "
+                          "per servo the variable set "
                           "and total degree with the fewest multipliers, then pruned",
                    "lowering": robot.fit.lowering,
                    "operand_bits": list(ctx.operand_bits) if ctx.operand_bits else None,

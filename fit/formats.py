@@ -8,8 +8,8 @@ import dataclasses
 import numpy as np
 
 from .context import FormatError
-from .lowering import build_plan
-from .polyfit import fit_least_squares
+from .lowering import trial_plan
+from .minimax import subset_minimax
 from .structure import ServoFit
 
 __all__ = ["round_and_refit", "requantize", "choose_formats"]
@@ -17,32 +17,30 @@ __all__ = ["round_and_refit", "requantize", "choose_formats"]
 
 def round_and_refit(sf: ServoFit, frac: int):
     """Coefficients on the grid 2**-frac, rounded one at a time (highest degree first) while
-    the rest are refitted (weighted least squares with the fit's final Lawson weights on its
-    working set) to absorb each rounding; plain rounding instead if that is better on the
-    check set (the refit is a heuristic for the maximum error). Piecewise: in every cell.
-    Returns (poly, max error on the check set) or None without fit data."""
+    the rest are refitted (minimax over the fit's active rows, :func:`~.minimax.subset_minimax`)
+    to absorb each rounding; plain rounding instead if that is better over the pool (the refit
+    is a heuristic for the maximum error). Piecewise: in every cell.
+    Returns (poly, max error over the pool) or None without fit data."""
     if sf.refit is None:
         return None
     data, states, _ = sf.refit
     terms = sorted(sf.poly, key=lambda e: (-sum(e), e))
     grid = 2.0 ** frac
     coefs, worst = [], 0.0
-    for orig, work, check in zip(data.coef(sf.poly, terms), states, data.check):
-        a, xt, w = work.matrix(terms), work.target, work.w
-        ctarget = check.t
+    for orig, state, rows in zip(data.coef(sf.poly, terms), states, data.rows):
+        a, b = rows.basis.rows(terms, state.active), rows.t[state.active]
+        ref = np.searchsorted(state.active, state.reference)
         coef = orig.copy()
         fixed = np.zeros(len(terms), dtype=bool)
         for k in range(len(terms)):
             coef[k] = np.round(coef[k] * grid) / grid
             fixed[k] = True
             free = ~fixed
-            if free.any():
-                rhs = xt - a[:, fixed] @ coef[fixed]
-                coef[free] = fit_least_squares(a[:, free], rhs, w)
-        ca = check.matrix(terms)
-        err = float(np.max(np.abs(ca @ coef - ctarget)))
+            if free.any():        # each refit starts among the previous one's reference
+                coef[free], ref = subset_minimax(a[:, free], b - a[:, fixed] @ coef[fixed], ref)
+        err = rows.error(terms, coef)
         naive = np.round(orig * grid) / grid
-        naive_err = float(np.max(np.abs(ca @ naive - ctarget)))
+        naive_err = rows.error(terms, naive)
         if naive_err < err:          # the refit is a heuristic: never worse than plain rounding
             coef, err = naive, naive_err
         coefs.append(coef)
@@ -54,7 +52,7 @@ def _rounding_pu(ctx, sf: ServoFit, fv: int) -> float:
     """Certified rounding bound (pu) of ``sf`` alone in a plan with features of ``fv`` bits
     (infinite when an intermediate would overflow 63 bits)."""
     try:
-        plan = build_plan(ctx, [sf], fv)
+        plan = trial_plan(ctx, sf, fv)
     except OverflowError:
         return np.inf
     return plan.rounding_bounds()[plan.outputs[0].preround] / ctx.ticks_per_pu

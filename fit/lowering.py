@@ -6,8 +6,8 @@ from .horner import estrin, lower_poly
 from .plan import Plan, PlanBuilder, PlanOutput
 from .structure import FeatureSet, ServoFit, input_norms
 
-__all__ = ["FeatureNodes", "parity_variable", "poly_inputs", "servo_nodes", "build_plan", "output_multipliers",
-           "structure_cost", "MIX_EXTRA_MULTIPLIERS"]
+__all__ = ["FeatureNodes", "parity_variable", "poly_inputs", "servo_nodes", "build_plan", "trial_plan",
+           "output_multipliers", "structure_cost", "MIX_EXTRA_MULTIPLIERS"]
 
 MIX_EXTRA_MULTIPLIERS = 2       # fit.lowering = "mixed": extra multiplications allowed per servo
 
@@ -81,6 +81,24 @@ def build_plan(ctx, fits: list[ServoFit], fv: int, mixed: bool | None = None, li
     return b.build(outs)
 
 
+def trial_plan(ctx, sf: ServoFit, fv: int, mixed: bool | None = None, limits: dict | None = None) -> Plan:
+    """The plan of ``sf`` alone with the same operations and intervals as ``build_plan(ctx,
+    [sf], fv, mixed, limits)``, built on a builder of ``ctx.trial_builders`` that holds the
+    coordinate stage already (its nodes are the same whatever else the builder holds: equal nodes
+    are shared): the servo's own nodes are discarded after (:meth:`PlanBuilder.trial`), so the
+    stage is lowered once per fit instead of once per trial."""
+    mixed = ctx.mixed if mixed is None else mixed
+    if (fv, mixed) not in ctx.trial_builders:
+        b = PlanBuilder(list(ctx.inputs), operand_bits=ctx.operand_bits)
+        ctx.trial_builders[fv, mixed] = b, FeatureNodes(ctx, b, fv, mixed)
+    b, nodes = ctx.trial_builders[fv, mixed]
+    feats = nodes[sf.features.kind]           # outside the trial: kept for the next ones
+    lo, hi = (ctx.robot.pulse_limits_ticks() if limits is None else limits)[sf.name]
+    with b.trial():
+        acc = servo_nodes(b, sf.features, sf.poly, feats, fv, sf.frac, mixed)
+        return b.build([PlanOutput(sf.name, b.clamp(b.round(acc, 0), lo, hi), acc, "ticks", ctx.ticks_per_pu)])
+
+
 def output_multipliers(plan: Plan) -> dict:
     """Multipliers each output needs, counting the shared coordinate stage in full."""
     return {o.name: sum(1 for i in plan.cone(o.node) if plan.nodes[i].op == "mul") for o in plan.outputs}
@@ -89,11 +107,18 @@ def output_multipliers(plan: Plan) -> dict:
 def structure_cost(ctx, fs: FeatureSet, terms: list, servo: str | None = None) -> float:
     """Cost (``ctx.cost_model``) of the evaluation of ``servo`` (its output clamp; None: the
     first servo's) with the coordinate stage for ``terms``, known before fitting: the
-    structure alone decides it."""
+    structure alone decides it (kept in ``ctx.structure_costs``)."""
+    limits = ctx.robot.pulse_limits_ticks()[servo or ctx.robot.servos[0]]
+    key = (fs, tuple(terms), tuple(limits))
+    if key not in ctx.structure_costs:
+        ctx.structure_costs[key] = _trial_cost(ctx, fs, terms, limits)
+    return ctx.structure_costs[key]
+
+
+def _trial_cost(ctx, fs: FeatureSet, terms: list, limits) -> float:
     # distinct coefficients: equal ones would share Horner sub-expressions
     cells = fs.cut.cells if fs.cut else 0
     sf = ServoFit("cost", fs, 0, {e: (1.0 + k / 4096,) * cells if cells else 1.0 + k / 4096
                                   for k, e in enumerate(terms)}, 0.0, frac=16)
-    limits = ctx.robot.pulse_limits_ticks()
-    plan = build_plan(ctx, [sf], 16, mixed=False, limits={"cost": limits[servo or ctx.robot.servos[0]]})
+    plan = trial_plan(ctx, sf, 16, mixed=False, limits={"cost": limits})
     return ctx.cost_model.cost(plan, "cost")

@@ -45,6 +45,7 @@ class Basis:
         self._powers: dict = {}
         self._columns: dict = {}
         self._magnitudes: dict = {}
+        self._norms: dict = {}
 
     def __getstate__(self):
         return {"points": self.points}
@@ -53,15 +54,24 @@ class Basis:
         self.__init__(state["points"])
 
     def _power(self, k: int, e: int) -> np.ndarray:
+        """points[:, k] ** e by one multiplication from the power below (``**`` with an
+        integer exponent calls ``pow`` per entry, several times slower)."""
         key = (k, e)
         if key not in self._powers:
-            self._powers[key] = self.points[:, k] ** e
+            x = self.points[:, k]
+            self._powers[key] = np.ones_like(x) if e == 0 else x.copy() if e == 1 else self._power(k, e - 1) * x
         return self._powers[key]
 
     def column(self, term: tuple[int, ...]) -> np.ndarray:
         col = self._columns.get(term)
         if col is None:
-            col = np.prod([self._power(k, e) for k, e in enumerate(term)], axis=0)
+            factors = [self._power(k, e) for k, e in enumerate(term) if e]
+            if not factors:
+                col = np.ones(len(self.points))
+            else:
+                col = factors[0].copy()
+                for f in factors[1:]:
+                    col *= f
             self._columns[term] = col
         return col
 
@@ -71,10 +81,31 @@ class Basis:
             self._magnitudes[term] = float(np.abs(self.column(term)).max())
         return self._magnitudes[term]
 
+    def norm(self, term: tuple[int, ...]) -> float:
+        """Root mean square of column(term) over the points (1 for a zero column)."""
+        if term not in self._norms:
+            v = float(np.sqrt(np.mean(np.square(self.column(term)))))
+            self._norms[term] = v if v > 0 else 1.0
+        return self._norms[term]
+
     def matrix(self, terms: list[tuple[int, ...]]) -> np.ndarray:
         if not terms:
             return np.zeros((len(self.points), 0))
         return np.stack([self.column(tuple(t)) for t in terms], 1)
+
+    def rows(self, terms: list[tuple[int, ...]], index: np.ndarray) -> np.ndarray:
+        """matrix(terms)[index], without forming the whole matrix."""
+        return np.stack([self.column(tuple(t))[index] for t in terms], 1).reshape(len(index), len(terms))
+
+    def residual(self, terms: list[tuple[int, ...]], coef: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """target - matrix(terms) @ coef, a column at a time (no matrix of all points is formed:
+        at a few hundred thousand points its allocation costs more than the products)."""
+        r = np.array(target, dtype=np.float64)
+        tmp = np.empty_like(r)
+        for t, c in zip(terms, coef):
+            np.multiply(self.column(tuple(t)), c, out=tmp)
+            r -= tmp
+        return r
 
 
 def evaluate(poly: dict, points: np.ndarray) -> np.ndarray:

@@ -1,36 +1,42 @@
 """The structure search of one servo: the cheapest polynomial that meets its budget.
 
-Per candidate variable set the degree rises until a Lawson near-minimax fit meets the
-approximation budget on the check set; the best set is then tried piecewise; the winner is
-pruned term by term while every removal saves a multiplier.
+Per candidate variable set the degree rises until the minimax fit (:mod:`.minimax`) over the fit
+and check samples meets the approximation budget; the best set is then tried piecewise; the
+winner is pruned term by term while every removal saves a multiplier.
 """
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from .context import FitError
 from .lowering import structure_cost
-from .polyfit import Basis, fit_least_squares, lawson
+from .minimax import minimax, region_ids
+from .polyfit import Basis
 from .structure import FeatureSet, ServoFit
 
-__all__ = ["Cells", "Rows", "Working", "fit_terms", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "PRUNE_REJECTS"]
+__all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "PRUNE_REJECTS", "FINALISTS",
+           "FINALIST_MARGIN"]
 
 MAX_DEGREE = 12
-PRUNE_REJECTS = 3
+PRUNE_REJECTS = 5                # refused removals in a row that end pruning (a refusal is cheap: a lower bound)
+FINALISTS = 2                    # the cheapest structures found that are pruned (the fewest multipliers after wins),
+FINALIST_MARGIN = 3              # those costing at most this much more than the cheapest
 CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
 
 
 class Rows:
-    """Points (features, shape (N, n)) and target ticks of a fit or check set, with the
-    points' monomial columns kept (:class:`~.polyfit.Basis`)."""
+    """The pool of one fit: points (features, shape (N, n)) and target ticks of the fit and check
+    samples together, with the points' monomial columns kept (:class:`~.polyfit.Basis`) and their
+    regions (:func:`~.minimax.region_ids`)."""
 
-    __slots__ = ("x", "t", "basis")
+    __slots__ = ("x", "t", "basis", "_regions")
 
     def __init__(self, x: np.ndarray, t: np.ndarray):
-        self.x, self.t, self.basis = x, t, Basis(x)
+        self.x, self.t, self.basis, self._regions = x, t, Basis(x), None
 
     def __getstate__(self):
         return (self.x, self.t)
@@ -44,169 +50,181 @@ class Rows:
     def matrix(self, terms) -> np.ndarray:
         return self.basis.matrix(terms)
 
-
-class Working:
-    """The rows a Lawson fit works on: the fit set and the check rows ``extra`` added by
-    exchange rounds (in the order added), with the final Lawson weights ``w``."""
-
-    __slots__ = ("fit", "check", "extra", "w")
-
-    def __init__(self, fit: Rows, check: Rows, extra: np.ndarray, w):
-        self.fit, self.check, self.extra, self.w = fit, check, extra, w
-
-    def matrix(self, terms) -> np.ndarray:
-        if not len(self.extra):
-            return self.fit.matrix(terms)
-        return np.concatenate([self.fit.matrix(terms), self.check.matrix(terms)[self.extra]])
-
     @property
-    def target(self) -> np.ndarray:
-        return np.concatenate([self.fit.t, self.check.t[self.extra]])
+    def regions(self) -> np.ndarray:
+        if self._regions is None:
+            self._regions = region_ids(self.x)
+        return self._regions
+
+    def fit(self, terms, budget_ticks, start=None, settle=True):
+        """The minimax fit of ``terms`` (:class:`~.minimax.MinimaxFit`), refused once it cannot
+        meet ``budget_ticks``; ``start``: pool rows to begin with; without ``settle`` the first
+        coefficients within the budget."""
+        return minimax(self.basis, self.t, list(terms), budget_ticks, self.regions, start, settle)
+
+    def error(self, terms, coef) -> float:
+        """Max |error| of coefficients ``coef`` of ``terms`` over the pool."""
+        return float(np.max(np.abs(self.basis.residual(list(terms), coef, self.t))))
 
 
-def fit_terms(terms, fit_set: Rows, check_set: Rows, budget_ticks, rounds: int = 4, warm: Working | None = None,
-              iterations: int = 30):
-    """Lawson near-minimax on the fit set, then exchange rounds adding the worst check
-    points. Returns (coefficients, max error over fit and check sets, :class:`Working`)
-    (the working rows and Lawson weights warm-start a fit of a subset of the terms)."""
-    ca = check_set.matrix(terms)
-    if warm is None:
-        work = Working(fit_set, check_set, np.zeros(0, dtype=np.intp), None)
-    else:
-        work = warm
-    w = work.w
-    for _ in range(rounds):
-        c, err, w = lawson(work.matrix(terms), work.target, iterations, w)
-        cerr = np.abs(ca @ c - check_set.t)
-        err = max(err, float(cerr.max()))
-        if err <= budget_ticks:
-            break
-        worst = np.argsort(cerr)[-500:]
-        work = Working(fit_set, check_set, np.concatenate([work.extra, worst]), None)
-        w = None if warm is None else np.concatenate([w, np.full(len(worst), w.max())])
-    return c, err, Working(fit_set, check_set, work.extra, w)
+class CellsFit(NamedTuple):
+    """Minimax fit of one polynomial in every cell: coefficients (cells, terms) (None when
+    refused), max error over the cells (a lower bound when refused), per cell its
+    :class:`~.minimax.MinimaxFit` (the state a related fit warm-starts from)."""
+    coef: np.ndarray | None
+    error: float
+    states: list
+    refused: bool
 
 
 @dataclass
 class Cells:
-    """Fit and check sets of one servo polynomial, per cell of a piecewise fit (a single cell
-    otherwise); each set is a :class:`Rows` of features (N, n) and target ticks."""
-    fit: list
-    check: list
+    """The pool (:class:`Rows`: fit and check samples, features (N, n) and target ticks) of one
+    servo polynomial per cell of a piecewise fit (a single cell otherwise)."""
+    rows: list
 
     @classmethod
     def whole(cls, fit_set, check_set) -> "Cells":
-        return cls([Rows(*fit_set)], [Rows(*check_set)])
+        return cls([Rows(np.concatenate([fit_set[0], check_set[0]]), np.concatenate([fit_set[1], check_set[1]]))])
 
     @classmethod
     def cut(cls, fs: FeatureSet, port, fit_set, check_set, raw) -> "Cells":
         """Rows of each cell of ``fs.cut``, the cut variable replaced by the offset in the cell;
         ``raw`` = real values of the cut port at the fit and check rows."""
-        out = cls([], [])
+        out = cls([])
         for c in range(fs.cut.cells):
-            for dst, (x, t), v in ((out.fit, fit_set, raw[0]), (out.check, check_set, raw[1])):
+            xs, ts = [], []
+            for (x, t), v in ((fit_set, raw[0]), (check_set, raw[1])):
                 sel, off = fs.cut.rows(port, v, c)
                 xc = x[sel].copy()
                 xc[:, fs.cut.var] = off
-                dst.append(Rows(xc, t[sel]))
+                xs.append(xc)
+                ts.append(t[sel])
+            out.rows.append(Rows(np.concatenate(xs), np.concatenate(ts)))
         return out
 
     def poly(self, terms, coef: np.ndarray) -> dict:
         """{exponents: coefficient} (a tuple per cell when piecewise) from coef (cells, terms)."""
-        if len(self.fit) == 1:
+        if len(self.rows) == 1:
             return {e: float(v) for e, v in zip(terms, coef[0])}
         return {e: tuple(float(v) for v in coef[:, j]) for j, e in enumerate(terms)}
 
     def coef(self, poly: dict, terms) -> np.ndarray:
-        return np.array([[poly[e] for e in terms]]) if len(self.fit) == 1 else \
+        return np.array([[poly[e] for e in terms]]) if len(self.rows) == 1 else \
             np.array([poly[e] for e in terms]).T
 
-    def lsq_error(self, terms) -> float:
-        err = 0.0
-        for rows in self.fit:
-            a = rows.matrix(terms)
-            err = max(err, float(np.max(np.abs(a @ fit_least_squares(a, rows.t) - rows.t))))
-        return err
-
-    def fit_terms(self, terms, budget_ticks, rounds: int = 4, warm=None, iterations: int = 30):
-        """:func:`fit_terms` in every cell: (coef (cells, terms), max error, states)."""
+    def fit_terms(self, terms, budget_ticks, warm=None, settle=True) -> CellsFit:
+        """The minimax fit in every cell, refused as soon as one cell's is; ``warm``: the states
+        of a related fit (their active rows start this one's); without ``settle`` the first
+        coefficients within the budget (enough to decide)."""
         coefs, err, states = [], 0.0, []
-        for c, (fit_set, check_set) in enumerate(zip(self.fit, self.check)):
-            cf, e, st = fit_terms(terms, fit_set, check_set, budget_ticks, rounds,
-                                  None if warm is None else warm[c], iterations)
-            coefs.append(cf)
-            err, states = max(err, e), states + [st]
-        return np.array(coefs), err, states
+        for c, rows in enumerate(self.rows):
+            st = rows.fit(terms, budget_ticks, None if warm is None else warm[c].active, settle)
+            if st.refused:
+                return CellsFit(None, st.error, states + [st], True)
+            coefs.append(st.coef)
+            err, states = max(err, st.error), states + [st]
+        return CellsFit(np.array(coefs), err, states, False)
 
     def forget_columns(self) -> None:
         """Drop the kept monomial columns (they can take hundreds of MB per servo)."""
-        for rows in self.fit + self.check:
+        for rows in self.rows:
             rows.basis = Basis(rows.x)
+
+
+def _fit_note(fit: CellsFit) -> str:
+    if fit.refused:
+        return f"minimax error above {fit.error:.4g} ticks"
+    settled = all(st.optimal for st in fit.states)
+    return f"max fit error {fit.error:.4g} ticks" + ("" if settled else " (within the budget, not settled)")
 
 
 def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> ServoFit:
     """The cheapest (fewest multipliers) polynomial over any candidate variable set whose
-    near-minimax fit meets ``budget_ticks`` on the check set, then pruned.
+    minimax fit over the fit and check samples meets ``budget_ticks``, pruned.
 
     ``sets[kind]`` = (fit set, check set), each (features, target ticks); ``raw[port]`` = the
     real values of an input port at the fit and check rows. Per candidate the total degree
     rises until the fit meets the budget or the structure already costs more than the best
-    plan found. Then the best variable set is tried piecewise: cut along each of its
-    variables that is an input port into ``CUT_CELLS`` cells (coefficient tables, a lower
-    degree); a piecewise plan wins only with strictly fewer multipliers, the fewest cells first.
+    plan found. Then the best variable set is tried piecewise, with either term set (total
+    degree or tensor): cut along each of its variables that is an input port into
+    ``CUT_CELLS`` cells (coefficient tables, a lower degree); a piecewise plan wins only with
+    strictly fewer multipliers, the fewest cells first. The ``FINALISTS`` cheapest structures
+    found (those within ``FINALIST_MARGIN`` of the cheapest) are each pruned (a cheaper one may
+    prune less), the fewest multipliers after pruning winning (on a tie the cheaper before). The
+    candidates of one kind share their pool (and its monomial columns).
     """
-    best = None
+    found: list = []           # (cost, ServoFit, states, Cells) of every new best, costs falling
+    pools: dict = {}
 
     def search(fs, data):
-        nonlocal best
         for deg in range(1, MAX_DEGREE + 1):
             terms = fs.terms(deg)
             cost = structure_cost(ctx, fs, terms, name)
-            if best is not None and cost >= best[0]:
+            if found and cost >= found[-1][0]:
                 return
-            if data.lsq_error(terms) > 8 * budget_ticks:
-                continue
-            c, err, state = data.fit_terms(terms, budget_ticks)
+            fit = data.fit_terms(terms, budget_ticks, settle=False)
             progress(f"  {name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
-                     f"{len(terms)} terms, {cost} multipliers, max fit error {err:.4g} ticks")
-            if err <= budget_ticks:
-                best = (cost, ServoFit(name, fs, deg, data.poly(terms, c), err), state, data)
+                     f"{len(terms)} terms, {cost} multipliers, {_fit_note(fit)}")
+            if not fit.refused and fit.error <= budget_ticks:
+                found.append((cost, ServoFit(name, fs, deg, data.poly(terms, fit.coef), fit.error), fit.states, data))
                 return
 
     for fs in candidates:
-        search(fs, Cells.whole(*sets[fs.kind]))
-    if best is None:
+        if fs.kind not in pools:
+            pools[fs.kind] = Cells.whole(*sets[fs.kind])
+        search(fs, pools[fs.kind])
+    if not found:
         raise FitError(f"servo {name}: no polynomial up to total degree {MAX_DEGREE} reaches the "
                        f"approximation budget of {budget_ticks:g} ticks")
-    base = best[1].features
     ports = {i.name: i for i in ctx.inputs}
-    for var, nm in enumerate(base.names):
-        if nm not in ports or base.allowed[var] == "none":
-            continue
-        for cells in CUT_CELLS:
-            fs = base.piecewise(var, ports[nm], cells)
-            if fs.cut.cells > 1:
-                search(fs, Cells.cut(fs, ports[nm], *sets[base.kind], raw[nm]))
-    cost, sf, state, data = best
+    for base in _cut_bases(found[-1][1].features, candidates):
+        for var, nm in enumerate(base.names):
+            if nm not in ports or base.allowed[var] == "none":
+                continue
+            for cells in CUT_CELLS:
+                fs = base.piecewise(var, ports[nm], cells)
+                if fs.cut.cells > 1:
+                    search(fs, Cells.cut(fs, ports[nm], *sets[base.kind], raw[nm]))
+    pools.clear()
+    finalists = [e for e in found[::-1][:FINALISTS] if e[0] <= found[-1][0] + FINALIST_MARGIN]
+    pruned = [_settle_and_prune(ctx, entry, budget_ticks, progress) for entry in finalists]
+    return min(pruned, key=lambda p: p[0])[1]
+
+
+def _cut_bases(fs: FeatureSet, candidates) -> list:
+    """The variable sets tried piecewise: ``fs`` and its twin with the other term set."""
+    twins = [c for c in candidates if c.tensor != fs.tensor and dataclasses.replace(c, tensor=fs.tensor) == fs]
+    return [fs, *twins[:1]]
+
+
+def _settle_and_prune(ctx, entry, budget_ticks, progress) -> tuple:
+    """(cost, ServoFit) of a structure the search found (cost, fit, states, Cells) once its
+    coefficients are optimal (the search only needed to know it fits) and it is pruned."""
+    cost, sf, state, data = entry
+    if not all(st.optimal for st in state):
+        terms = list(sf.poly)
+        fit = data.fit_terms(terms, budget_ticks, warm=state)
+        sf, state = dataclasses.replace(sf, poly=data.poly(terms, fit.coef), fit_error_ticks=fit.error), fit.states
     return prune(ctx, sf, cost, data, state, budget_ticks, progress)
 
 
-def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progress) -> ServoFit:
+def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progress) -> tuple:
     """Drop terms while the refitted polynomial still meets the budget.
 
     Only removals that save a multiplier are tried (in a nested Horner scheme most
     inner coefficients cost an add, not a multiply), least important first
-    (|coefficient| x largest |monomial| on the check set, the largest over the cells); stops
-    after ``PRUNE_REJECTS`` refused removals in a row. Each trial refit is warm-started from
-    the current fit's working set and Lawson weights (one exchange round). The result carries
-    its fit data (``refit``) for the coefficient refit after quantization.
+    (|coefficient| x largest |monomial| over the pool, the largest over the cells); stops
+    after ``PRUNE_REJECTS`` refused removals in a row. Each trial's minimax fit starts from the
+    current fit's active rows. Returns the cost and the fit, which carries its fit data
+    (``refit``) for the coefficient refit after quantization.
     """
     terms = list(sf.poly)
     coef = data.coef(sf.poly, terms)
     rejected: set = set()
     misses = 0
     while misses < PRUNE_REJECTS:
-        scale = np.max([[rows.basis.magnitude(t) for t in terms] for rows in data.check], axis=0)
+        scale = np.max([[rows.basis.magnitude(t) for t in terms] for rows in data.rows], axis=0)
         order = np.argsort(np.max(np.abs(coef), axis=0) * scale, kind="stable")
         pick = None
         for i in order:
@@ -221,14 +239,17 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
         if pick is None:
             break
         t, rest, c2 = pick
-        c, err, st = data.fit_terms(rest, budget_ticks, rounds=1, warm=state, iterations=12)
-        if err <= budget_ticks:
-            terms, coef, cost, misses, state = rest, c, c2, 0, st
-            sf = ServoFit(sf.name, sf.features, sf.degree, data.poly(terms, c), err)
+        fit = data.fit_terms(rest, budget_ticks, warm=state, settle=False)
+        if not fit.refused and fit.error <= budget_ticks:
+            terms, coef, cost, misses, state = rest, fit.coef, c2, 0, fit.states
+            sf = ServoFit(sf.name, sf.features, sf.degree, data.poly(terms, fit.coef), fit.error)
         else:
             rejected.add(t)
             misses += 1
+    if not all(st.optimal for st in state):     # the trials only needed to know they fit
+        fit = data.fit_terms(terms, budget_ticks, warm=state)
+        sf, state = dataclasses.replace(sf, poly=data.poly(terms, fit.coef), fit_error_ticks=fit.error), fit.states
     progress(f"  {sf.name}: pruned to {len(terms)} terms, {cost} multipliers, "
              f"max fit error {sf.fit_error_ticks:.4g} ticks")
     data.forget_columns()
-    return dataclasses.replace(sf, refit=(data, state, budget_ticks))
+    return cost, dataclasses.replace(sf, refit=(data, state, budget_ticks))

@@ -90,7 +90,7 @@ class ServoFit:
     fit_error_ticks: float   # max error on the fit and check samples (float coefficients)
     frac: int = 0            # accumulator / coefficient fractional bits
     bound_pu: float = 0.0    # certified rounding bound
-    # fit data for the refit after quantization: (Cells, per cell working set + Lawson weights, budget)
+    # fit data for the refit after quantization: (Cells, per cell MinimaxFit (active rows), budget)
     refit: tuple | None = field(default=None, repr=False, compare=False)
 
     def integers(self) -> dict:

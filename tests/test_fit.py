@@ -183,7 +183,7 @@ def test_coefficients_are_reoptimised_on_their_grid(fitted):
             assert all(c * 2.0 ** frac == round(c * 2.0 ** frac) for c in np.ravel(list(poly.values())))
             naive = np.round(data.coef(sf.poly, terms) * 2.0 ** frac) / 2.0 ** frac
             assert err <= max(float(np.max(np.abs(vander(cpts, terms) @ n - ctarget)))
-                              for n, (cpts, ctarget) in zip(naive, data.check))
+                              for n, (cpts, ctarget) in zip(naive, data.rows))
 
 
 def test_piecewise_cells_of_the_fit_are_the_cells_of_the_plan():
@@ -312,3 +312,21 @@ def test_products_dsp_say_why_when_no_rounding_share_is_enough(small_robot, smal
                        r"fitting 16 x 16 DSP operands \(fit.products = \"dsp\", hardware.dsp = 'ice40'\); use "
                        r"fit.products = \"exact\", a wider DSP or a looser tolerance$"):
         fit_robot(robot, certified=False)
+
+
+def test_trial_plans_are_the_plans_built_afresh(robot):
+    """trial_plan (one servo on a kept builder holding the coordinate stage) gives byte for byte
+    the plan build_plan makes from scratch, whichever kinds and lowerings were tried before."""
+    from ikseries.fit.context import FitContext
+    from ikseries.fit.lowering import build_plan, trial_plan
+    from ikseries.fit.structure import ServoFit, feature_sets
+    ctx = FitContext.for_robot(robot, 0.1)
+    seen = 0
+    for k, name in enumerate(robot.servos):
+        for fs in feature_sets(ctx, k)[:3]:
+            for deg, mixed in ((2, False), (4, True), (3, None)):
+                poly = {e: 1.0 + j / 7 for j, e in enumerate(fs.terms(deg))}
+                sf = ServoFit(name, fs, deg, poly, 0.0, frac=8)
+                assert trial_plan(ctx, sf, 14, mixed).dumps() == build_plan(ctx, [sf], 14, mixed).dumps()
+                seen += 1
+    assert seen >= 18 and len(ctx.trial_builders) == 2
