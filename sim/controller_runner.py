@@ -19,17 +19,12 @@ import json
 from pathlib import Path
 
 from .cocotb_controller.config import TESTS, ControllerConfig
-from .runner import SIMULATORS, VERILATOR_OPT, Simulation, _write_if_changed, simulate, simulator_available
+from .runner import ICARUS_ARGS, SIMULATORS, VERILATOR_OPT, Simulation, _write_if_changed, simulate, simulator_available
 
 __all__ = ["TEST_MODULE", "TOPLEVEL", "ControllerResult", "run_controller"]
 
 TEST_MODULE = "ikseries.sim.cocotb_controller.tests"
 TOPLEVEL = "robot_controller"
-#: Verilog-2005 rules: there a declaration's initial value is an event at time 0, which is what
-#: wakes Amaranth's ``always @*`` blocks whose inputs never change (the link receiver's ready,
-#: from a state register that first changes on a byte it must accept); under the runner's
-#: ``-g2012`` they stay X and the receiver never takes a byte
-ICARUS_ARGS = ("-g2005",)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -354,13 +354,20 @@ class Simulation:
     waves: Path | None
 
 
+#: Verilog-2005 rules on Icarus: there a declaration's initial value is an event at time 0, which
+#: is what wakes Amaranth's ``always @*`` blocks whose inputs never change (a constant-driven
+#: node of a plan, the link receiver's ready from a state register that first changes on a byte
+#: it must accept); under cocotb's default ``-g2012`` they stay X
+ICARUS_ARGS = ("-g2005",)
+
+
 def simulate(simulator: str, build_dir: Path, name: str, vfile: Path, test_module: str, config: Path,
              testcase: str | None = None, waves: bool = False,
-             verilator_opt: str | None = VERILATOR_OPT, icarus_args: tuple[str, ...] = ()) -> Simulation:
+             verilator_opt: str | None = VERILATOR_OPT, icarus_args: tuple[str, ...] = ICARUS_ARGS) -> Simulation:
     """Build ``vfile`` (top module ``name``) on ``simulator`` in ``build_dir`` and run the cocotb
     ``test_module`` on it, the run configuration file ``config`` named in :data:`ENV_CONFIG`;
     does not raise on test failures (they are in the returned tests). ``icarus_args``: more
-    iverilog arguments (after the runner's own)."""
+    iverilog arguments (after the runner's own; default :data:`ICARUS_ARGS`)."""
     from cocotb_tools.runner import get_runner
 
     sources, build_args, env = _simulator_settings(simulator, build_dir, name, vfile, waves, verilator_opt)
