@@ -130,7 +130,7 @@ class Body:
 
 
 def _leg_from_record(d: dict) -> BodyLeg:
-    servos = tuple((name, ServoOverride(**{k: v for k, v in o.items()})) for name, o in d.get("servos", {}).items())
+    servos = tuple((name, ServoOverride(**o)) for name, o in d.get("servos", {}).items())
     return BodyLeg(**{f: d[f] for f in _LEG_FIELDS}, servos=servos)
 
 

@@ -78,16 +78,13 @@ def _legs(robot) -> list[BodyLeg | None]:
     return list(robot.body.legs) if robot.body is not None else [None] * robot.legs
 
 
-def _leg_map(robot, leg: BodyLeg, j: int, servo: str, o: ServoOverride) -> tuple[float, float]:
-    """(scale, shift in ticks) of ``leg``'s own linear map of servo ``servo``, from the plan's
-    linear map of the same servo angle."""
-    base = robot.joint_calibration.servos[j]
+def _leg_map(robot, k: int, servo: str, o: ServoOverride, base, neutral: float) -> tuple[float, float]:
+    """(scale, shift in ticks) of leg ``k``'s own linear map of servo ``servo``, from the plan's
+    map ``base`` of the same servo angle (``neutral`` at the neutral pose)."""
     if not isinstance(base, LinearMap):
-        k = robot.body.names.index(leg.name)
         raise RobotError(f"body.legs[{k}].servos.{servo} cannot scale calibration.servos.{servo}.table: a leg's "
                          "own map needs a linear map of the plan's (us_per_degree)")
     u, tpu = robot.calibration.pulse_unit_us, robot.ticks_per_pu
-    neutral = robot.calibration.neutral_angles(robot.geometry)[j]
     if o.zero_pulse_us is not None:
         own = LinearMap(0.0, o.zero_pulse_us / u, o.us_per_degree / u, (o.trim_us or 0.0) / u)
     else:
@@ -101,11 +98,9 @@ def _leg_limits(robot, leg: BodyLeg | None, servo: str, default: tuple[int, int]
     o = None if leg is None else leg.servo(servo)
     if o is None or (o.pulse_min_us is None and o.pulse_max_us is None):
         return default
-    tick_us = robot.hardware.clock_hz * 1e-6
     lo_us, hi_us = robot.calibration.limits_us(servo)
-    lo_us = o.pulse_min_us if o.pulse_min_us is not None else lo_us
-    hi_us = o.pulse_max_us if o.pulse_max_us is not None else hi_us
-    return int(np.ceil(lo_us * tick_us)), int(np.floor(hi_us * tick_us))
+    return robot.limits_ticks(o.pulse_min_us if o.pulse_min_us is not None else lo_us,
+                              o.pulse_max_us if o.pulse_max_us is not None else hi_us)
 
 
 def channel_calibration(robot) -> tuple[ChannelCalibration, ...]:
@@ -126,7 +121,7 @@ def channel_calibration(robot) -> tuple[ChannelCalibration, ...]:
         for j, servo in enumerate(robot.servos):
             o = None if leg is None else leg.servo(servo)
             if o is not None and o.us_per_degree is not None:
-                scale, shift = _leg_map(robot, leg, j, servo, o)
+                scale, shift = _leg_map(robot, k, servo, o, maps.servos[j], neutral[j])
                 centre = scale * centres[j] + shift
             elif side == "left":
                 scale, shift, centre = -1.0, 2 * centres[j], centres[j]
@@ -159,7 +154,7 @@ def _table_channel(c: ChannelCalibration, f: int, widths: tuple[int, int]) -> Ta
     the ends) and carries the rounding half."""
     sign = 1 if c.scale > 0 else -1
     if f == 0:
-        return TableChannel(sign, int(np.rint(c.shift)) + c.trim if sign == -1 or c.shift else c.trim, c.min, c.max)
+        return TableChannel(sign, int(np.rint(c.shift)) + c.trim, c.min, c.max)
     gain = int(np.rint(abs(c.scale) * 2 ** f))
     mid = (widths[0] + widths[1]) / 2
     exact = c.shift + c.trim - sign * (gain / 2 ** f - abs(c.scale)) * mid
@@ -220,17 +215,14 @@ def channel_pulses_pu(robot, leg: int, x, y, z) -> tuple:
     plan's reference (:meth:`~ikseries.robot.Robot.pulses_pu`, the right leg's) through the
     channel's calibration, ``scale * pulse + shift + trim``; unsaturated, like the plan's
     reference."""
-    tpu = robot.ticks_per_pu
-    pulses = robot.pulses_pu(x, y, z)
     n = len(robot.servos)
-    out = []
-    for p, c in zip(pulses, channel_calibration(robot)[leg * n:(leg + 1) * n]):
-        if c.scale == -1.0:      # the mirror about the centre, as written
-            centre = c.centre / tpu
-            out.append(centre - (np.asarray(p) - centre) + c.trim / tpu)
-        else:
-            out.append(c.scale * np.asarray(p) + (c.shift + c.trim) / tpu)
-    return tuple(out)
+    return tuple(_through(c, p, robot.ticks_per_pu)
+                 for p, c in zip(robot.pulses_pu(x, y, z), channel_calibration(robot)[leg * n:(leg + 1) * n]))
+
+
+def _through(c: ChannelCalibration, plan_pu, tpu: float):
+    """Channel ``c``'s reference pulses (pu) of the plan's reference pulses ``plan_pu``."""
+    return c.scale * np.asarray(plan_pu) + (c.shift + c.trim) / tpu
 
 
 def body_pulses_pu(robot, leg_name: str, x, y, z) -> tuple:
@@ -274,14 +266,16 @@ def _limit_field(robot, c: ChannelCalibration, which: str) -> str:
 
 def check_channels(robot, names, coords) -> None:
     """At the leg-frame targets ``coords`` (arrays, input ``names``): every channel that does
-    not just pass the plan's pulse (a mirrored or a scaled one) within its pulse limits; the
+    not just pass the plan's pulse with its clamp (a mirrored, scaled, trimmed or differently
+    clamped one) within its pulse limits; the
     first target (C order) that fails is named with the leg and servo, in one line."""
     n, tick_us = len(robot.servos), robot.hardware.clock_hz * 1e-6
-    u = robot.calibration.pulse_unit_us
+    u, tpu, plan_limits = robot.calibration.pulse_unit_us, robot.ticks_per_pu, robot.pulse_limits_ticks()
+    pulses = robot.pulses_pu(*coords)      # the plan's reference, once: each channel is a map of it
     for c in channel_calibration(robot):
-        if c.scale == 1.0 and not c.shift and not c.trim:
-            continue          # the plan's own pulse: the calibration's box check has it
-        us = np.ravel(channel_pulses_pu(robot, c.leg, *coords)[c.channel % n]) * u
+        if c.scale == 1.0 and not c.shift and not c.trim and (c.min, c.max) == plan_limits[c.servo]:
+            continue          # the plan's own pulse and clamp: the calibration's box check has it
+        us = np.ravel(_through(c, pulses[c.channel % n], tpu)) * u
         lo, hi = c.min / tick_us, c.max / tick_us
         masks = [us < lo - PULSE_SLACK_US - 1 / tick_us, us > hi + PULSE_SLACK_US + 1 / tick_us]
         bad = first_failure(masks)

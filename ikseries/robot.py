@@ -71,9 +71,12 @@ class Robot:
 
     def pulse_limits_ticks(self) -> dict[str, tuple[int, int]]:
         """Per servo its pulse limits in whole PWM ticks (inside the µs limits): the output clamp."""
+        return {s: self.limits_ticks(*self.calibration.limits_us(s)) for s in self.servos}
+
+    def limits_ticks(self, lo_us: float, hi_us: float) -> tuple[int, int]:
+        """Pulse limits in µs as whole PWM ticks inside them."""
         tpu = self.hardware.clock_hz * 1e-6
-        limits = {s: self.calibration.limits_us(s) for s in self.servos}
-        return {s: (int(np.ceil(lo * tpu)), int(np.floor(hi * tpu))) for s, (lo, hi) in limits.items()}
+        return int(np.ceil(lo_us * tpu)), int(np.floor(hi_us * tpu))
 
     @property
     def joint_calibration(self) -> Calibration:

@@ -223,3 +223,12 @@ def test_a_channel_of_whole_gain_and_offset_adds_no_rounding():
     w = np.arange(limits["s1"][0], limits["s1"][1] + 1, 97)
     out = table.apply(np.zeros(len(w), dtype=np.int64), {"s1": w, "s2": w, "s3": w})
     assert np.array_equal(out["s1"], w)
+
+
+def test_a_right_legs_narrower_clamp_alone_is_checked_over_the_box():
+    """A right leg's channel that passes the plan's pulse but clamps narrower (limits alone) is
+    checked too: a clamp inside the box's pulses is refused before the fit, naming the field."""
+    with pytest.raises(RobotError) as e:
+        parse_robot(phoenix_with(0, {"s1": {"pulse_max_us": 1500.0}}))
+    msg = str(e.value)
+    assert "drives leg RR servo s1 to " in msg and msg.endswith("(body.legs[0].servos.s1.pulse_max_us)"), msg
