@@ -56,6 +56,7 @@ from . import centred as cn
 from . import interval as ia
 from .cut import chain_range, cut_chain
 from .ops import OPS
+from .parallel import check_jobs, servo_map
 from .plan import Plan
 
 __all__ = ["CertificationError", "UnboundedCellError", "ServoCertificate", "Certificate", "certify", "output_rounding",
@@ -568,7 +569,7 @@ def _box(robot, plan: Plan) -> tuple[list[str], np.ndarray, np.ndarray]:
 
 
 def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int = DEFAULT_MAX_CELLS,
-            initial: int = 4, progress=lambda msg: None) -> Certificate:
+            initial: int = 4, progress=lambda msg: None, jobs: int = 1) -> Certificate:
     """Certified bound of every servo's error over the continuous workspace box.
 
     Parameters
@@ -589,6 +590,9 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
         input a piecewise plan cuts into cells.
     progress : callable
         Receives one progress message per refinement round.
+    jobs : int
+        Servos certified at a time, each in a process of its own (:func:`~.parallel.servo_map`);
+        the certificate is the same whatever ``jobs``.
 
     Returns
     -------
@@ -607,32 +611,41 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
     if target_pu is not None and (isinstance(target_pu, bool) or not isinstance(target_pu, (int, float))
                                   or not target_pu > 0):
         raise ValueError(f"target_pu must be a number > 0 pu or None, not {target_pu!r}")
+    check_jobs(jobs)
     names, box_lo, box_hi = _box(robot, plan)
     quant = plan.rounding_bounds()
-    servos = []
-    for k, o in enumerate(plan.outputs):
-        t0 = time.perf_counter()
-        tpp = o.ticks_per_pu
-        out_round, clamp_rng = output_rounding(plan, k)
-        rounding_pu, out_pu = quant[o.preround] / tpp, out_round / tpp
-        target = robot.fit.tolerance_pu - rounding_pu - out_pu if target_pu is None else float(target_pu)
-        err = _error_function(plan, robot, k)
-        edges, cut = _table_edges(plan, plan.cone(o.preround), names, box_lo, box_hi)
-        best, sampled, cells, evaluated, (f_lo, f_hi) = _refine(
-            err, names, box_lo, box_hi, target * tpp, [initial] * len(names), max_cells, progress, o.name,
-            edges, cut)
-        if not np.isfinite(best["bound"]):
-            raise UnboundedCellError(_unbounded(err, names, o.name, best))
-        clamp = 0.0 if clamp_rng is None else max(0.0, clamp_rng[0] - f_lo, f_hi - clamp_rng[1])
-        servos.append(ServoCertificate(
-            o.name, best["bound"] / tpp, sampled / tpp, rounding_pu, out_pu, clamp / tpp, target,
-            bool(best["bound"] <= target * tpp), cells, evaluated,
-            {"lo": dict(zip(names, best["lo"].tolist())), "hi": dict(zip(names, best["hi"].tolist())),
-             "bound_pu": best["bound"] / tpp},
-            time.perf_counter() - t0))
-        progress(Certificate((servos[-1],), {}, METHOD).lines()[0])
+
+    def one(k, say):
+        c = _certify_output(robot, plan, k, names, box_lo, box_hi, quant, target_pu, max_cells, initial, say)
+        say(Certificate((c,), {}, METHOD).lines()[0])
+        return c
+    servos = servo_map(one, range(len(plan.outputs)), jobs, progress)
     box = {n: (float(a), float(b)) for n, a, b in zip(names, box_lo, box_hi)}
     return Certificate(tuple(servos), box, METHOD)
+
+
+def _certify_output(robot, plan, k, names, box_lo, box_hi, quant, target_pu, max_cells, initial, say):
+    """The :class:`ServoCertificate` of output ``k`` (:func:`certify`)."""
+    t0 = time.perf_counter()
+    o = plan.outputs[k]
+    tpp = o.ticks_per_pu
+    out_round, clamp_rng = output_rounding(plan, k)
+    rounding_pu, out_pu = quant[o.preround] / tpp, out_round / tpp
+    target = robot.fit.tolerance_pu - rounding_pu - out_pu if target_pu is None else float(target_pu)
+    err = _error_function(plan, robot, k)
+    edges, cut = _table_edges(plan, plan.cone(o.preround), names, box_lo, box_hi)
+    best, sampled, cells, evaluated, (f_lo, f_hi) = _refine(
+        err, names, box_lo, box_hi, target * tpp, [initial] * len(names), max_cells, say, o.name,
+        edges, cut)
+    if not np.isfinite(best["bound"]):
+        raise UnboundedCellError(_unbounded(err, names, o.name, best))
+    clamp = 0.0 if clamp_rng is None else max(0.0, clamp_rng[0] - f_lo, f_hi - clamp_rng[1])
+    return ServoCertificate(
+        o.name, best["bound"] / tpp, sampled / tpp, rounding_pu, out_pu, clamp / tpp, target,
+        bool(best["bound"] <= target * tpp), cells, evaluated,
+        {"lo": dict(zip(names, best["lo"].tolist())), "hi": dict(zip(names, best["hi"].tolist())),
+         "bound_pu": best["bound"] / tpp},
+        time.perf_counter() - t0)
 
 
 METHOD = ("per cell the least of the plain interval enclosure, the mean-value form |e(c)| + "

@@ -24,6 +24,7 @@ from .certify import CertificationError, UnboundedCellError, certify
 from .context import Budget, FitContext, FitError, FormatError, operand_bits
 from .cost import DEFAULT_COST_MODEL, CostModel
 from .lowering import build_plan, output_multipliers
+from .parallel import check_jobs, servo_map
 from .plan import Plan
 from .search import MAX_DEGREE, fit_servo
 from .formats import choose_formats, requantize
@@ -133,7 +134,7 @@ def _plan_meta(ctx: FitContext, fits: list[ServoFit], fv: int, mults: dict) -> d
 
 
 def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True,
-              cost_model: CostModel = DEFAULT_COST_MODEL) -> FitResult:
+              cost_model: CostModel = DEFAULT_COST_MODEL, jobs: int = 1) -> FitResult:
     """Fit every servo of ``robot`` and return the evaluation plan and the fits.
 
     Per servo the structure of least ``cost_model`` cost (:mod:`ikseries.fit.cost`; the
@@ -154,14 +155,18 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True,
     A cell of the workspace over which the reference has no enclosure once the certifier's
     cell budget is spent (:class:`~ikseries.fit.certify.UnboundedCellError`: e.g. a chain's IK
     near a singular pose) refuses the fit at once, naming the cell: no refit can help.
+
+    ``jobs`` > 1 fits and certifies the servos in that many processes at a time
+    (:func:`~.parallel.servo_map`); the plan is the same whatever ``jobs``.
     """
+    check_jobs(jobs)
     robot = robot.fitted    # a mirrored leg's margin reserved
     bits = operand_bits(robot)
     if bits is None:
-        return _fit_attempts(FitContext.for_robot(robot, QUANTIZATION_SHARES[0], cost_model), progress, certified)
+        return _fit_attempts(FitContext.for_robot(robot, QUANTIZATION_SHARES[0], cost_model), progress, certified, jobs)
     for share, bigger in zip(QUANTIZATION_SHARES, QUANTIZATION_SHARES[1:] + (None,)):
         try:
-            return _fit_attempts(FitContext.for_robot(robot, share, cost_model), progress, certified)
+            return _fit_attempts(FitContext.for_robot(robot, share, cost_model), progress, certified, jobs)
         except FormatError as e:
             if bigger is None:
                 raise FormatError(f"{e} ({share:.0%} of the tolerance) with every product fitting "
@@ -173,24 +178,28 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True,
     raise AssertionError("unreachable")
 
 
-def _fit_servos(ctx: FitContext, samples: _Samples, fits: list, approx: list, progress) -> list:
-    """``fits`` with every missing (None) servo fitted to its approximation budget (ticks)."""
-    fits = list(fits)
-    for k, name in enumerate(ctx.robot.servos):
-        if fits[k] is not None:
-            continue
-        candidates = feature_sets(ctx, k)
-        sets = samples.sets(k, candidates)
-        progress(f"fitting {name}: candidates " + "; ".join(
+def _fit_servos(ctx: FitContext, samples: _Samples, fits: list, approx: list, progress, jobs: int) -> list:
+    """``fits`` with every missing (None) servo fitted to its approximation budget (ticks), the
+    servos in up to ``jobs`` processes (:func:`~.parallel.servo_map`)."""
+    todo = [k for k, f in enumerate(fits) if f is None]
+    candidates = {k: feature_sets(ctx, k) for k in todo}
+    sets = {k: samples.sets(k, candidates[k]) for k in todo}      # before any fork: computed once
+
+    def one(k, say):
+        name = ctx.robot.servos[k]
+        say(f"fitting {name}: candidates " + "; ".join(
             f"{fs.label()} ({', '.join(f'{v} {a}' for v, a in zip(fs.names, fs.allowed))})"
-            for fs in candidates))
-        fits[k] = fit_servo(ctx, name, candidates, sets, samples.raw, approx[k], progress)
+            for fs in candidates[k]))
+        return fit_servo(ctx, name, candidates[k], sets[k], samples.raw, approx[k], say)
+    fits = list(fits)
+    for k, f in zip(todo, servo_map(one, todo, jobs, progress)):
+        fits[k] = f
     return fits
 
 
-def _certificate(ctx: FitContext, plan: Plan, progress):
+def _certificate(ctx: FitContext, plan: Plan, progress, jobs: int):
     progress("certifying the error bound over the continuous workspace")
-    cert = certify(ctx.robot, plan, progress=progress)
+    cert = certify(ctx.robot, plan, progress=progress, jobs=jobs)
     for line in cert.lines():
         progress("  " + line)
     rec = cert.to_json()    # without run times: the plan must be byte-identical on a rerun
@@ -200,7 +209,7 @@ def _certificate(ctx: FitContext, plan: Plan, progress):
     return cert
 
 
-def _fit_attempts(ctx: FitContext, progress, certified: bool) -> FitResult:
+def _fit_attempts(ctx: FitContext, progress, certified: bool, jobs: int) -> FitResult:
     """Fit, lower and certify; refit the servos whose certified total misses the tolerance
     with a tighter approximation budget, up to ``CERTIFY_ATTEMPTS`` times."""
     robot = ctx.robot
@@ -209,12 +218,12 @@ def _fit_attempts(ctx: FitContext, progress, certified: bool) -> FitResult:
     approx = [ctx.budget.approximation * ctx.ticks_per_pu] * len(robot.servos)
     fits: list = [None] * len(robot.servos)
     for _ in range(CERTIFY_ATTEMPTS):
-        fits = _fit_servos(ctx, samples, fits, approx, progress)
+        fits = _fit_servos(ctx, samples, fits, approx, progress, jobs)
         plan, fits = lower(ctx, fits, progress)
         if not certified:
             return FitResult(plan, fits)
         try:
-            cert = _certificate(ctx, plan, progress)
+            cert = _certificate(ctx, plan, progress, jobs)
         except UnboundedCellError as e:
             raise FitError(f"fit refused: {e}") from None
         failed = [k for k, c in enumerate(cert.servos)

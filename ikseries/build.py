@@ -88,7 +88,7 @@ def _install(tmp: Path, out_dir: Path) -> list[str]:
 
 
 def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto", progress=print,
-          board: BoardSpec | None = None) -> BuildReport:
+          board: BoardSpec | None = None, jobs: int = 1) -> BuildReport:
     """Run the whole pipeline (:mod:`ikseries.steps`) and write every artifact into ``out_dir``.
 
     Files are written to a hidden temporary directory inside ``out_dir`` and moved into
@@ -100,7 +100,8 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
     ("auto": every installed one; empty: none). With ``board``
     (:func:`ikseries.boardbuild.board_spec`) the robot runs at the clock the board's PLL makes,
     and the build also writes the robot controller's Verilog and its bitstream
-    (:mod:`ikseries.boardbuild`). Returns the build's report.
+    (:mod:`ikseries.boardbuild`). ``jobs`` > 1 fits the servos in that many processes at a
+    time (the plan is the same). Returns the build's report.
     """
     out_dir = Path(out_dir)
     try:
@@ -114,7 +115,7 @@ def build(robot, out_dir, *, synth: bool = True, vcd: bool = False, cocotb="auto
         robot = on_board
     _check_foreign(out_dir, planned_outputs(robot, vcd=vcd, cocotb=cocotb, board=board))
     try:
-        fitted = steps.fit(robot, progress)
+        fitted = steps.fit(robot, progress, jobs)
         core = steps.core(robot, fitted.plan, progress)
         with staging(out_dir, created, ".ikseries-tmp-", BuildError, "build output") as tmp:
             report = _write_outputs(robot, fitted, core, tmp, synth=synth, vcd=vcd, cocotb=cocotb,

@@ -26,6 +26,20 @@ def _robot(args):
     return load_preset(args.preset or "cylinder-leg")
 
 
+def _jobs(args) -> int:
+    """``--jobs``: processes for the servos of a fit (default: every core this process may use)."""
+    from .fit.parallel import usable_cores
+    if args.jobs is None:
+        return usable_cores()
+    try:
+        jobs = int(args.jobs)
+    except ValueError:
+        jobs = 0
+    if jobs < 1:
+        raise CliError(f"--jobs must be a positive integer (processes for the servos), not {args.jobs!r}")
+    return jobs
+
+
 def _progress(quiet):
     t0 = time.perf_counter()
 
@@ -115,7 +129,7 @@ def cmd_build(args):
             raise CliError(f"--cocotb must be auto, none or a list from {','.join(SIMULATORS)}, not {bad[0]!r}")
     board = _board_spec(robot, args)
     rep = build(robot, out, synth=not args.no_synth, vcd=args.vcd, cocotb=sims, progress=_progress(args.quiet),
-                board=board)
+                board=board, jobs=_jobs(args))
     choice = rep.core.choice
     print(f"{robot.name}: max error {rep.worst_error_pu:.3f} pu (tolerance {robot.fit.tolerance_pu:g}), "
           f"latency {choice.core.latency} cycles, {choice.candidate.describe()}, "
@@ -151,7 +165,7 @@ def _eval_plan(robot, args, say):
     """(plan, line saying which plan it is) for ``ikseries eval`` (:func:`ikseries.plancache.find_plan`)."""
     from .plancache import PlanLookupError, find_plan
     try:
-        return find_plan(robot, None if args.plan is None else Path(args.plan), say)
+        return find_plan(robot, None if args.plan is None else Path(args.plan), say, _jobs(args))
     except PlanLookupError as e:
         raise CliError(str(e)) from None
 
@@ -161,7 +175,7 @@ def cmd_fit(args):
     robot = _robot(args)
     out = Path(args.output) if args.output else default_fit_dir(robot, args.method)
     try:
-        rec = run_fit(robot, args.method, out, progress=_progress(args.quiet))
+        rec = run_fit(robot, args.method, out, progress=_progress(args.quiet), jobs=_jobs(args))
     except FitCommandError as e:
         raise CliError(str(e)) from None
     if args.method == "ikseries":
@@ -418,6 +432,10 @@ def _host_parser(sub, name: str, help: str):
     return h
 
 
+_JOBS_HELP = ("fit and certify up to N servos at once, each in a process of its own (default: every "
+              "core this process may use; the plan is the same whatever N)")
+
+
 def _parser() -> argparse.ArgumentParser:
     from . import __version__
     from .constraints.devices import FAMILIES, FIT_DEVICES, PNR_DEVICES, PRIMITIVES, PARTS
@@ -462,6 +480,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="with --board: the servo pins of channels 0, 1, ... (comma-separated; default: the "
                         "board's servo pins in order)")
     b.add_argument("--baud", metavar="N", help="with --board: the host link's bit rate (default 1000000)")
+    b.add_argument("-j", "--jobs", metavar="N", help=_JOBS_HELP)
     b.add_argument("-q", "--quiet", action="store_true")
     f = sub.add_parser("fit", help="fit only (no hardware) by one method, with a report")
     f.add_argument("robot", nargs="?", help="robot description (TOML); default: --preset cylinder-leg")
@@ -470,11 +489,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="ikseries (automatic fit), paper (the integer power series paper's procedure "
                         "beside it) or divided-differences (planar-arm path mode)")
     f.add_argument("-o", "--output", help="output directory (default build/<robot>/fit-<method>)")
+    f.add_argument("-j", "--jobs", metavar="N", help=_JOBS_HELP)
     f.add_argument("-q", "--quiet", action="store_true")
     e = sub.add_parser("eval", help="pulse of each servo: reference IK vs golden integer model")
     e.add_argument("--preset")
     e.add_argument("--robot", help="robot description (TOML)")
     e.add_argument("--plan", help="use this plan.json instead of fitting")
+    e.add_argument("-j", "--jobs", metavar="N", help=_JOBS_HELP + "; only when it has to fit")
     e.add_argument("-q", "--quiet", action="store_true")
     e.add_argument("--leg", metavar="NAME", help="a robot with a [body]: the leg the target is for (its channels "
                    "are shown: mirror and channel table applied); the target is in its leg frame (a left leg's "

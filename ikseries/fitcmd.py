@@ -38,8 +38,8 @@ def _dump(obj) -> str:
     return json.dumps(obj, indent=1, sort_keys=True) + "\n"
 
 
-def _ikseries(robot, progress) -> tuple[dict, dict]:
-    plan, fits = fit_robot(robot, progress)
+def _ikseries(robot, progress, jobs) -> tuple[dict, dict]:
+    plan, fits = fit_robot(robot, progress, jobs=jobs)
     plan.meta["robot_description"] = robot_record(robot)
     progress("measuring the error on >= 10^6 points")
     acc = measure(robot, plan)
@@ -64,7 +64,7 @@ def _ikseries(robot, progress) -> tuple[dict, dict]:
     return {"plan.json": plan.dumps(), "fit.json": _dump(rec), "fit.md": "\n".join(md) + "\n"}, rec
 
 
-def _paper(robot, progress) -> tuple[dict, dict]:
+def _paper(robot, progress, jobs) -> tuple[dict, dict]:
     from .accuracy import verification_points
     from .fit.certify import certify
     from .fit.baselines.comparison import compare, render_comparison
@@ -79,7 +79,7 @@ def _paper(robot, progress) -> tuple[dict, dict]:
     sampled = measure(robot, pplan, pts)["servos"]
     # refine each servo to just above its sampled error: the bound is then close to the truth
     cert = certify(robot, pplan, target_pu=1.05 * max(e["approximation"] for e in sampled.values()),
-                   max_cells=PAPER_CERT_CELLS)
+                   max_cells=PAPER_CERT_CELLS, jobs=jobs)
     for line in cert.lines():
         progress("  " + line)
     rec = cert.to_json()
@@ -87,14 +87,14 @@ def _paper(robot, progress) -> tuple[dict, dict]:
         c.pop("seconds", None)
     pplan.meta["certificate"] = rec
     progress("fitting the same robot with ikseries")
-    plan, _ = fit_robot(robot, progress)
+    plan, _ = fit_robot(robot, progress, jobs=jobs)
     progress("measuring both on the same >= 10^6 points")
     res = compare(robot, plan, pplan, pts)
     return {"paper_plan.json": pplan.dumps(), "plan.json": plan.dumps(), "comparison.json": _dump(res),
             "comparison.md": render_comparison(res)}, res
 
 
-def _divided(robot, progress) -> tuple[dict, dict]:
+def _divided(robot, progress, jobs) -> tuple[dict, dict]:   # one path at a time: jobs unused
     from .fit.baselines.divided import render_markdown, run_divided_differences
     from .planar_arm import PlanarArm
     if not isinstance(robot.geometry, PlanarArm):
@@ -106,8 +106,9 @@ def _divided(robot, progress) -> tuple[dict, dict]:
     return {"divided.json": _dump(res), "divided.md": render_markdown(res)}, res
 
 
-def run_fit(robot, method: str, out_dir, progress=print) -> dict:
-    """Fit ``robot`` by ``method`` and write its artifacts into ``out_dir`` (all or nothing)."""
+def run_fit(robot, method: str, out_dir, progress=print, jobs: int = 1) -> dict:
+    """Fit ``robot`` by ``method`` and write its artifacts into ``out_dir`` (all or nothing);
+    ``jobs``: processes for the servos of an ikseries fit (:func:`~ikseries.fit.fitter.fit_robot`)."""
     if method not in METHODS:
         raise FitCommandError(f"method must be one of {list(METHODS)}, not {method!r}")
     run = {"ikseries": _ikseries, "paper": _paper, "divided-differences": _divided}[method]
@@ -117,7 +118,7 @@ def run_fit(robot, method: str, out_dir, progress=print) -> dict:
     except OutputDirError as e:
         raise FitCommandError(str(e)) from None
     try:
-        files, rec = run(robot, progress)
+        files, rec = run(robot, progress, jobs)
     except FitError as e:
         raise FitCommandError(str(e)) from None
     done = False

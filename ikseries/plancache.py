@@ -92,7 +92,7 @@ def read_plan(robot, path: Path, given: bool):
     return plan
 
 
-def find_plan(robot, given: Path | None, progress):
+def find_plan(robot, given: Path | None, progress, jobs: int = 1):
     """(plan, line saying which plan it is): the ``given`` file, else the robot's build under
     build/, else this cache, else a fit that is then cached."""
     from .architecture import ArchitectureError, cost_model
@@ -106,7 +106,7 @@ def find_plan(robot, given: Path | None, progress):
             return plan, f"plan: {path} ({what})"
     progress(f"no plan for {robot.name} under build/ or in the cache: fitting")
     try:
-        plan = fit_robot(robot, progress, cost_model=cost_model(robot))[0]
+        plan = fit_robot(robot, progress, cost_model=cost_model(robot), jobs=jobs)[0]
     except (FitError, ArchitectureError) as e:
         raise PlanLookupError(str(e)) from None
     plan.meta["robot_description"] = robot_record(robot)

@@ -54,14 +54,14 @@ class Fitted:
     accuracy_s: float
 
 
-def fit(robot, progress) -> Fitted:
+def fit(robot, progress, jobs: int = 1) -> Fitted:
     """Fit ``robot``, minimising its architectures' cost model
     (:func:`ikseries.architecture.cost_model`), and measure the plan; refused unless the sampled
     error meets the tolerance."""
     t0 = time.perf_counter()
     progress(f"fitting {robot.name} (tolerance ±{robot.fit.tolerance_pu:g} pu)")
     try:
-        plan, servos = fit_robot(robot, progress, cost_model=cost_model(robot))
+        plan, servos = fit_robot(robot, progress, cost_model=cost_model(robot), jobs=jobs)
     except (FitError, ArchitectureError) as e:
         raise StepError(str(e)) from None
     fit_s = _seconds_since(t0)

@@ -64,6 +64,9 @@ class ChainEnclosureError(ia.IntervalDomainError):
         super().__init__(message)
         self.reason = reason
 
+    def __reduce__(self):      # pickles (from a fit's worker process) with its reason
+        return type(self), (str(self), self.reason)
+
 
 # -- interval vectors and matrices: (lo, hi) pairs of arrays (..., N), outward rounded -----------
 def _add(a, b):
