@@ -5,7 +5,11 @@ Per preset and servo: variables, total degree, terms, multiplications per evalua
 representable points, certified bound (pu), and the preset's fit time (wall and CPU, certification
 included; the CPU seconds of the certifications alone beside them).
 
-    python bench/fit_benchmark.py [PRESET ...] [--json docs/results/fit_benchmark.json]
+    python bench/fit_benchmark.py [PRESET ...] [--jobs N] [--json docs/results/fit_benchmark.json]
+
+With ``--jobs N`` each preset is fitted a second time with its servos in N processes
+(``fit_robot(jobs=N)``): its wall time beside the one-process fit's, and the two plans compared
+byte for byte (the run fails if they differ).
 
 Targets for cylinder-leg at +-0.5 pu: <= 100 multiply-adds per servo, certified (issue 3); fit
 plus certification <= 10 s CPU on one core ("a fit ten times faster").
@@ -49,7 +53,7 @@ def certify_seconds():
         fitter.certify = certify
 
 
-def bench_preset(name: str) -> dict:
+def bench_preset(name: str, jobs: int = 1) -> dict:
     robot = load_preset(name)
     t0, c0 = time.perf_counter(), time.process_time()
     with certify_seconds() as cert_cpu:
@@ -71,10 +75,17 @@ def bench_preset(name: str) -> dict:
                        "coefficient_bits": coef_bits, "coefficient_frac_bits": sf.frac,
                        "sampled_max_pu": acc["servos"][sf.name]["total"],
                        "certified_max_pu": cs["total_pu"], "certified": cs["converged"]})
-    return {"preset": name, "tolerance_pu": robot.fit.tolerance_pu, "fit_s": fit_s, "fit_cpu_s": fit_cpu,
-            "certify_cpu_s": sum(cert_cpu), "certifications": len(cert_cpu),
-            "points": acc["points"], "plan_multipliers": plan.count("mul"),
-            "servos": servos}
+    rec = {"preset": name, "tolerance_pu": robot.fit.tolerance_pu, "fit_s": fit_s, "fit_cpu_s": fit_cpu,
+           "certify_cpu_s": sum(cert_cpu), "certifications": len(cert_cpu),
+           "points": acc["points"], "plan_multipliers": plan.count("mul"),
+           "servos": servos}
+    if jobs > 1:
+        t0 = time.perf_counter()
+        again = fit_robot(robot, jobs=jobs).plan
+        rec["parallel"] = {"jobs": jobs, "fit_s": time.perf_counter() - t0}
+        if again.dumps() != plan.dumps():
+            raise SystemExit(f"{name}: the plan fitted with jobs={jobs} differs from the one-process plan")
+    return rec
 
 
 def table(results: list) -> str:
@@ -89,7 +100,8 @@ def table(results: list) -> str:
             rows.append((r["preset"], s["servo"], s["variables"], s["degree"], s["terms"], s["multiplications"],
                          s["coefficient_bits"], f"{s['sampled_max_pu']:.3f}",
                          f"{s['certified_max_pu']:.3f}" + ("" if s["certified"] else " (budget spent)"),
-                         f"{r['fit_s']:.1f} ({r['fit_cpu_s']:.1f}; {r['certify_cpu_s']:.1f})"))
+                         f"{r['fit_s']:.1f} ({r['fit_cpu_s']:.1f}; {r['certify_cpu_s']:.1f})"
+                         + (f"; {r['parallel']['fit_s']:.1f} with {r['parallel']['jobs']} jobs" if "parallel" in r else "")))
     w = [max(len(str(row[i])) for row in rows) for i in range(len(head))]
     return "\n".join("  ".join(str(c).ljust(w[i]) for i, c in enumerate(row)) for row in rows)
 
@@ -97,8 +109,11 @@ def table(results: list) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("presets", nargs="*", help=f"default: all ({', '.join(preset_names())})")
+    ap.add_argument("--jobs", type=int, default=1, help="also fit each preset with its servos in N processes")
     ap.add_argument("--json", default=FACTS["default_json"]("fit_benchmark"))
     args = ap.parse_args(argv)
+    if args.jobs < 1:
+        sys.exit(f"--jobs must be a positive integer, not {args.jobs}")
     run = FACTS["run_facts"]("fit_benchmark", argv)
     names = args.presets or preset_names()
     bad = [n for n in names if n not in preset_names()]
@@ -107,7 +122,7 @@ def main(argv=None):
     results = []
     for n in names:
         print(f"fitting {n} ...", flush=True)
-        results.append(bench_preset(n))
+        results.append(bench_preset(n, args.jobs))
     print(table(results))
     out = FACTS["write_result"](args.json, {"results": results}, run)
     print(f"wrote {out}")

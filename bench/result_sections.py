@@ -32,7 +32,8 @@ def demote(markdown: str, levels: int = 1) -> list[str]:
 def _fit_seconds(r: dict) -> str:
     """Wall and CPU seconds of a preset's fit, with those of its certifications when recorded."""
     cert = f"; {r['certify_cpu_s']:.1f}" if "certify_cpu_s" in r else ""
-    return f"{r['fit_s']:.1f} ({r['fit_cpu_s']:.1f}{cert})"
+    par = f"; {r['parallel']['fit_s']:.1f} s with {r['parallel']['jobs']} jobs" if "parallel" in r else ""
+    return f"{r['fit_s']:.1f} ({r['fit_cpu_s']:.1f}{cert}){par}"
 
 
 def fit_benchmark(res: dict) -> list[str]:
@@ -50,7 +51,7 @@ def fit_benchmark(res: dict) -> list[str]:
         notes.append(f"- {r['preset']}: tolerance ±{r['tolerance_pu']:g} pu, sampled on {r['points']:,} points, "
                      f"{r['plan_multipliers']} multipliers in the whole plan")
     head = ("preset", "servo", "variables", "degree", "terms", "mults", "coefficient bits", "sampled (pu)",
-            "certified (pu)", "fit + certify, wall s (CPU s; certify CPU s)")
+            "certified (pu)", "fit + certify, wall s (CPU s; certify CPU s; wall s with N jobs)")
     return ["*mults*: multiplications per evaluation of the servo, its share of the coordinate stage "
             "included. *sampled*: max |emitted − exact pulse| on the sampled points; *certified*: the "
             "proven bound over the continuous workspace box.", "", *table(head, rows), *notes, ""]
