@@ -10,7 +10,7 @@ For the cylinder-leg robot, the IK cores alone (no PWM), as flat-port stream top
 ``moduloN``    ``ModuloEvaluator``: the dataflow pipelined, its multiplications shared by a modulo
                schedule, one target every N cycles (N = 4, 8, 12; products gathered by the device's
                DSP size);
-``moduloNd``   on the ECP5 only (N = 4, 7, 16): the plan fitted with ``fit.products = "dsp"`` (every
+``moduloNd``   on the ECP5 only (N = 1, 4, 7, 16; N = 1 is one solution per clock): the plan fitted with ``fit.products = "dsp"`` (every
                product's operands narrowed to the ECP5's DSP size, so each is one DSP block),
                modulo-scheduled, every product an instantiated ECP5 DSP primitive using its own
                input and output registers (``dsp_registers="ecp5"``; Yosys would leave them in the
@@ -27,14 +27,17 @@ and ``hexapod``: the hexapod preset's shared robot core (``RobotCore``: one fold
 for 6 legs, the configuration ``choose_architecture`` picks, iCE40 DSP size, plus the 18-channel
 PWM bank) on the iCE40 only (``robot_verilog``).
 
-Each is placed and routed (``ikseries.pnr.place_and_route``, seed 1) on each device
+Each is placed and routed (``ikseries.pnr.place_and_route``) with each nextpnr placer seed of
+``--seeds`` (default 1, 2, 3) on each device
 (each of ``ikseries.constraints.devices.PNR_DEVICES``) with nextpnr ``--freq`` = ``--clock-mhz`` (default 100 MHz).
 nextpnr reports the Fmax it achieved whether or not it meets the target; the target only
 steers its timing-driven placement and routing, so the default is above every core's expected
 Fmax (not the robots' 48 MHz) in case a lower one would let it stop early. Measured with the
 installed ECP5 nextpnr (seed 1): folded2 and CORDIC reach the same Fmax (64.671, 104.471 MHz)
 with ``--clock-mhz`` 48, 100 and 200. A design that does not fit is recorded with Yosys' counts
-and the overflow.
+and the overflow. Per design and device the record reported is the median seed's (the lower
+median: the placed seeds sorted by Fmax, the middle one, the slower of two), with every seed's
+Fmax beside it (``fmax_by_seed``).
 Accuracy: the polynomial plan's max |error| on the >= 10**6 verification points
 (``ikseries.accuracy.measure``; bit-exact for the pipelined and folded cores alike) and its
 certified bound; the CORDIC design's on the same points (``measure_cordic``).
@@ -43,11 +46,15 @@ Writes JSON (default ``docs/results/pareto.json``), a plot per device next to it
 (``pareto_<device>.png``: area = LUT + FF from Yosys (LUT including the LUTs that carry cells
 occupy, ``Family.ripple_luts``) with the timing harness' FFs removed on x,
 latency in ns at Fmax on y, Pareto front of the placed cylinder-leg cores marked), and prints a table and
-verdicts for the issue's targets.
+verdicts: the targets of "one leg solution per clock on a small FPGA" (one solution per clock on
+the ECP5 part within its DSP blocks and block RAMs at >= 200 MHz and <= 100 ns, certified; the
+hexapod core at 48 MHz with >= 15 % Fmax margin on the iCE40 part; the smallest single-leg core there
+at one solution per <= 16 cycles), then the earlier ones (the fastest core's Fmax, latency and
+throughput; the hexapod within the iCE40 part; polynomial against CORDIC).
 
     python bench/pareto.py [--devices ice40,ecp5]
                            [--designs pipelined,modulo4,modulo8,modulo12,modulo4d,modulo7d,modulo16d,folded1,folded2,cordic,cordic_iter,hexapod]
-                           [--jobs 2]
+                           [--jobs 2] [--seeds 1,2,3]
                            [--clock-mhz 100] [--cordic-design JSON] [--out docs/results/pareto.json]
                            [--work build/bench/pareto]
 """
@@ -75,7 +82,7 @@ ICE40, ECP5 = (next(n for n, d in PNR_DEVICES.items() if d.family == f) for f in
 ECP5_PART = PARTS[PNR_DEVICES[ECP5].part].part
 ECP5_PRIMITIVES = ", ".join(p.name for p in family_primitives("ecp5"))
 MODULO_II = (4, 8, 12)
-MODULO_DSP_II = (4, 7, 16)   # ECP5 only: DSP-sized plan, DSP primitives with their own registers
+MODULO_DSP_II = (1, 4, 7, 16)   # ECP5 only: DSP-sized plan, DSP primitives with their own registers
 DESIGNS = ("pipelined", *(f"modulo{ii}" for ii in MODULO_II), *(f"modulo{ii}d" for ii in MODULO_DSP_II),
            "folded1", "folded2", "cordic", "cordic_iter", "hexapod")
 CORDIC_DESIGNS = ("cordic", "cordic_iter")
@@ -85,6 +92,13 @@ TARGET_FMAX_MHZ, TARGET_LATENCY_NS, TARGET_THROUGHPUT = 150.0, 200.0, 20e6
 #: the hexapod target: within the iCE40 part's DSP blocks and logic cells, refreshing >= 1000/s
 HEXAPOD_DSP, HEXAPOD_LC = (PARTS[PNR_DEVICES[ICE40].part].capacities[k] for k in ("DSP", "LUT"))
 HEXAPOD_REFRESH_HZ = 1000.0
+#: one solution per clock on the ECP5 part: its DSP blocks and block RAMs, Fmax, latency
+ECP5_DSP, ECP5_BRAM = (PARTS[PNR_DEVICES[ECP5].part].capacities[k] for k in ("DSP", "BRAM"))
+II1_FMAX_MHZ, II1_LATENCY_NS = 200.0, 100.0
+#: the hexapod core on the iCE40 part: its clock and Fmax margin; the smallest single-leg core's
+#: longest interval
+HEXAPOD_CLOCK_MHZ, HEXAPOD_MARGIN = 48.0, 0.15
+SMALL_CORE_II = 16
 
 
 def say(msg: str) -> None:
@@ -203,6 +217,67 @@ def _certified(cert: dict) -> dict | None:
 def _by(records, device, kind=None):
     """Records of ``device`` (and ``kind``)."""
     return [r for r in records if r["device"] == device and (kind is None or r["kind"] == kind)]
+
+
+def _check(name, v, op, t, unit) -> tuple[bool, str]:
+    ok = v <= t if op == "<=" else v >= t
+    u = f" {unit}" if unit else ""
+    return ok, f"{name} {v:.4g}{u} {op} {t:g}{u}" + ("" if ok else f" (NOT MET by {abs(v - t):.4g}{u})")
+
+
+def verdict_one_per_clock(records, tolerance_pu: float) -> list[str]:
+    """One solution per clock (II = 1) on the ECP5 part: within its DSP blocks and block RAMs,
+    Fmax and latency targets, certified within the tolerance; every II = 1 core's line."""
+    cores = [r for r in _by(records, ECP5, "polynomial") if r["initiation_interval"] == 1]
+    if not cores:
+        return [f"one solution per clock on the {ECP5_PART}: no II = 1 core run - not decided"]
+    lines, met = [f"one solution per clock on the {ECP5_PART} (DSP <= {ECP5_DSP}, BRAM <= {ECP5_BRAM}, "
+                  f"Fmax >= {II1_FMAX_MHZ:g} MHz, latency <= {II1_LATENCY_NS:g} ns, certified <= "
+                  f"{tolerance_pu:g} pu):"], []
+    for r in cores:
+        if r["status"] != "placed":
+            over = ", ".join(f"{k} {o['used']}/{o['available']} ({o['used'] / o['available']:.1f}x)"
+                             for k, o in (r["overflow"] or {}).items())
+            lines.append(f"  {r['design']}: {r['status']} {over or r['error']} - NOT MET")
+            continue
+        cert = max((r.get("certified_pu") or {}).values(), default=None)
+        checks = [_check("DSP", r["DSP"], "<=", ECP5_DSP, ""), _check("BRAM", r["BRAM"], "<=", ECP5_BRAM, ""),
+                  _check("Fmax", r["fmax_mhz"], ">=", II1_FMAX_MHZ, "MHz"),
+                  _check("latency", r["latency_ns"], "<=", II1_LATENCY_NS, "ns"),
+                  (False, "not certified") if cert is None else _check("certified", cert, "<=", tolerance_pu, "pu")]
+        ok = all(c[0] for c in checks)
+        met += [r["design"]] if ok else []
+        lines.append(f"  {r['design']}: " + "; ".join(c[1] for c in checks) + f" -> {'met' if ok else 'NOT MET'}")
+    lines.append(f"  verdict: {'MET by ' + ', '.join(met) if met else 'NOT MET'}")
+    return lines
+
+
+def verdict_hexapod_margin(records) -> list[str]:
+    """The hexapod core on the iCE40 part at 48 MHz with the Fmax margin."""
+    hx = [r for r in records if r["design"] == "hexapod" and r["device"] == ICE40 and r["status"] == "placed"]
+    if not hx:
+        return [f"hexapod at {HEXAPOD_CLOCK_MHZ:g} MHz on the iCE40 part: not placed - not decided"]
+    need = HEXAPOD_CLOCK_MHZ * (1 + HEXAPOD_MARGIN)
+    ok, line = _check("Fmax", hx[0]["fmax_mhz"], ">=", round(need, 3), "MHz")
+    return [f"hexapod core at {HEXAPOD_CLOCK_MHZ:g} MHz with >= {HEXAPOD_MARGIN:.0%} margin on the iCE40 part "
+            f"({hx[0]['description']}): {line}, margin {hx[0]['fmax_mhz'] / HEXAPOD_CLOCK_MHZ - 1:+.1%} -> "
+            f"{'MET' if ok else 'NOT MET'}"]
+
+
+def verdict_small_core(records) -> list[str]:
+    """A single-leg core on the iCE40 part at one solution per at most ``SMALL_CORE_II`` cycles:
+    the smallest placed one (the part has too few DSP blocks for one solution per clock)."""
+    cores = [r for r in _by(records, ICE40) if r["kind"] in ("polynomial", "cordic")
+             and r["initiation_interval"] <= SMALL_CORE_II]
+    placed = [r for r in cores if r["status"] == "placed"]
+    head = f"single-leg core on the iCE40 part at one solution per <= {SMALL_CORE_II} cycles"
+    if not placed:
+        tried = ", ".join(f"{r['design']} ({r['status']})" for r in cores) or "none run"
+        return [f"{head}: none placed ({tried}) - NOT MET"]
+    r = min(placed, key=lambda r: (r["LC"], r["initiation_interval"]))
+    return [f"{head}: the smallest placed is {r['design']}: {r['LC']} LC, {r['DSP']} DSP, {r['BRAM']} BRAM, "
+            f"one solution per {r['initiation_interval']} cycles at {r['fmax_mhz']:.1f} MHz "
+            f"({r['throughput_per_s'] / 1e6:.3g} M/s) -> MET"]
 
 
 def verdict_ecp5_speed(records) -> list[str]:
@@ -366,6 +441,21 @@ def table(records) -> str:
     return "\n".join(lines)
 
 
+# -- seeds -----------------------------------------------------------------------------------------
+def median_records(runs: list[list[dict]], seeds: list[int]) -> list[dict]:
+    """One record per design and device from the runs of every seed (``runs[i]`` made with
+    ``seeds[i]``, records in the same order): the median seed's, by Fmax among the seeds that
+    placed it (the lower median), with ``fmax_by_seed`` (None where a seed did not place it);
+    where no seed placed it, the first seed's record."""
+    out = []
+    for group in zip(*runs):
+        placed = sorted(((r["fmax_mhz"], s, r) for s, r in zip(seeds, group) if r["status"] == "placed"),
+                        key=lambda t: t[:2])
+        _, seed, rec = placed[(len(placed) - 1) // 2] if placed else (None, seeds[0], group[0])
+        out.append({**rec, "seed": seed, "fmax_by_seed": {str(s): r["fmax_mhz"] for s, r in zip(seeds, group)}})
+    return out
+
+
 # -- main ------------------------------------------------------------------------------------------
 def _csv(value: str, allowed, what: str) -> list[str]:
     aliases = {"ice40": ICE40, "ecp5": ECP5}
@@ -443,7 +533,7 @@ def main(argv=None):
     ap.add_argument("--jobs", type=int, default=2, help="parallel place-and-route runs (1 or 2)")
     ap.add_argument("--clock-mhz", type=float, default=100.0, help="nextpnr --freq target")
     ap.add_argument("--cordic-design", default=None, help="CORDIC design as JSON (skips the sizing)")
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--seeds", default="1,2,3", help="nextpnr placer seeds (comma-separated); the median is reported")
     ap.add_argument("--out", default=FACTS["default_json"]("pareto"))
     ap.add_argument("--work", default="build/bench/pareto", help="place-and-route working directory")
     args = ap.parse_args(argv)
@@ -456,6 +546,12 @@ def main(argv=None):
         sys.exit(f"--jobs must be 1 or 2, not {args.jobs}")
     if not args.clock_mhz > 0:
         sys.exit(f"--clock-mhz must be positive, not {args.clock_mhz}")
+    try:
+        seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
+    except ValueError:
+        seeds = []
+    if not seeds or len(set(seeds)) != len(seeds):
+        sys.exit(f"--seeds must be distinct integers separated by commas, not {args.seeds!r}")
     out = Path(args.out).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -464,8 +560,9 @@ def main(argv=None):
     order = {"pipelined": 0, "cordic": 1, "hexapod": 2}
     specs.sort(key=lambda s: order.get(s.name, 3))
     clock_hz = int(round(args.clock_mhz * 1e6))
-    records = run_matrix(specs, devices, clock_hz, Path(args.work).resolve(), jobs=args.jobs, seed=args.seed,
-                         progress=say)
+    runs = [run_matrix(specs, devices, clock_hz, Path(args.work).resolve() / f"seed{s}", jobs=args.jobs, seed=s,
+                       progress=lambda m, s=s: say(f"seed {s}: {m}")) for s in seeds]
+    records = median_records(runs, seeds)
     for r in records:
         if r["kind"] == "robot" and r["status"] == "placed":
             per = r["legs"] * r["initiation_interval"]
@@ -478,9 +575,11 @@ def main(argv=None):
         png = out.with_name(f"{out.stem}_{d}.png")
         front = plot_device([r for r in records if r["kind"] != "robot"], d, png)
         plots[d] = {"png": str(png), "pareto_front": front}
-    verdicts = {"ecp5_speed": verdict_ecp5_speed(records), "hexapod": verdict_hexapod(records),
+    verdicts = {"one_per_clock": verdict_one_per_clock(records, info["tolerance_pu"]),
+                "hexapod_margin": verdict_hexapod_margin(records), "small_core": verdict_small_core(records),
+                "ecp5_speed": verdict_ecp5_speed(records), "hexapod": verdict_hexapod(records),
                 "poly_vs_cordic": verdict_poly_vs_cordic(records)}
-    result = {**info, "clock_target_mhz": args.clock_mhz, "seed": args.seed, "devices": devices,
+    result = {**info, "clock_target_mhz": args.clock_mhz, "seeds": seeds, "devices": devices,
               "area_metric": "LUT + FF - harness_ffs (Yosys counts)", "records": records, "plots": plots,
               "verdicts": verdicts, "seconds": round(time.perf_counter() - t0, 1)}
     FACTS["write_result"](out, result, run)

@@ -193,7 +193,9 @@ def _pareto_row(r: dict) -> tuple:
     """One table row of a place-and-route record ``r``."""
     placed = r["status"] == "placed"
     if placed:
-        status = num(r["fmax_mhz"], ".1f")
+        seeds = r.get("fmax_by_seed") or {}
+        status = num(r["fmax_mhz"], ".1f") + (" (" + " / ".join(num(v, ".1f") for v in seeds.values()) + ")"
+                                              if len(seeds) > 1 else "")
     elif r["overflow"]:
         status = "does not fit: " + ", ".join(f"{k} {o['used']} of {o['available']}" for k, o in r["overflow"].items())
     else:
@@ -207,10 +209,12 @@ def _pareto_row(r: dict) -> tuple:
 
 def pareto(res: dict) -> list[str]:
     """Lines of the ``bench/pareto.py`` section from its JSON ``res``."""
-    head = ("core", "device", "Fmax (MHz)", "LC (nextpnr)", "LUT", "FF", "DSP", "BRAM", "latency (cycles / ns)",
+    head = ("core", "device", "Fmax (MHz; per seed)", "LC (nextpnr)", "LUT", "FF", "DSP", "BRAM", "latency (cycles / ns)",
             "II", "M solutions/s", "max error (pu)")
-    lines = [f"Robot `{res['robot']}` (the hexapod row: the hexapod preset's shared core), nextpnr seed "
-             f"{res['seed']}, `--freq` {res['clock_target_mhz']:g} MHz, Fmax of the register-to-register paths. "
+    seeds = res["seeds"] if "seeds" in res else [res["seed"]]
+    lines = [f"Robot `{res['robot']}` (the hexapod row: the hexapod preset's shared core), nextpnr seed"
+             f"{'s' * (len(seeds) > 1)} {', '.join(map(str, seeds))} (each row the median seed's), `--freq` "
+             f"{res['clock_target_mhz']:g} MHz, Fmax of the register-to-register paths. "
              "LUT, FF, DSP and BRAM from Yosys (ECP5 LUT: LUT4 cells plus the two LUT4s of every CCU2C), LC "
              "the logic cells nextpnr placed; cores with more port bits than the package has pins run inside "
              "a serial timing harness, whose flip-flops the LC and FF counts include.", "",
@@ -224,7 +228,7 @@ def pareto(res: dict) -> list[str]:
                   f"![{device}](results/{plot['png'].rsplit('/', 1)[-1]})", ""]
     lines += ["Verdicts on the design targets, as the bench prints them:", "", "```"]
     for verdict in res["verdicts"].values():
-        lines += verdict
+        lines += verdict + [""]
     return lines + ["```", ""]
 
 

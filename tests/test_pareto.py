@@ -165,3 +165,50 @@ def test_bench_iterative_cordic_spec(robot):
     assert it.latency_cycles(bench.ECP5) == pipe.latency_cycles(bench.ECP5)
     text, top = it.verilog(bench.ECP5)
     assert top == "cordic_iterative" and f"module {top}" in text and "phase" in text
+
+
+def test_issue_targets_verdicts_on_hand_made_records():
+    bench = _bench()
+    base = {"kind": "polynomial", "status": "placed", "overflow": None, "error": None, "max_error_pu": 0.4,
+            "device": bench.ECP5, "initiation_interval": 1, "BRAM": 10, "certified_pu": {"s1": 0.5, "s2": 0.49}}
+    fast = {**base, "design": "modulo1d", "fmax_mhz": 210.0, "latency_ns": 95.0, "DSP": 28}
+    lines = bench.verdict_one_per_clock([fast], 0.5)
+    assert lines[1].endswith("-> met") and lines[-1] == "  verdict: MET by modulo1d"
+    slow = {**fast, "design": "pipelined", "fmax_mhz": 150.0, "DSP": 30}
+    lines = bench.verdict_one_per_clock([slow, {**fast, "certified_pu": {"s1": 0.51}}], 0.5)
+    assert "DSP 30 <= 28 (NOT MET by 2)" in lines[1] and "Fmax 150 MHz >= 200 MHz (NOT MET by 50 MHz)" in lines[1]
+    assert "certified 0.51 pu <= 0.5 pu (NOT MET by 0.01 pu)" in lines[2]
+    assert lines[-1] == "  verdict: NOT MET"
+    over = {**fast, "status": "does-not-fit", "overflow": {"DSP": {"used": 84, "available": 28, "over": 56}}}
+    assert bench.verdict_one_per_clock([over], 0.5)[1] == "  modulo1d: does-not-fit DSP 84/28 (3.0x) - NOT MET"
+    assert "not decided" in bench.verdict_one_per_clock([{**fast, "initiation_interval": 4}], 0.5)[0]
+
+    hx = {**base, "kind": "robot", "design": "hexapod", "device": bench.ICE40, "description": "folded",
+          "fmax_mhz": 56.0}
+    assert bench.verdict_hexapod_margin([hx])[0].endswith("margin +16.7% -> MET")
+    assert bench.verdict_hexapod_margin([{**hx, "fmax_mhz": 50.0}])[0].endswith("margin +4.2% -> NOT MET")
+
+    small = {**base, "device": bench.ICE40, "design": "modulo12", "initiation_interval": 12, "LC": 3000,
+             "DSP": 6, "fmax_mhz": 40.0, "throughput_per_s": 40e6 / 12}
+    folded = {**small, "design": "folded1", "initiation_interval": 70, "LC": 1500}
+    line = bench.verdict_small_core([folded, small, {**small, "design": "modulo8", "initiation_interval": 8,
+                                                     "LC": 3500}])[0]
+    assert "the smallest placed is modulo12: 3000 LC, 6 DSP" in line and line.endswith("-> MET")
+    assert bench.verdict_small_core([folded])[0].endswith("none placed (none run) - NOT MET")
+
+
+def test_median_records_take_the_median_seed():
+    bench = _bench()
+
+    def rec(fmax, status="placed"):
+        return {"design": "d", "device": "x", "status": status, "fmax_mhz": fmax, "LC": fmax and int(fmax)}
+    runs = [[rec(50.0), rec(None, "does-not-fit")], [rec(40.0), rec(None, "does-not-fit")],
+            [rec(60.0), rec(None, "does-not-fit")]]
+    med, nofit = bench.median_records(runs, [1, 2, 3])
+    assert (med["fmax_mhz"], med["LC"], med["seed"]) == (50.0, 50, 1)
+    assert med["fmax_by_seed"] == {"1": 50.0, "2": 40.0, "3": 60.0}
+    assert nofit["status"] == "does-not-fit" and nofit["seed"] == 1
+    two = bench.median_records([[rec(50.0)], [rec(40.0)]], [1, 2])[0]
+    assert (two["fmax_mhz"], two["seed"]) == (40.0, 2)          # the slower of two
+    one_placed = bench.median_records([[rec(None, "error")], [rec(45.0)]], [1, 2])[0]
+    assert (one_placed["fmax_mhz"], one_placed["seed"]) == (45.0, 2)
