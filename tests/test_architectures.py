@@ -140,7 +140,7 @@ def test_the_fitter_prices_structures_by_the_cost_model(small_robot, monkeypatch
             return 1000 + super().cost(plan, output)
     model = Counting()
     contexts = []
-    monkeypatch.setattr(fitter, "_fit_attempts", lambda ctx, progress, certified: contexts.append(ctx))
+    monkeypatch.setattr(fitter, "_fit_attempts", lambda ctx, progress, certified, jobs: contexts.append(ctx))
     fitter.fit_robot(small_robot, cost_model=model)
     assert [c.cost_model for c in contexts] == [model]
     ctx = FitContext.for_robot(small_robot, 0.1, model)

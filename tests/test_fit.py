@@ -269,7 +269,7 @@ def _fitted_servos(monkeypatch, small_fitted):
     """Every servo search returns the session's fits of the small robot: the tests using this
     are about the formats after the search, which it would only repeat."""
     from ikseries.fit import fitter
-    monkeypatch.setattr(fitter, "_fit_servos", lambda ctx, samples, fits, approx, progress: list(small_fitted[1]))
+    monkeypatch.setattr(fitter, "_fit_servos", lambda ctx, samples, fits, approx, progress, jobs: list(small_fitted[1]))
 
 
 def test_products_dsp_give_rounding_a_larger_share_when_the_usual_one_is_too_small(small_robot, small_fitted,
