@@ -50,7 +50,6 @@ class _Regs:
         self.ans_len = Signal(range(d._region + 1))
         self.rd_idx = Signal(range(d._region))              # answer byte the memory now shows
         self.move_time = Signal(d._time_bits)
-        self.uptime = Signal(32)
         self.since = Signal(range(d._period + 1))           # cycles since the last period start
         self.clamped = Signal(P.COUNTER_BITS)
         self.pending, self.started = Signal(), Signal()     # a commit not yet applied; its pass began
@@ -109,7 +108,8 @@ class Dispatcher(wiring.Component):
     write, target, commit, read, status, keepalive, busy, period_start
         To the servo controller's ports of the same names.
 
-    Reset state: idle, no answer pending, move time 0, counters (``uptime``, ``clamped``) 0.
+    Reset state: idle, no answer pending, move time 0, ``clamped`` 0 (the status answer's uptime
+    is the link's: words ``UPTIME_WORD`` and the next of its counter memory).
 
     Latency
     -------
@@ -252,7 +252,7 @@ class Dispatcher(wiring.Component):
         flag = Mux(u["bsel"] | r.bl, st.enabled, st.moving)
         stb = Cat(st.target, Const(0, 32 - len(st.target)), st.current, Const(0, 32 - len(st.current)))
         src = {"IMM": imm, "RD": self.rd_data, "F0": r.f[:8], "SEXT": r.f[31].replicate(8),
-               "CNT": Mux(imm[3], cd[8:16], cd[:8]), "UP": r.uptime.word_select(imm[4:6], 8),
+               "CNT": Mux(imm[3], cd[8:16], cd[:8]),
                "CL": r.clamped.word_select(imm[0], 8), "S": r.s, "FLAG": flag, "CMD": r.cmd, "CH": r.ch,
                "STB": stb.word_select(imm[:3], 8)}
         x = Signal(8)
@@ -334,6 +334,8 @@ class Dispatcher(wiring.Component):
         with m.If(wm["ans"]):
             m.d.comb += [wr.en.eq(1), wr.addr.eq(self._region_addr(1, r.b)), wr.data.eq(x)]
             m.d.sync += r.b.eq(r.b + 1)
+        with m.If(fire & u["BSET"]):
+            m.d.sync += r.b.eq(u["imm"])
         with m.If(wm["width"]):
             m.d.comb += [wr.en.eq(1), wr.addr.eq(r.ch), wr.data.eq(widths)]
         with m.If(wm["pulse"]):
@@ -353,7 +355,6 @@ class Dispatcher(wiring.Component):
     def _ports(self, m, r, u, s, e, rd):
         imm = u["imm"]
         m.d.sync += r.since.eq(Mux(self.period_start, 0, Mux(r.since == self._period, r.since, r.since + 1)))
-        _saturating_increment(m, r.uptime, self.period_start)
         # a commit is applied by the pass of the next period start (staged in the window before it)
         with m.If(self.period_start & r.pending):
             m.d.sync += r.started.eq(1)

@@ -21,6 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from . import protocol as P
+from .answers import answer_bytes
+from .link import UPTIME_WORD
 from .servo_fields import ChannelField, FailsafeAction
 
 __all__ = ["CONDS", "SOURCES", "STROBES", "Ins", "Assembled", "Geometry", "command_index", "program",
@@ -32,10 +34,10 @@ ADDR_BITS = 8
 CONDS = ("0", "B", "BL", "reqok", "ik_ready", "ik_valid", "wr_ready", "tg_ready", "rd_ready", "st_valid",
          "ans_ready", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
 #: the byte sources of ``X`` (``ZERO`` is the default)
-SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "UP", "CL", "S", "FLAG", "CMD", "CH", "STB")
+SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "CL", "S", "FLAG", "CMD", "CH", "STB")
 #: one ROM bit each
 STROBES = ("ACC", "IDENT", "NACK", "TAKE", "DISP", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV",
-           "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH")
+           "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET")
 _OPS = {"ra": (None, "inc", "set", "clear"), "ch": (None, "inc", "load", "clear"), "lm": (None, "rot", "mask", "one"),
         "s": (None, "shift", "load"), "wm": (None, "ans", "width", "pulse")}
 _REASON_BAD = 1 + [n for n, _ in P.NACK_REASONS].index("bad_value")
@@ -172,20 +174,24 @@ def _flag_bytes(g):
     out.append(_ins(wm="ans", src="S", label=None if pad else "FLEND"))
     out += [_ins(wm="ans", src="IMM", imm=0) for _ in range(4 - (c + 7) // 8)]
     # B := 1 (0 - 1 borrows), then BL := B
-    out += [_ins(cond="BL", to="STHDR"), _ins(alu="first", imm=1),
-            _ins(sp={"LATCH"}, ch="clear", cond="always", to="FL"), _header("STHDR", 26)]
-    return out
+    return out + [_ins(cond="BL", to="STC"), _ins(alu="first", imm=1),
+                  _ins(sp={"LATCH"}, ch="clear", cond="always", to="FL")]
 
 
 def _status(g):
-    out = [_ins(sp={"ACC"}, at=_entry(0, "status"))]
-    # the last uptime byte already addresses counter 0: its word is read the next cycle
-    out += [_ins(wm="ans", src="UP", imm=k << 4) for k in range(4)]
-    n = len(P.RECEIVER_COUNTERS)
-    for a in range(n):
-        out += [_ins(wm="ans", src="CNT", imm=a), _ins(wm="ans", src="CNT", imm=8 | (a + 1) % n)]
-    out += [_ins(wm="ans", src="CL", imm=0), _ins(wm="ans", src="CL", imm=1, ch="clear")]
-    return out + _flag_bytes(g)
+    """The masks first (the servo controller's reads take a while), then the counters, so that
+    they are read shortly before the answer goes out."""
+    masks = answer_bytes(_C["status"].answer[:-2])
+    out = [_ins(sp={"ACC", "BSET"}, imm=masks, ch="clear", at=_entry(0, "status"))] + _flag_bytes(g)
+    # the uptime's two words, then the receiver's counters: a word is read the cycle after its
+    # address, so each byte's instruction addresses the next word
+    up, n = UPTIME_WORD, len(P.RECEIVER_COUNTERS)
+    order = [up, up + 1, *range(n)]
+    out += [_ins(label="STC", sp={"BSET"}, imm=0), _ins(imm=order[0])]
+    for i, a in enumerate(order):
+        out += [_ins(wm="ans", src="CNT", imm=a), _ins(wm="ans", src="CNT", imm=8 | order[(i + 1) % len(order)])]
+    out += [_ins(wm="ans", src="CL", imm=0), _ins(wm="ans", src="CL", imm=1), _header("STHDR", 26)]
+    return out
 
 
 def _channel_status(g):
