@@ -119,9 +119,11 @@ class Dispatcher(wiring.Component):
     takes it, its engine's pass (``pass_cycles``) at most. Moves: :meth:`move_cycles` to the
     commit strobe (per selected leg its ``C`` coordinates, the core's latency and ``servos``
     cycles; a wait of at most ``stage_cycles + pass_cycles`` for the staging window and
-    ``stage_cycles`` to stage and commit), the header 2 cycles later. Status and channel_status
-    answers: a read of the servo controller per channel (per flag of the status masks), a cycle
-    per answer byte (the link's counters read as they are then). The widths reach the pins at the
+    ``stage_cycles`` to stage and commit), the header the cycle after the strobe. Status: a read
+    of the servo controller per channel and flag of its two masks, then a cycle per answer byte
+    (the link's counters read as they are then); channel_status: once the last commit has been
+    applied by a pass (so its answer shows every earlier move), the channel's read, a cycle per
+    answer byte. The widths reach the pins at the
     second period start after the commit at the latest (the servo controller's latency). An
     answer byte is on ``answer_data`` the cycle after ``answer_index`` names it. A request waits
     in the link while the previous answer's payload is still being sent.
@@ -129,7 +131,7 @@ class Dispatcher(wiring.Component):
     Throughput
     ----------
     One request at a time. A full ``move_legs`` takes at most ``move_cycles(legs)``, about
-    ``legs * (12 C + latency + servos + 4) + pass_cycles + 2 * stage_cycles`` cycles, far below
+    ``legs * (11 C + latency + servos + 5) + pass_cycles + 2 * stage_cycles`` cycles, far below
     the line time of its frame at the rates :func:`~ikseries.hdl.uart.uart_divisor` allows for
     a clock of tens of MHz (see ``tests/test_controller.py``, which measures it): the UART
     is the limit.
@@ -175,9 +177,9 @@ class Dispatcher(wiring.Component):
         return self._stage_cycles
 
     @property
-    def program_words(self) -> int:
-        """Instructions of the microprogram (its ROM holds 256)."""
-        return sum(w is not None for w in self._asm.words)
+    def program_words(self) -> tuple[int, int]:
+        """Instructions of the microprogram and the words of its ROM."""
+        return sum(w is not None for w in self._asm.words), len(self._asm.words)
 
     def move_cycles(self, legs: int) -> int:
         """Most cycles from ``request.valid`` of a move of ``legs`` legs to its commit strobe:
@@ -200,12 +202,12 @@ class Dispatcher(wiring.Component):
         m.submodules.mem = mem = Memory(shape=max(self._w, 8), depth=3 * self._region,
                                         init=[0] * (2 * self._region) + list(self._identity))
         wr, rd = falling_edge_write_port(m, mem), mem.read_port()
-        width = sum(b for _, b in fields())
+        width = sum(b for _, b in fields(len(self._asm.words)))
         m.submodules.rom = rom = Memory(shape=unsigned(width), depth=len(self._asm.words),
                                         init=encode(self._asm))
         rp = rom.read_port()
         u, off = {}, 0
-        for name, bits in fields():
+        for name, bits in fields(len(self._asm.words)):
             u[name] = rp.data[off:off + bits]
             off += bits
         m.d.sync += r.boot.eq(0)

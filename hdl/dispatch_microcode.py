@@ -21,15 +21,17 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from . import protocol as P
-from .answers import answer_bytes
+from .answers import answer_bytes, scalar_offsets
 from .link import UPTIME_WORD
 from .servo_fields import ChannelField, FailsafeAction
 
 __all__ = ["CONDS", "SOURCES", "STROBES", "Ins", "Assembled", "Geometry", "command_index", "program",
-           "assemble", "encode", "ROM_DEPTH", "fields"]
+           "assemble", "encode", "ROM_DEPTH", "ROM_DEPTHS", "fields"]
 
-ROM_DEPTH = 256
-ADDR_BITS = 8
+#: ROM depths tried in turn: 256 words of up to 80 bits are five iCE40 block RAMs; a program of
+#: more (more coordinates, servos, legs than a hexapod's) takes the next
+ROM_DEPTHS = (256, 512)
+ROM_DEPTH = ROM_DEPTHS[0]
 #: branch conditions (index 0 is constant 0: ``never``, inverted ``always``)
 CONDS = ("0", "B", "BL", "reqok", "ik_ready", "ik_valid", "wr_ready", "tg_ready", "rd_ready", "st_valid",
          "ans_ready", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
@@ -45,9 +47,10 @@ _C = {c.name: c for c in P.COMMANDS}
 _NAMES = {c.code: c.name for c in P.COMMANDS}
 
 
-def fields() -> tuple:
-    """ROM word fields, low bits first: (name, bits)."""
-    return (("cond", 5), ("inv", 1), ("to", ADDR_BITS), ("nxt", ADDR_BITS), ("imm", 8), ("src", 4),
+def fields(depth: int = ROM_DEPTH) -> tuple:
+    """ROM word fields of a ROM of ``depth`` words, low bits first: (name, bits)."""
+    a = (depth - 1).bit_length()
+    return (("cond", 5), ("inv", 1), ("to", a), ("nxt", a), ("imm", 8), ("src", 4),
             ("shf", 1), ("alu", 1), ("first", 1), ("ysel", 1), ("bias", 1), ("ra", 2), ("ch", 2), ("tg", 1),
             ("lm", 2), ("s", 2), ("sz", 1), ("bsel", 1), ("wm", 2), ("hold", 1)) + tuple((s, 1) for s in STROBES)
 
@@ -100,6 +103,17 @@ def _ins(*args, sp=(), **kw):
     return Ins(*args, sp=frozenset(sp), **kw)
 
 
+def _field(cmd: str, name: str) -> tuple:
+    """(payload offset, bytes, signed) of request field ``name`` of command ``cmd``, from the
+    protocol table."""
+    return scalar_offsets(_C[cmd])[name]
+
+
+def _kind(cmd: str, name: str) -> tuple:
+    """(bytes, signed) of a request field."""
+    return _field(cmd, name)[1:]
+
+
 def _wait(label, cond, **kw):
     return _ins(label=label, cond="~" + cond, to=label, hold=True, **kw)
 
@@ -150,15 +164,18 @@ def _common(g):
     nack = [_ins(label="NACK", sp={"ACC", "NACK"}, wm="ans", src="CMD"),
             _ins(wm="ans", src="IMM", imm=_REASON_BAD), _header("NACKHDR", 2), _header("ACK", 0)]
     # a channel field first: checked, kept, then the command's own table
-    chan = _load(1, False, g.channels)[1:] + [_ins(cond="~B", to="NACK", ch="load", sp={"DISP"}, imm=2)]
+    chans = {_kind(c.name, "channel") for c in P.COMMANDS if c.request and c.request[0].name == "channel"}
+    assert len(chans) == 1, chans
+    chan = _load(*chans.pop(), g.channels)[1:] + [_ins(cond="~B", to="NACK", ch="load", sp={"DISP"}, imm=2)]
     chan_entries = [_ins(ra="inc", nxt="CH1", at=_entry(0, c.name)) for c in P.COMMANDS
                     if c.request and c.request[0].name == "channel"]
     chan[0] = replace(chan[0], label="CH1")
     # a width field (u24 below 2 ** W), then the command's entry of the third table
-    wide = _load(3, False, 1 << g.width_bits)[1:] + [_ins(cond="~B", to="NACK", sp={"DISP"}, imm=3)]
+    wide = _load(*_kind("set_pulse", "pulse"), 1 << g.width_bits)[1:] + [_ins(cond="~B", to="NACK", sp={"DISP"}, imm=3)]
     wide[0] = replace(wide[0], label="WD1")
-    wide_entries = [_ins(ra="inc", nxt="WD1", at=_entry(1, n)) for n in
-                    ("set_pulse", "set_speed", "set_accel", "set_home")]
+    names = {"set_pulse": "pulse", "set_speed": "speed", "set_accel": "accel", "set_home": "pulse"}
+    assert {_kind(c, n) for c, n in names.items()} == {_kind("set_pulse", "pulse")}
+    wide_entries = [_ins(ra="inc", nxt="WD1", at=_entry(1, n)) for n in names]
     return idle + ident + nack + chan_entries + chan + wide_entries + wide
 
 
@@ -211,15 +228,18 @@ def _writes(g):
                       ("set_home", ChannelField.HOME)):
         out += [_ins(sp={"ACC"}, at=_entry(2, name)), _write(fld)]
     # the trim: signed, in [-2 ** W, 2 ** W)
-    out += [*_load(3, True, -(1 << w), first={"at": _entry(1, "set_trim")}), _ins(cond="B", to="NACK"),
+    out += [*_load(*_kind("set_trim", "trim"), -(1 << w), first={"at": _entry(1, "set_trim")}), _ins(cond="B", to="NACK"),
             *_rotate(1 << w, True), _ins(cond="~B", to="NACK"), _ins(sp={"ACC"}), _write(ChannelField.TRIM)]
-    out += [*_load(1, False, max(FailsafeAction) + 1, first={"at": _entry(1, "set_failsafe_action")}),
+    out += [*_load(*_kind("set_failsafe_action", "action"), max(FailsafeAction) + 1,
+                   first={"at": _entry(1, "set_failsafe_action")}),
             _ins(cond="~B", to="NACK"), _ins(sp={"ACC"}), _write(ChannelField.FAILSAFE)]
-    out += [*_load(2, False, (1 << w) if w < 16 else None, first={"at": _entry(0, "set_failsafe")})]
-    if w < 16:
+    nbytes, signed = _kind("set_failsafe", "periods")
+    out += [*_load(nbytes, signed, (1 << w) if w < 8 * nbytes else None, first={"at": _entry(0, "set_failsafe")})]
+    if w < 8 * nbytes:
         out.append(_ins(cond="~B", to="NACK"))
     out += [_ins(sp={"ACC"}), _write(ChannelField.TIMEOUT)]
-    out += [*_load(2, False, first={"at": _entry(0, "set_move_time")}), _ins(sp={"ACC", "MT"}, nxt="ACK")]
+    out += [*_load(*_kind("set_move_time", "periods"), first={"at": _entry(0, "set_move_time")}),
+            _ins(sp={"ACC", "MT"}, nxt="ACK")]
     return out
 
 
@@ -231,14 +251,16 @@ def _reload(offset, nbytes):
 def _limits(g):
     """max (below 2 ** W) into F; min streamed in against it byte by byte (min - max - 1 borrows:
     min <= max), leaving min in F for its write; max loaded again for its own."""
-    out = [_ins(ra="set", imm=4, at=_entry(1, "set_limits")), *_load(3, False, 1 << g.width_bits),
-           _ins(cond="~B", to="NACK", ra="set", imm=1), _ins(ra="inc")]
+    (lo_at, lo_n, _), (hi_at, hi_n, _) = _field("set_limits", "min"), _field("set_limits", "max")
+    assert lo_n == hi_n and not _field("set_limits", "min")[2]
+    out = [_ins(ra="set", imm=hi_at, at=_entry(1, "set_limits")), *_load(hi_n, False, 1 << g.width_bits),
+           _ins(cond="~B", to="NACK", ra="set", imm=lo_at), _ins(ra="inc")]
     # the chain starts with a borrow (sz on the first byte)
-    out += [_ins(src="RD" if i < 3 else "ZERO", shf=True, ra="inc" if i < 2 else None, ysel=True,
+    out += [_ins(src="RD" if i < lo_n else "ZERO", shf=True, ra="inc" if i < lo_n - 1 else None, ysel=True,
                  alu="first" if i == 0 else "chain", sz=i == 0) for i in range(4)]
     out += [_ins(cond="~B", to="NACK"), _ins(sp={"ACC"}),
             _wait("LMIN", "wr_ready", sp={"WRV"}, imm=int(ChannelField.MIN)),
-            *_reload(4, 3), _write(ChannelField.MAX)]
+            *_reload(hi_at, hi_n), _write(ChannelField.MAX)]
     return out
 
 
@@ -247,7 +269,8 @@ def _masks(g):
     c = g.channels
     k = (1 << c) if c < 32 else None
     out = [_ins(ra="inc", at=_entry(0, name), nxt="MK1") for name in ("enable", "relax")]
-    load = _load(4, False, k)[1:]
+    assert _kind("enable", "channels") == _kind("relax", "channels")
+    load = _load(*_kind("enable", "channels"), k)[1:]
     load[0] = replace(load[0], label="MK1")
     out += load + [_ins(cond="~B" if k is not None else "never", to="NACK", sp={"DISP"}, imm=3)]
     for name, value in (("enable", 1), ("relax", 0)):
@@ -280,14 +303,24 @@ def _coord(k, lo, hi, after, prime_after):
     return out
 
 
+def _skip(label, servos, then):
+    """An unselected leg: its channels passed over, a cycle each."""
+    out = [_ins(ch="inc", label=label if j == 0 else None) for j in range(servos)]
+    out[-1] = replace(out[-1], cond="always", to=then)
+    return out
+
+
 def _moves(g):
     """The leg field, then each leg of the mask: its coordinates saturated, through the core, its
     widths into the buffer (word ``leg * servos + j``)."""
-    out = [*_load(1, False, g.legs, first={"at": _entry(0, "move_leg")}),
+    out = [*_load(*_kind("move_leg", "leg"), g.legs, first={"at": _entry(0, "move_leg")}),
            _ins(cond="~B", to="NACK", lm="one", ch="clear", nxt="LEG")]
-    out += [*_load(1, False, 1 << g.legs, first={"at": _entry(0, "move_legs")}), _ins(cond="~B", to="NACK"),
+    out += [*_load(*_kind("move_legs", "legs"), 1 << g.legs, first={"at": _entry(0, "move_legs")}),
+            _ins(cond="~B", to="NACK"),
             *_rotate(1, False), _ins(cond="B", to="NACK", lm="mask", ch="clear", nxt="LEG")]
     coords = len(g.bounds)
+    target = next(f for f in _C["move_legs"].request if f.count == "coords")
+    assert P.KINDS[target.kind] == (2, True), target      # TG holds 16 bits per coordinate
     out.append(_ins(label="LEG", cond="~LM0", to="SKIP", sp={"CLRO"}, nxt="K0"))
     for k, (lo, hi) in enumerate(g.bounds):
         last = k + 1 == coords
@@ -297,8 +330,7 @@ def _moves(g):
         out.append(_wait(f"ST{j}", "ik_valid", wm="width", imm=j, ch="inc",
                          sp={"IKR"} if j == g.servos - 1 else ()))
     out += [_ins(label="LNEXT", lm="rot", cond="leglast", to="MDONE", nxt="LEG"),
-            *[_ins(ch="inc", label="SKIP" if j == 0 else None) for j in range(g.servos - 1)],
-            _ins(ch="inc", cond="always", to="LNEXT"),
+            *_skip("SKIP", g.servos, "LNEXT"),
             _ins(label="MDONE", sp={"ACC"}, ch="clear", nxt="STAGE")]
     return out
 
@@ -312,8 +344,7 @@ def _stage(g):
     for j in range(g.servos):
         out += ([_ins()] if j else []) + [_wait(f"SG{j}", "tg_ready", sp={"TGV"}, ch="inc")]
     out += [_ins(label="SNEXT", lm="rot", cond="leglast", to="COMMIT", nxt="SL"),
-            *[_ins(ch="inc", label="SSKIP" if j == 0 else None) for j in range(g.servos - 1)],
-            _ins(ch="inc", cond="always", to="SNEXT"),
+            *_skip("SSKIP", g.servos, "SNEXT"),
             _ins(label="COMMIT", sp={"COMMIT"}), _ins(nxt="ACK")]
     return out
 
@@ -360,11 +391,19 @@ class Assembled:
 
 
 def assemble(prog: list[Ins]) -> Assembled:
-    """Place the program (table entries and fixed words first), resolve labels and fall-throughs."""
+    """Place the program in the smallest ROM of :data:`ROM_DEPTHS` it fits (table entries and
+    fixed words first), resolve labels and fall-throughs."""
+    for depth in ROM_DEPTHS[:-1]:
+        if len(prog) <= depth:
+            return _assemble(prog, depth)
+    return _assemble(prog, ROM_DEPTHS[-1])
+
+
+def _assemble(prog, depth):
     idx = {c.code: command_index(c.code) for c in P.COMMANDS}
     if len(set(idx.values())) != len(idx) or any(c >> 6 for c in idx):
         raise ValueError(f"command codes must have distinct dispatch indices, not {idx!r}")
-    prog, words, addr = list(prog), [None] * ROM_DEPTH, {}
+    prog, words, addr = list(prog), [None] * depth, {}
     for i, s in enumerate(prog):
         if s.at is not None:
             a = s.at[1] if s.at[0] == "fixed" else 16 * (s.at[1] + 1) + idx[s.at[2]]
@@ -374,12 +413,12 @@ def assemble(prog: list[Ins]) -> Assembled:
             if s.at[0] == "table" and s.label is None:
                 s = prog[i] = replace(s, label=f"T{s.at[1]}_{_NAMES[s.at[2]]}")
                 words[a] = s
-    free = (a for a in range(ROM_DEPTH) if words[a] is None)
+    free = (a for a in range(depth) if words[a] is None)
     for i, s in enumerate(prog):
         if i not in addr:
             a = next(free, None)
             if a is None:
-                raise ValueError(f"the program must fit {ROM_DEPTH} words, not {len(prog)}")
+                raise ValueError(f"the program must fit {depth} words, not {len(prog)}")
             words[a], addr[i] = s, a
     labels = {}
     for i, s in enumerate(prog):
@@ -387,7 +426,7 @@ def assemble(prog: list[Ins]) -> Assembled:
             if s.label in labels:
                 raise ValueError(f"label {s.label!r} twice")
             labels[s.label] = addr[i]
-    to, nxt = [0] * ROM_DEPTH, [0] * ROM_DEPTH
+    to, nxt = [0] * depth, [0] * depth
     for i, s in enumerate(prog):
         a = addr[i]
         for name in (s.to, s.nxt):
@@ -423,7 +462,7 @@ def encode(asm: Assembled) -> list[int]:
         v.update({k: ops.index(getattr(s, k)) for k, ops in _OPS.items()})
         v.update({k: int(k in s.sp) for k in STROBES})
         word, off = 0, 0
-        for name, bits in fields():
+        for name, bits in fields(len(asm.words)):
             assert 0 <= v[name] < 1 << bits, (name, v[name], s)
             word |= v[name] << off
             off += bits

@@ -157,7 +157,7 @@ class FrameReceiver(wiring.Component):
     block RAM: the bank of the frame on ``o`` is read through ``rd_addr``/``rd_data`` while the
     next frame fills the other, so a frame is offered only once its CRC is good (an atomic
     multi-leg move is never half applied). The command/length check is a block RAM table and the
-    error counters live in a block RAM too (Yosys gives it two copies, one a read port): four
+    error counters live in a block RAM too, with the controller's uptime (``period`` pulses) (Yosys gives it two copies, one a read port): four
     iCE40 block RAMs in all, written on the falling clock edge.
 
     Parameters
