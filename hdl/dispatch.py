@@ -329,7 +329,7 @@ class Dispatcher(wiring.Component):
     def _memory(self, m, r, u, x, fire, wr, rd):
         wm = self._op(m, u, "wm", fire)
         widths = Signal(self._w)
-        with m.Switch(u["imm"][:2]):
+        with m.Switch(u["imm"][:max(1, (self._servos - 1).bit_length())]):
             for j, name in enumerate(self._servo_names):
                 with m.Case(j):
                     m.d.comb += widths.eq(self.ik_o.payload.widths[name])
