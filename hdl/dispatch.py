@@ -48,6 +48,7 @@ class _Regs:
         self.b = Signal(range(d._region))                   # answer byte being built
         self.nack, self.ident, self.sending = Signal(), Signal(), Signal()
         self.ans_len = Signal(range(d._region + 1))
+        self.ans_cmd = Signal(8)
         self.rd_idx = Signal(range(d._region))              # answer byte the memory now shows
         self.move_time = Signal(d._time_bits)
         self.since = Signal(range(d._period + 1))           # cycles since the last period start
@@ -212,11 +213,15 @@ class Dispatcher(wiring.Component):
             off += bits
         m.d.sync += r.boot.eq(0)
         take, fire = self._sequencer(m, r, u, rp)
-        s = {name: u[name] & ~r.boot for name in STROBES}
-        e = {name: s[name] & fire for name in STROBES}      # register effects: not while waiting
+        # a wait's register effects wait for its condition (assemble allows a wait only the
+        # channel, memory, CLI and HDR effects): the others need not see the condition, whose
+        # path from the servo controller, core and link is the longest of the design
+        go = ~r.boot
+        s = {name: u[name] & go for name in STROBES}
+        e = {name: s[name] & (fire if name in ("CLI", "HDR") else go) for name in STROBES}
         x = self._source(m, r, u)
-        self._datapath(m, r, u, x, fire, e)
-        self._memory(m, r, u, x, fire, wr, rd)
+        self._datapath(m, r, u, x, go, fire, e)
+        self._memory(m, r, u, x, go, fire, wr, rd)
         self._ports(m, r, u, s, e, rd)
         return m
 
@@ -227,11 +232,15 @@ class Dispatcher(wiring.Component):
     # -- conditions and the next address
     def _sequencer(self, m, r, u, rp):
         c = self._channels
-        window = ~self.busy & (r.since < self._period - self._stage_cycles)
-        base = {"0": Const(0, 1), "B": r.b_, "BL": r.bl, "reqok": self.request.valid & ~r.sending,
+        # registered a cycle late (since has moved on by one, or restarted: then it errs closed)
+        early = Signal()
+        m.d.sync += early.eq(r.since < self._period - self._stage_cycles - 1)
+        window = ~self.busy & early
+        base = {"0": Const(0, 1), "B": r.b_, "BL": r.bl,
+                "reqok": self.request.valid & ~r.sending & ~self.answer.valid,
                 "ik_ready": self.ik_i.ready, "ik_valid": self.ik_o.valid, "wr_ready": self.write.ready,
                 "tg_ready": self.target.ready, "rd_ready": self.read.ready, "st_valid": self.status.valid,
-                "ans_ready": self.answer.ready, "window": window, "LM0": r.lm[0], "S0": r.s[0],
+                "ans_free": ~self.answer.valid, "window": window, "LM0": r.lm[0], "S0": r.s[0],
                 "leglast": r.leg == self._legs - 1, "chlast": r.ch == c - 1, "chlow0": r.ch[:3] == 0,
                 "applied": ~r.pending}
         # a binary tree of 2:1 multiplexers over the condition index
@@ -240,7 +249,12 @@ class Dispatcher(wiring.Component):
             level = [Mux(u["cond"][bit], hi, lo) for lo, hi in zip(level[::2], level[1::2])]
         take = Signal()
         m.d.comb += take.eq(level[0] ^ u["inv"])
-        fire = ~r.boot & ~(u["hold"] & take)
+        # a wait's effects happen as it ends; the waits that have effects are those assemble
+        # allows, each ended by one stream's handshake: fire sees only that, not the whole
+        # condition multiplexer
+        ends = ((u["TGV"] & self.target.ready) | ((u["wm"] == 2) & self.ik_o.valid)
+                | (u["IKV"] & self.ik_i.ready) | (u["HDR"] & ~self.answer.valid))
+        fire = ~r.boot & (~u["hold"] | ends)
         cmd = r.cmd
         # the dispatch index of the command code (dispatch_microcode.command_index)
         index = Cat(cmd[:2], cmd[2] ^ ~cmd[5], cmd[3] ^ cmd[4])
@@ -265,7 +279,7 @@ class Dispatcher(wiring.Component):
         self._flag = flag
         return x
 
-    def _datapath(self, m, r, u, x, fire, e):
+    def _datapath(self, m, r, u, x, go, fire, e):
         imm = u["imm"]
         y = Mux(u["ysel"], r.f[:8], imm)
         # X - Y - borrow, bit 7 of both flipped for a signed comparison's top byte
@@ -273,15 +287,15 @@ class Dispatcher(wiring.Component):
         cin = Mux(u["first"], u["sz"], r.b_)
         total = Signal(9)
         m.d.comb += total.eq(xb + (~yb)[:8] + ~cin)
-        with m.If(u["alu"] & fire):
+        with m.If(u["alu"] & go):
             m.d.sync += r.b_.eq(~total[8])
         with m.If(e["LATCH"]):
             m.d.sync += r.bl.eq(r.b_)
-        with m.If(u["shf"] & fire):
+        with m.If(u["shf"] & go):
             m.d.sync += r.f.eq(Cat(r.f[8:], x))
-        with m.If(u["tg"] & fire):
+        with m.If(u["tg"] & go):
             m.d.sync += r.tg.eq(Cat(r.tg[8:], y))
-        ra = self._op(m, u, "ra", fire)
+        ra = self._op(m, u, "ra", go)
         with m.If(ra["inc"]):
             m.d.sync += r.ra.eq(r.ra + 1)
         with m.If(ra["set"]):
@@ -293,7 +307,7 @@ class Dispatcher(wiring.Component):
             m.d.sync += r.ch.eq(r.ch + 1)
         with m.If(ch["load"]):
             m.d.sync += r.ch.eq(r.f[:len(r.ch)])
-        lm = self._op(m, u, "lm", fire)
+        lm = self._op(m, u, "lm", go)
         with m.If(lm["rot"]):
             m.d.sync += [r.lm.eq(Cat(r.lm[1:], r.lm[0])), r.leg.eq(r.leg + 1)]
         with m.If(lm["mask"]):
@@ -303,7 +317,7 @@ class Dispatcher(wiring.Component):
                          r.leg.eq(0)]
         with m.If(ch["clear"]):
             m.d.sync += [r.ch.eq(0), r.leg.eq(0)]
-        sh = self._op(m, u, "s", fire)
+        sh = self._op(m, u, "s", go)
         with m.If(sh["shift"]):
             m.d.sync += r.s.eq(Cat(r.s[1:], self._flag & ~u["sz"]))
         with m.If(sh["load"]):
@@ -318,15 +332,18 @@ class Dispatcher(wiring.Component):
             m.d.sync += r.nack.eq(1)
         with m.If(e["IDENT"]):
             m.d.sync += r.ident.eq(1)
+        # every cycle of the idle wait: the request's command is held while it is offered; the
+        # identity answer's region is kept while it is sent
         with m.If(e["TAKE"]):
-            m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.b.eq(0), r.nack.eq(0),
-                         r.ident.eq(0), r.bl.eq(0)]
+            m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.b.eq(0), r.nack.eq(0), r.bl.eq(0)]
+            with m.If(~r.sending & ~self.answer.valid):
+                m.d.sync += r.ident.eq(0)
         _saturating_increment(m, r.clamped, e["CLI"] & r.out)
 
     def _region_addr(self, region: int, offset):
         return Cat(offset[:(self._region - 1).bit_length()], Const(region, 2))
 
-    def _memory(self, m, r, u, x, fire, wr, rd):
+    def _memory(self, m, r, u, x, go, fire, wr, rd):
         wm = self._op(m, u, "wm", fire)
         widths = Signal(self._w)
         with m.Switch(u["imm"][:max(1, (self._servos - 1).bit_length())]):
@@ -336,7 +353,7 @@ class Dispatcher(wiring.Component):
         with m.If(wm["ans"]):
             m.d.comb += [wr.en.eq(1), wr.addr.eq(self._region_addr(1, r.b)), wr.data.eq(x)]
             m.d.sync += r.b.eq(r.b + 1)
-        with m.If(fire & u["BSET"]):
+        with m.If(go & u["BSET"]):
             m.d.sync += r.b.eq(u["imm"])
         with m.If(wm["width"]):
             m.d.comb += [wr.en.eq(1), wr.addr.eq(r.ch), wr.data.eq(widths)]
@@ -367,8 +384,7 @@ class Dispatcher(wiring.Component):
         # registered: the request's acceptance depends on the field checks
         m.d.sync += [self.keepalive.eq(self.request.valid & self.request.ready), self.commit.eq(e["COMMIT"])]
         m.d.comb += [self.request.ready.eq(e["ACC"]), self.counter_addr.eq(imm[:3]), self.rd_addr.eq(r.ra),
-                     self.answer.valid.eq(s["HDR"]), self.answer.payload.length.eq(imm),
-                     self.answer.payload.command.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT)),
+                     self.answer.payload.length.eq(r.ans_len), self.answer.payload.command.eq(r.ans_cmd),
                      self.ik_i.valid.eq(s["IKV"]), self.ik_i.payload.leg.eq(r.leg), self.ik_o.ready.eq(s["IKR"]),
                      self.write.valid.eq(s["WRV"]), self.write.payload.channel.eq(r.ch),
                      self.write.payload.field.eq(imm[:4]), self.write.payload.value.eq(r.f),
@@ -377,5 +393,9 @@ class Dispatcher(wiring.Component):
                      self.read.valid.eq(s["RDV"]), self.read.payload.eq(r.ch), self.status.ready.eq(e["STR"])]
         m.d.comb += [self.ik_i.payload.target[inp.name].eq(r.tg[16 * k:16 * k + 16])
                      for k, inp in enumerate(self._plan.inputs)]
+        # the header in a register, offered until the link takes it
+        with m.If(e["HDR"]):
+            m.d.sync += [self.answer.valid.eq(1), r.ans_len.eq(imm),
+                         r.ans_cmd.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT))]
         with m.If(self.answer.valid & self.answer.ready):
-            m.d.sync += [r.ans_len.eq(imm), r.sending.eq(imm != 0)]
+            m.d.sync += [self.answer.valid.eq(0), r.sending.eq(r.ans_len != 0)]

@@ -34,12 +34,17 @@ ROM_DEPTHS = (256, 512)
 ROM_DEPTH = ROM_DEPTHS[0]
 #: branch conditions (index 0 is constant 0: ``never``, inverted ``always``)
 CONDS = ("0", "B", "BL", "reqok", "ik_ready", "ik_valid", "wr_ready", "tg_ready", "rd_ready", "st_valid",
-         "ans_ready", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
+         "ans_free", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
 #: the byte sources of ``X`` (``ZERO`` is the default)
 SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "CL", "S", "FLAG", "CMD", "CH", "STB")
 #: one ROM bit each
 STROBES = ("ACC", "IDENT", "NACK", "TAKE", "DISP", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV",
            "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET")
+#: strobes whose effects do not wait for a wait's condition (the dispatcher gates only the others)
+_UNHELD = frozenset(STROBES) - {"CLI", "HDR", "TAKE", "RDV", "IKV", "IKR", "TGV", "WRV"}
+#: the waits whose effects happen as they end, and what ends them (Dispatcher: ``fire``)
+_HELD = {"~ik_valid": lambda s: s.wm == "width", "~tg_ready": lambda s: "TGV" in s.sp,
+         "~ik_ready": lambda s: "IKV" in s.sp, "~ans_free": lambda s: "HDR" in s.sp}
 _OPS = {"ra": (None, "inc", "set", "clear"), "ch": (None, "inc", "load", "clear"), "lm": (None, "rot", "mask", "one"),
         "s": (None, "shift", "load"), "wm": (None, "ans", "width", "pulse")}
 _REASON_BAD = 1 + [n for n, _ in P.NACK_REASONS].index("bad_value")
@@ -139,7 +144,9 @@ def _rotate(k, signed):
 
 
 def _header(label, length):
-    return _wait(label, "ans_ready", sp={"HDR"}, imm=length, nxt="IDLE")
+    """The answer header into its register (free: the previous one was taken before this
+    request was), then idle."""
+    return _wait(label, "ans_free", sp={"HDR"}, imm=length, nxt="IDLE")
 
 
 def _write(fld):
@@ -436,6 +443,11 @@ def _assemble(prog, depth):
             raise ValueError(f"instruction {i} {s!r}: unknown condition")
         if s.cond != "never" and s.to is None:
             raise ValueError(f"instruction {i} {s!r} branches nowhere")
+        if s.hold and (s.shf or s.alu or s.tg or s.ra or s.lm or s.s or s.sp & _UNHELD):
+            raise ValueError(f"instruction {i} {s!r}: a wait may change only the channel, the memory, "
+                             "the clamped count and the header")
+        if s.hold and (s.ch or s.wm or s.sp & {"CLI", "HDR"}) and not _HELD.get(s.cond, lambda s: False)(s):
+            raise ValueError(f"instruction {i} {s!r}: a wait with effects must be one of {sorted(_HELD)}")
         to[a] = labels[s.to] if s.to is not None else 0
         if s.nxt is not None:
             nxt[a] = labels[s.nxt]
