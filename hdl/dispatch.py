@@ -10,7 +10,7 @@ from amaranth.lib.memory import Memory
 from . import protocol as P
 from .answers import answer_bytes, answer_constant
 from .bram import falling_edge_write_port
-from .dispatch_microcode import CONDS, SOURCES, STROBES, Geometry, assemble, encode, fields, program
+from .dispatch_microcode import BITS, CODED, CONDS, SOURCES, STROBES, Geometry, assemble, encode, fields, program
 
 __all__ = ["Dispatcher"]
 
@@ -211,6 +211,10 @@ class Dispatcher(wiring.Component):
         for name, bits in fields(len(self._asm.words)):
             u[name] = rp.data[off:off + bits]
             off += bits
+        for k, name in enumerate(CODED):
+            u[name] = u["code"] == k + 1
+        # sz and bsel are the immediate's low bits (dispatch_microcode.encode)
+        u["sz"], u["bsel"] = u["imm"][1], u["imm"][0]
         m.d.sync += r.boot.eq(0)
         take, fire = self._sequencer(m, r, u, rp)
         # a wait's register effects wait for its condition (assemble allows a wait only the
@@ -284,7 +288,8 @@ class Dispatcher(wiring.Component):
         y = Mux(u["ysel"], r.f[:8], imm)
         # X - Y - borrow, bit 7 of both flipped for a signed comparison's top byte
         xb, yb = Cat(x[:7], x[7] ^ u["bias"]), Cat(y[:7], y[7] ^ u["bias"])
-        cin = Mux(u["first"], u["sz"], r.b_)
+        # a first byte's borrow in: sz, when Y is F (the immediate is free then)
+        cin = Mux(u["first"], u["sz"] & u["ysel"], r.b_)
         total = Signal(9)
         m.d.comb += total.eq(xb + (~yb)[:8] + ~cin)
         with m.If(u["alu"] & go):

@@ -25,7 +25,7 @@ from .answers import answer_bytes, scalar_offsets
 from .link import UPTIME_WORD
 from .servo_fields import ChannelField, FailsafeAction
 
-__all__ = ["CONDS", "SOURCES", "STROBES", "Ins", "Assembled", "Geometry", "command_index", "program",
+__all__ = ["CONDS", "SOURCES", "STROBES", "BITS", "CODED", "Ins", "Assembled", "Geometry", "command_index", "program",
            "assemble", "encode", "ROM_DEPTH", "ROM_DEPTHS", "fields"]
 
 #: ROM depths tried in turn: 256 words of up to 80 bits are five iCE40 block RAMs; a program of
@@ -37,9 +37,11 @@ CONDS = ("0", "B", "BL", "reqok", "ik_ready", "ik_valid", "wr_ready", "tg_ready"
          "ans_free", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
 #: the byte sources of ``X`` (``ZERO`` is the default)
 SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "CL", "S", "FLAG", "CMD", "CH", "STB")
-#: one ROM bit each
-STROBES = ("ACC", "IDENT", "NACK", "TAKE", "DISP", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV",
-           "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET")
+#: one ROM bit each (the stream strobes, decoded by nothing)
+BITS = ("ACC", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV")
+#: at most one of these an instruction: a 4-bit code (0: none)
+CODED = ("IDENT", "NACK", "TAKE", "DISP", "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET")
+STROBES = BITS + CODED
 #: strobes whose effects do not wait for a wait's condition (the dispatcher gates only the others)
 _UNHELD = frozenset(STROBES) - {"CLI", "HDR", "TAKE", "RDV", "IKV", "IKR", "TGV", "WRV"}
 #: the waits whose effects happen as they end, and what ends them (Dispatcher: ``fire``)
@@ -57,7 +59,7 @@ def fields(depth: int = ROM_DEPTH) -> tuple:
     a = (depth - 1).bit_length()
     return (("cond", 5), ("inv", 1), ("to", a), ("nxt", a), ("imm", 8), ("src", 4),
             ("shf", 1), ("alu", 1), ("first", 1), ("ysel", 1), ("bias", 1), ("ra", 2), ("ch", 2), ("tg", 1),
-            ("lm", 2), ("s", 2), ("sz", 1), ("bsel", 1), ("wm", 2), ("hold", 1)) + tuple((s, 1) for s in STROBES)
+            ("lm", 2), ("s", 2), ("wm", 2), ("hold", 1), ("code", 4)) + tuple((s, 1) for s in BITS)
 
 
 def command_index(code: int) -> int:
@@ -470,9 +472,20 @@ def encode(asm: Assembled) -> list[int]:
              "inv": int(s.cond == "always" or s.cond.startswith("~")), "to": asm.to[a], "nxt": asm.nxt[a],
              "imm": s.imm, "src": SOURCES.index(s.src), "shf": int(s.shf), "alu": int(s.alu is not None),
              "first": int(s.alu == "first"), "ysel": int(s.ysel), "bias": int(s.bias), "tg": int(s.tg),
-             "sz": int(s.sz), "bsel": s.bsel, "hold": int(s.hold)}
+             "hold": int(s.hold)}
+        coded = [k for k in CODED if k in s.sp]
+        if len(coded) > 1:
+            raise ValueError(f"instruction at {a} {s!r}: at most one of {CODED}, not {coded}")
+        v["code"] = CODED.index(coded[0]) + 1 if coded else 0
+        # the S input's zero and the first borrow (sz), the flag (bsel): immediate bits 1 and 0
+        if s.sz and s.alu == "first" and not s.ysel:
+            raise ValueError(f"instruction at {a} {s!r}: a first borrow (sz) needs Y = F (ysel)")
+        if s.sz or s.bsel:
+            if s.imm & 3 and s.imm & 3 != (s.sz << 1 | s.bsel):
+                raise ValueError(f"instruction at {a} {s!r}: sz and bsel take immediate bits 1 and 0")
+            v["imm"] = s.imm | s.sz << 1 | s.bsel
         v.update({k: ops.index(getattr(s, k)) for k, ops in _OPS.items()})
-        v.update({k: int(k in s.sp) for k in STROBES})
+        v.update({k: int(k in s.sp) for k in BITS})
         word, off = 0, 0
         for name, bits in fields(len(asm.words)):
             assert 0 <= v[name] < 1 << bits, (name, v[name], s)
