@@ -71,7 +71,8 @@ class Dispatcher(wiring.Component):
     every range check and each target coordinate's saturation is a comparison of the field
     register's bytes with the program's constants by one 8-bit subtract-with-borrow unit;
     answers are built a byte a cycle in block RAM. The streams to the servo controller and the
-    core are driven by the ROM's output register and by registers.
+    core are driven by the ROM's output register and by registers, the answer header by a
+    register; the conditions a wait ends on are the one combinational path in from them.
 
     Moves: each leg of a ``move_leg``/``move_legs`` target goes through the IK core, one leg at
     a time; a coordinate is saturated to the plan input's ``[lo, hi]`` first (``status`` counts
@@ -83,7 +84,7 @@ class Dispatcher(wiring.Component):
     is channel ``l * servos + j``. ``set_pulse`` stages its one channel the same way, so a
     move time applies to it as well.
 
-    One block RAM holds the width buffer, the answer being built (status, channel_status,
+    One memory (block RAM) holds the width buffer, the answer being built (status, channel_status,
     NACK) and the identity answer (its initial contents); the link pulls answer bytes from it.
 
     Parameters
@@ -120,12 +121,12 @@ class Dispatcher(wiring.Component):
     takes it, its engine's pass (``pass_cycles``) at most. Moves: :meth:`move_cycles` to the
     commit strobe (per selected leg its ``C`` coordinates, the core's latency and ``servos``
     cycles; a wait of at most ``stage_cycles + pass_cycles`` for the staging window and
-    ``stage_cycles`` to stage and commit), the header the cycle after the strobe. Status: a read
-    of the servo controller per channel and flag of its two masks, then a cycle per answer byte
-    (the link's counters read as they are then); channel_status: once the last commit has been
-    applied by a pass (so its answer shows every earlier move), the channel's read, a cycle per
-    answer byte. The widths reach the pins at the
-    second period start after the commit at the latest (the servo controller's latency). An
+    ``stage_cycles`` to stage and commit), the header (a register) 2 cycles after the strobe.
+    Status: a read of the servo controller per channel and flag of its two masks, then a cycle
+    per answer byte (the link's counters read as they are then); channel_status: once the last
+    commit has been applied by a pass (so its answer shows every earlier move), the channel's
+    read, a cycle per answer byte. The widths reach the pins at the second period start after
+    the commit at the latest (the servo controller's latency). An
     answer byte is on ``answer_data`` the cycle after ``answer_index`` names it. A request waits
     in the link while the previous answer's payload is still being sent.
 
