@@ -7,7 +7,7 @@ The machine (``hdl/dispatch.py``): a 32-bit field register ``F`` that shifts a b
 its sign, an answer source ...); one 8-bit subtract-with-borrow unit ``X - Y - B`` (``Y`` the
 immediate or ``F``'s low byte) whose borrow ``B`` chains over the bytes of a comparison, so every
 range check and the target saturation is a comparison of ``F``'s bytes with an immediate; a
-48-bit target register ``TG`` that shifts ``Y`` in the same way; counters for the payload
+target register ``TG`` (16 bits per coordinate) that shifts ``Y`` in the same way; counters for the payload
 address, the channel and the leg, the leg mask ``LM`` (rotated a leg at a time) and an 8-bit
 bit-shift register ``S`` (status flags in, mask bits out). Each instruction names its two
 successors (``to`` when its condition holds, ``nxt`` otherwise), so the program is placed in any
