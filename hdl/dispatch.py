@@ -10,7 +10,7 @@ from amaranth.lib.memory import Memory
 from . import protocol as P
 from .answers import answer_bytes, answer_constant
 from .bram import falling_edge_write_port
-from .dispatch_microcode import BITS, CODED, CONDS, SOURCES, STROBES, Geometry, assemble, encode, fields, program
+from .dispatch_microcode import CODED, CONDS, SOURCES, STROBES, Geometry, assemble, encode, fields, program
 
 __all__ = ["Dispatcher"]
 
