@@ -1,19 +1,15 @@
 """Request fields out of payload bytes and answer payloads into bytes, from the protocol table.
 
 Both directions follow :data:`~ikseries.hdl.protocol.COMMANDS`: a payload is its fields in
-order, each little-endian. The dispatcher reads a request field byte by byte at its offset and
-builds an answer byte by byte, so what it needs here is where each field's bytes are.
+order, each little-endian. The dispatcher's microprogram reads a request field byte by byte at
+its offset and builds an answer byte by byte, so what it needs here is where each field's bytes
+are.
 """
 from __future__ import annotations
 
 from . import protocol as P
 
-__all__ = ["scalar_offsets", "has_targets", "answer_bytes", "answer_byte_map", "answer_constant"]
-
-
-def has_targets(cmd: P.Command) -> bool:
-    """Whether the request carries leg targets (``count="coords"`` fields)."""
-    return any(f.count == "coords" for f in cmd.request)
+__all__ = ["scalar_offsets", "answer_bytes", "answer_constant"]
 
 
 def scalar_offsets(cmd: P.Command) -> dict[str, tuple[int, int, bool]]:
@@ -32,11 +28,6 @@ def scalar_offsets(cmd: P.Command) -> dict[str, tuple[int, int, bool]]:
 def answer_bytes(fields: tuple[P.Field, ...]) -> int:
     """Payload bytes of an answer without a text field."""
     return sum(f.group_bytes(None) for f in fields)
-
-
-def answer_byte_map(fields: tuple[P.Field, ...]) -> list[tuple[str, int]]:
-    """``(field, byte of the field)`` of each payload byte of an answer without a text field."""
-    return [(f.name, k) for f in fields for k in range(f.group_bytes(None))]
 
 
 def _field_bytes(f: P.Field, value) -> bytes:

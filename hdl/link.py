@@ -12,7 +12,7 @@ from amaranth.lib.wiring import In, Out
 from . import protocol as P
 from .uart import UARTRx, UARTTx
 
-__all__ = ["SerialCRC", "FrameReceiver", "FrameTransmitter", "Link", "frame_layout"]
+__all__ = ["SerialCRC", "FrameReceiver", "FrameTransmitter", "Link", "frame_layout", "UPTIME_WORD"]
 
 
 class SerialCRC(wiring.Component):
@@ -97,35 +97,52 @@ def _write_domain(m):
     return "write"
 
 
-def _counter_engine(m, events, counter_bits, write_domain):
-    """Saturating counters of ``events`` (one-cycle pulses) in a block RAM, one shared incrementer.
+#: word of the uptime's low half in the counter memory (its high half is the next word)
+UPTIME_WORD = len(P.RECEIVER_COUNTERS)
+
+
+def _counter_engine(m, events, period, counter_bits, write_domain):
+    """Saturating counters of ``events`` (one-cycle pulses) in a block RAM, one shared incrementer,
+    and the uptime: pulses of ``period`` in the next two words, low half first (the low word
+    wraps into the high one; the pair saturates).
 
     A scan reads one word a cycle (every word each 8 cycles) and, if its event is pending, writes
     it back incremented half a cycle after the next edge (on ``write_domain``, from registers: the
     read, the incrementer and the write in half a cycle made 28 MHz), so an event may come once per
-    8 cycles and shows on the outside port 10 cycles later at most. Returns the memory's read port
+    8 cycles and shows on the outside port 10 cycles later at most (a carry into the uptime's high
+    word 1 cycle after its low word: the scan reads it next). Returns the memory's read port
     for the outside. After a reset the first scan writes zeros (the configured contents are zero
     too).
     """
     words = 8
+    low, high = UPTIME_WORD, UPTIME_WORD + 1
+    assert len(events) == low and high < words
     # a small memory: Yosys would build it of flip-flops, the very cells this saves
     m.submodules.counters = mem = Memory(shape=counter_bits, depth=words, init=[], attrs={"ram_style": "block"})
     wr, scan_rd, outside = mem.write_port(domain=write_domain), mem.read_port(), mem.read_port()
     scan, held = Signal(range(words)), Signal(range(words))     # word being read; word read last cycle
     clearing = Signal(init=1)
     pending = Signal(words)
+    high_full = Signal()        # the uptime's high word is all ones: its low word saturates too
     total = scan_rd.data + 1
     m.d.sync += [scan.eq(scan + 1), held.eq(scan)]
     with m.If(held == words - 1):
         m.d.sync += clearing.eq(0)
     hit = pending.bit_select(held, 1)
+    over = total[counter_bits]
     # the incremented word's carry out is set only for an all-ones (saturated) word; the
     # clearing scan writes 1 for a pending event: an event waits at most 8 cycles, reset or not
+    wraps = (held == low) & ~high_full
+    carry = ~clearing & hit & over & wraps
     m.d.sync += [wr.addr.eq(held), wr.data.eq(Mux(clearing, hit, total[:counter_bits])),
-                 wr.en.eq(clearing | (hit & ~total[counter_bits]))]
+                 wr.en.eq(clearing | (hit & (~over | wraps)))]
     m.d.comb += scan_rd.addr.eq(scan)
+    with m.If(clearing):
+        m.d.sync += high_full.eq(0)
+    with m.Elif((held == high) & hit & (total[:counter_bits] == (1 << counter_bits) - 1)):
+        m.d.sync += high_full.eq(1)
     served = Cat(*(held == k for k in range(words)))
-    m.d.sync += pending.eq((pending & ~served) | Cat(*events))
+    m.d.sync += pending.eq((pending & ~served) | Cat(*events, period, carry))
     return outside
 
 
@@ -140,7 +157,7 @@ class FrameReceiver(wiring.Component):
     block RAM: the bank of the frame on ``o`` is read through ``rd_addr``/``rd_data`` while the
     next frame fills the other, so a frame is offered only once its CRC is good (an atomic
     multi-leg move is never half applied). The command/length check is a block RAM table and the
-    error counters live in a block RAM too (Yosys gives it two copies, one a read port): four
+    error counters live in a block RAM too, with the controller's uptime (``period`` pulses) (Yosys gives it two copies, one a read port): four
     iCE40 block RAMs in all, written on the falling clock edge.
 
     Parameters
@@ -167,14 +184,17 @@ class FrameReceiver(wiring.Component):
         Payload byte index of the frame on ``o``.
     rd_data : Out(8)
         That byte, one cycle after ``rd_addr`` (a block RAM read). Valid while ``o.valid``.
-    counter_addr : In(range(len(RECEIVER_COUNTERS)))
+    counter_addr : In(range(len(RECEIVER_COUNTERS) + 2))
         Index of an error counter in :data:`~ikseries.hdl.protocol.RECEIVER_COUNTERS`: ``crc``,
         ``framing``, ``overrun``, ``bad_length``, ``unknown_command``, ``dropped`` (a good frame
         completed while ``o`` still held the previous one, untaken by the end of the new one's
-        CRC check).
+        CRC check); then the uptime's low and high words (:data:`UPTIME_WORD`).
+    period : In(1)
+        Pulses counted in the uptime (the controller's PWM period starts; at most one per 8 cycles).
     counter_data : Out(counter_bits)
         That counter, one cycle after ``counter_addr`` (a block RAM read); saturating, zero from
-        reset, up to 10 cycles behind its event.
+        reset, up to 10 cycles behind its event (the uptime, ``2 * counter_bits`` bits in two
+        words, saturates as one).
 
     Latency
     -------
@@ -208,7 +228,7 @@ class FrameReceiver(wiring.Component):
             "i": In(stream.Signature(8)), "framing_error": In(1), "overrun": In(1), "tick": In(1),
             "o": Out(stream.Signature(frame_layout(self._max))),
             "rd_addr": In(self._addr_bits), "rd_data": Out(8),
-            "counter_addr": In(range(len(P.RECEIVER_COUNTERS))), "counter_data": Out(counter_bits),
+            "counter_addr": In(range(UPTIME_WORD + 2)), "counter_data": Out(counter_bits), "period": In(1),
         })
 
     @property
@@ -271,7 +291,8 @@ class FrameReceiver(wiring.Component):
         known, length_ok = self._length_check(m, byte, length)
         events = {name: Signal(name=f"{name}_event") for name in P.RECEIVER_COUNTERS}
         m.d.comb += [events["framing"].eq(self.framing_error), events["overrun"].eq(self.overrun)]
-        counters = _counter_engine(m, [events[name] for name in P.RECEIVER_COUNTERS], self._counter_bits, write)
+        counters = _counter_engine(m, [events[name] for name in P.RECEIVER_COUNTERS], self.period,
+                                   self._counter_bits, write)
         m.d.comb += [counters.addr.eq(self.counter_addr), self.counter_data.eq(counters.data)]
         m.d.comb += [rd.addr.eq(Cat(self.rd_addr, rbank)), self.rd_data.eq(rd.data),
                      wr.addr.eq(Cat(index[:self._addr_bits], wbank)), wr.data.eq(byte), check.byte.eq(byte)]
@@ -486,8 +507,9 @@ class Link(wiring.Component):
         Serial input pin (from the host).
     tx : Out(1)
         Serial output pin (to the host), registered; idle high from reset.
-    request, rd_addr, rd_data, counter_addr, counter_data
-        The receiver's ``o``, ``rd_addr``, ``rd_data``, ``counter_addr`` and ``counter_data``.
+    request, rd_addr, rd_data, counter_addr, counter_data, period
+        The receiver's ``o``, ``rd_addr``, ``rd_data``, ``counter_addr``, ``counter_data`` and
+        ``period``.
     answer, answer_data, answer_index
         The transmitter's ``i``, ``data`` and ``index``.
 
@@ -508,7 +530,7 @@ class Link(wiring.Component):
         super().__init__({
             "rx": In(1, init=1), "tx": Out(1, init=1),
             "request": Out(stream.Signature(frame_layout(r.max_payload))), "rd_addr": In(r.addr_bits), "rd_data": Out(8),
-            "counter_addr": In(range(len(P.RECEIVER_COUNTERS))), "counter_data": Out(counter_bits),
+            "counter_addr": In(range(UPTIME_WORD + 2)), "counter_data": Out(counter_bits), "period": In(1),
             "answer": In(stream.Signature(frame_layout(t.max_payload))), "answer_data": In(stream.Signature(8)),
             "answer_index": Out(range(t.max_payload)),
         })
@@ -538,5 +560,6 @@ class Link(wiring.Component):
         m.d.comb += [rx.rx.eq(self.rx), self.tx.eq(tx.tx), r.framing_error.eq(rx.framing_error),
                      r.overrun.eq(rx.overrun), r.tick.eq(rx.idle_tick), r.rd_addr.eq(self.rd_addr),
                      self.rd_data.eq(r.rd_data), r.counter_addr.eq(self.counter_addr),
-                     self.counter_data.eq(r.counter_data), self.answer_index.eq(t.index)]
+                     self.counter_data.eq(r.counter_data), r.period.eq(self.period),
+                     self.answer_index.eq(t.index)]
         return m

@@ -12,7 +12,7 @@ from amaranth.lib import crc as amaranth_crc
 from amaranth.sim import Simulator
 
 from ikseries.hdl import protocol as P
-from ikseries.hdl.link import FrameReceiver, FrameTransmitter, Link, SerialCRC
+from ikseries.hdl.link import UPTIME_WORD, FrameReceiver, FrameTransmitter, Link, SerialCRC
 from ikseries.hdl.uart import BAUD_TOLERANCE, MIN_DIVISOR, UARTRx, UARTTx, uart_divisor
 from ikseries.host.protocol import (Decoder, Message, crc, decode_request, encode, encode_answer, field_bounds,
                                     frame, request_parser)
@@ -455,6 +455,30 @@ def test_receiver_counters_saturate():
     assert got["frames"] == [(0x02, b"")]
     with pytest.raises(ValueError, match=r"^counter_bits must be an integer in \[1, 16\], not 17$"):
         FrameReceiver(HEXAPOD, 17)
+
+
+@pytest.mark.parametrize("pulses", [20, 70])
+def test_receiver_uptime_carries_into_its_high_word_and_saturates_as_one(pulses):
+    # 3-bit words: the low word wraps at 8 into the high one; the pair stops at 63
+    dut = FrameReceiver(HEXAPOD, 3)
+    seen = []
+    sim = Simulator(dut)
+    sim.add_clock(1e-6)
+
+    async def bench(ctx):
+        for _ in range(pulses):
+            ctx.set(dut.period, 1)
+            await ctx.tick()
+            ctx.set(dut.period, 0)
+            await ctx.tick().repeat(7)
+        await ctx.tick().repeat(10)
+        for k in (UPTIME_WORD, UPTIME_WORD + 1):
+            ctx.set(dut.counter_addr, k)
+            await ctx.tick()
+            seen.append(ctx.get(dut.counter_data))
+    sim.add_testbench(bench)
+    sim.run()
+    assert seen[0] + 8 * seen[1] == min(pulses, 63), seen
 
 
 def test_receiver_refuses_a_non_shape():
