@@ -26,8 +26,8 @@ from .plan import PlanBuilder
 from .polyfit import fit_lawson, total_degree_terms, vander
 from .ports import plan_inputs
 
-__all__ = ["Cut", "CutGrid", "TrigSeries", "TrigTable", "fit_trig", "fit_trig_table", "pow2_scale", "Normaliser", "CylindricalStage", "CartesianStage",
-           "coordinate_stage"]
+__all__ = ["Cut", "CutGrid", "TrigSeries", "TrigTable", "fit_trig", "fit_trig_table", "pow2_scale", "Normaliser",
+           "CylindricalStage", "CartesianStage", "coordinate_stage"]
 
 
 def pow2_scale(half_range: float) -> int:

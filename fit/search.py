@@ -20,8 +20,8 @@ from .minimax import minimax, region_ids
 from .polyfit import Basis
 from .structure import FeatureSet, ServoFit
 
-__all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "GRID_CELLS", "MAX_GRID_CELLS", "PRUNE_REJECTS", "FINALISTS",
-           "FINALIST_MARGIN"]
+__all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "GRID_CELLS", "MAX_GRID_CELLS",
+           "PRUNE_REJECTS", "FINALISTS", "FINALIST_MARGIN"]
 
 MAX_DEGREE = 12
 PRUNE_REJECTS = 5                # refused removals in a row that end pruning (a refusal is cheap: a lower bound)
@@ -29,7 +29,7 @@ FINALISTS = 2                    # the cheapest structures found that are pruned
 FINALIST_MARGIN = 3              # those costing at most this much more than the cheapest
 CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
 GRID_CELLS = (2, 4)              # cells tried per port of a two-port grid (rounded to the ports' powers of two)
-MAX_GRID_CELLS = 16              # cells of a grid at most (GRID_CELLS gives <= 4 per port: tables of <= 16 entries, padding included)
+MAX_GRID_CELLS = 16              # cells of a grid at most (GRID_CELLS gives <= 4 a port: tables of <= 16 entries)
 
 
 class Rows:
