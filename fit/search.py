@@ -28,8 +28,9 @@ PRUNE_REJECTS = 5                # refused removals in a row that end pruning (a
 FINALISTS = 2                    # the cheapest structures found that are pruned (the fewest multipliers after wins),
 FINALIST_MARGIN = 3              # those costing at most this much more than the cheapest
 CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
-GRID_CELLS = (2, 4)              # cells tried per port of a two-port grid (rounded to the ports' powers of two)
-MAX_GRID_CELLS = 16              # cells of a grid at most (GRID_CELLS gives <= 4 a port: tables of <= 16 entries)
+GRID_CELLS = (2, 4, 8)           # cells tried per port of a two-port grid (rounded to the ports' powers of two)
+SCREEN_STRIDE = 1                # a grid's screening fit: every this many fit samples (a subset of the pool)
+MAX_GRID_CELLS = 32              # cells and table entries (row padding included) of a grid at most
 
 
 class Rows:
@@ -185,7 +186,7 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     ``CUT_CELLS`` cells (coefficient tables, a lower degree); a piecewise plan wins only with
     strictly fewer multipliers, the fewest cells first. Then the best variable set is tried on
     two-port grids (:func:`_grid_sets`, :class:`_Grids`: every pair of input ports, each in
-    ``GRID_CELLS`` cells, at most ``MAX_GRID_CELLS`` cells), again winning only with strictly
+    ``GRID_CELLS`` cells, at most ``MAX_GRID_CELLS`` table entries), again winning only with strictly
     fewer multipliers. The ``FINALISTS`` cheapest structures
     found (those within ``FINALIST_MARGIN`` of the cheapest) are each pruned (a cheaper one may
     prune less), the fewest multipliers after pruning winning (on a tie the cheaper before). The
@@ -242,15 +243,17 @@ class _Grids:
         self.ctx, self.name, self.sets, self.raw, self.ports = ctx, name, sets, raw, ports
         self.budget, self.progress = budget_ticks, progress
         self.memo, self.screen_memo = {}, {}
-        self.fit_raw = {k: (v[0], v[1][:0]) for k, v in raw.items()}
+        k = SCREEN_STRIDE
+        self.screen_sets = ((sets[0][0][::k], sets[0][1][::k]), (sets[1][0][:0], sets[1][1][:0]))
+        self.screen_raw = {p: (v[0][::k], v[1][:0]) for p, v in raw.items()}
 
     def search(self, fs: FeatureSet, found: list) -> None:
         """Append to ``found`` the fit of ``fs`` at the lowest degree meeting the budget that
         costs less than ``found[-1]``, if any. The term sets rise with the degree, each holding
         the last, so a refusal at the costliest affordable degree refuses every lower one (a
-        minimax refusal is a lower bound): that degree is tried first, on the fit samples alone
-        (a subset of the pool, so a refusal there is one on the pool), then downwards on the
-        pool until refused."""
+        minimax refusal is a lower bound): that degree is tried first, on every ``SCREEN_STRIDE``-th
+        fit sample alone (a subset of the pool, so a refusal there is one on the pool), then
+        downwards on the pool until refused."""
         degrees = []
         for deg in range(1, MAX_DEGREE + 1):
             cost = structure_cost(self.ctx, fs, fs.terms(deg), self.name)
@@ -259,10 +262,8 @@ class _Grids:
             degrees.append((deg, cost))
         if not degrees:
             return
-        fit_set, check_set = self.sets
-        screen = Cells.cut(fs, self.ports, fit_set, (check_set[0][:0], check_set[1][:0]), self.fit_raw,
-                           self.screen_memo)
-        if not self._fits(fs, screen, *degrees[-1], "fit samples"):
+        screen = Cells.cut(fs, self.ports, *self.screen_sets, self.screen_raw, self.screen_memo)
+        if not self._fits(fs, screen, *degrees[-1], "screen samples"):
             return
         data, best = Cells.cut(fs, self.ports, *self.sets, self.raw, self.memo), None
         for deg, cost in degrees[::-1]:
@@ -284,14 +285,14 @@ class _Grids:
 def _grid_sets(base: FeatureSet, ports: dict) -> list:
     """The grids tried for ``base``: every pair of input ports (a variable of ``base``, made the
     offset in its cell, or a port that is no variable), ``GRID_CELLS`` cells each, at most
-    ``MAX_GRID_CELLS`` cells in all."""
+    ``MAX_GRID_CELLS`` table entries (so cells) in all."""
     var = {nm: (base.names.index(nm) if nm in base.names else None) for nm in ports}
     use = [nm for nm in ports if var[nm] is None or base.allowed[var[nm]] != "none"]
     out = []
     for pa, pb in itertools.combinations(use, 2):
         for ca, cb in itertools.product(GRID_CELLS, repeat=2):
             fs = base.piecewise(var[pa], ports[pa], ca, (var[pb], ports[pb], cb))
-            if fs.cut.a.cells > 1 and fs.cut.b.cells > 1 and fs.cut.cells <= MAX_GRID_CELLS:
+            if fs.cut.a.cells > 1 and fs.cut.b.cells > 1 and fs.cut.entries <= MAX_GRID_CELLS:
                 out.append(fs)
     return out
 
