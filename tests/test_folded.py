@@ -145,8 +145,7 @@ def test_folded_real_plan_bit_exact(plan):
     limb multipliers, with random output backpressure."""
     core = FoldedEvaluator(plan, multipliers=2, dsp=(16, 16))
     prog = core.program
-    # limbs (3, 2) since the two-port grids, (2, 2) before
-    assert min(prog.limbs) >= 2 and prog.acc_width >= max(n.width for n in plan.nodes if n.op == "mul")
+    assert prog.limbs == (2, 2) and prog.acc_width >= max(n.width for n in plan.nodes if n.op == "mul")
     # one issue per cycle: never faster than the operation count nor than the dependence
     # chains (operation latencies, write-back delay), and a list schedule never slower than
     # the two together
