@@ -28,9 +28,10 @@ PRUNE_REJECTS = 5                # refused removals in a row that end pruning (a
 FINALISTS = 2                    # the cheapest structures found that are pruned (the fewest multipliers after wins),
 FINALIST_MARGIN = 3              # those costing at most this much more than the cheapest
 CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
-GRID_CELLS = (2, 4, 8)           # cells tried per port of a two-port grid (rounded to the ports' powers of two)
+GRID_CELLS = (2, 4)              # cells tried per port of a two-port grid (rounded to the ports' powers of two);
+                                 # with 8 too, cylinder-leg's plan needs products wider than 18 x 18 (fit.products = "dsp" refused)
 SCREEN_STRIDE = 1                # a grid's screening fit: every this many fit samples (a subset of the pool)
-MAX_GRID_CELLS = 32              # cells and table entries (row padding included) of a grid at most
+MAX_GRID_CELLS = 16              # cells and table entries (row padding included) of a grid at most
 
 
 class Rows:
