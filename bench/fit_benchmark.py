@@ -5,8 +5,11 @@ Per preset and servo: variables, total degree, terms, multiplications per evalua
 representable points, certified bound (pu), and the preset's fit time (wall and CPU, certification
 included; the CPU seconds of the certifications alone beside them).
 
-    python bench/fit_benchmark.py [PRESET ...] [--jobs N] [--json docs/results/fit_benchmark.json]
+    python bench/fit_benchmark.py [PRESET ...] [--box-scale S] [--jobs N] [--json docs/results/fit_benchmark.json]
 
+``--box-scale S`` fits every preset's workspace box scaled S times about its centre (each
+range's half-width times S; an end the geometry refuses, such as r < 0 or theta past +-180 deg,
+stays where it was); the preset is reported as ``NAME-xS`` (the dot an underscore).
 With ``--jobs N`` each preset is fitted a second time with its servos in N processes
 (``fit_robot(jobs=N)``): its wall time beside the one-process fit's, and the two plans compared
 byte for byte (the run fails if they differ).
@@ -22,6 +25,7 @@ single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
 import contextlib
+import tomllib
 import runpy
 import sys
 import time
@@ -30,7 +34,7 @@ from pathlib import Path
 import ikseries.fit.fitter as fitter
 from ikseries.accuracy import measure
 from ikseries.fit.fitter import FitError, fit_robot, output_multipliers
-from ikseries.robot import load_preset, preset_names
+from ikseries.robot import load_preset, parse_robot, preset_names, preset_text
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
@@ -53,8 +57,27 @@ def certify_seconds():
         fitter.certify = certify
 
 
-def bench_preset(name: str, jobs: int = 1) -> dict:
-    robot = load_preset(name)
+def scaled_robot(name: str, scale: float):
+    """Preset ``name`` with its workspace box scaled ``scale`` times about its centre (an end
+    the geometry refuses stays put)."""
+    if not scale > 0:
+        raise ValueError(f"box scale must be > 0, not {scale!r}")
+    robot, data = load_preset(name), tomllib.loads(preset_text(name))
+    for spec in robot.workspace.inputs:
+        mid, half = (spec.min + spec.max) / 2, (spec.max - spec.min) / 2 * scale
+        lo, hi = mid - half, mid + half
+        if robot.geometry.workspace_error(spec.name, lo, spec.max):
+            lo = spec.min
+        if robot.geometry.workspace_error(spec.name, spec.min, hi):
+            hi = spec.max
+        data["workspace"][spec.name].update(min=lo, max=hi)
+    data["name"] = f"{name}-x{scale:g}".replace(".", "_")
+    return parse_robot(data, f"preset {name} scaled {scale:g}")
+
+
+def bench_preset(name: str, scale: float = 1.0, jobs: int = 1) -> dict:
+    robot = load_preset(name) if scale == 1.0 else scaled_robot(name, scale)
+    name = robot.name
     t0, c0 = time.perf_counter(), time.process_time()
     with certify_seconds() as cert_cpu:
         try:
@@ -109,6 +132,7 @@ def table(results: list) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("presets", nargs="*", help=f"default: all ({', '.join(preset_names())})")
+    ap.add_argument("--box-scale", type=float, default=1.0, help="scale every workspace box about its centre")
     ap.add_argument("--jobs", type=int, default=1, help="also fit each preset with its servos in N processes")
     ap.add_argument("--json", default=FACTS["default_json"]("fit_benchmark"))
     args = ap.parse_args(argv)
@@ -119,10 +143,12 @@ def main(argv=None):
     bad = [n for n in names if n not in preset_names()]
     if bad:
         sys.exit(f"preset must be one of {preset_names()}, not {bad[0]!r}")
+    if not args.box_scale > 0:
+        sys.exit(f"--box-scale must be > 0, not {args.box_scale!r}")
     results = []
     for n in names:
         print(f"fitting {n} ...", flush=True)
-        results.append(bench_preset(n, args.jobs))
+        results.append(bench_preset(n, args.box_scale, args.jobs))
     print(table(results))
     out = FACTS["write_result"](args.json, {"results": results}, run)
     print(f"wrote {out}")

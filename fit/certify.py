@@ -34,7 +34,8 @@ A piecewise plan cuts inputs into table cells (``index``, ``mask``) and looks it
 coefficients up per cell (``lut``): the initial cells are aligned to the table edges of every
 cut input, cells are half-open along cut inputs with a degenerate last slab at the box's upper
 end, so that on every cell each index is one value, the looked-up coefficients are constants
-and the offset in the cell an exact affine function of the input (see :mod:`ikseries.fit.cut`
+and the offset in the cell an exact affine function of the input; a grid over two inputs
+(its table address from both cell numbers) is aligned along both (see :mod:`ikseries.fit.cut`
 for the argument).
 
 The certified total error per servo adds the certified quantization bound of the integer

@@ -20,6 +20,19 @@ another form, an edge that is not a float, or a caller's own cells) the lut is t
 the reachable entries and the mask [0, 2**-k], both with unbounded derivatives (gradient
 [-inf, inf], Hessian NaN: no mean-value or Taylor form applies), which is sound and makes the
 refinement split the cell.
+
+A grid over two inputs (:class:`ikseries.fit.features.CutGrid`) has an index node on each and
+looks its coefficients up at the address i * 2**bits + j (a binary point move, a shift and an
+add of the two cell numbers). Each index node is a cut chain of its own input, so the initial
+grid is aligned to both tables (edges and a degenerate last slab along each input) and every
+certifier cell, before and after bisection, holds one cell number of each: the address
+enclosure, an interval sum of two exact integers (outward rounding at most moves it by less
+than one, which the lut's ceil / floor of the enclosure undoes), is then one value, and the
+lut a constant. Where either index takes several values its enclosure carries unbounded
+derivatives, and the address enclosure contains every address reachable from the two index
+ranges; the lut is then the hull of the contiguous entries between the least and greatest
+address, a superset of the reachable ones (the unused entries after a row copy a real entry),
+with unbounded derivatives: sound again, and refined away.
 """
 from __future__ import annotations
 

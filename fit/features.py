@@ -26,8 +26,8 @@ from .plan import PlanBuilder
 from .polyfit import fit_lawson, total_degree_terms, vander
 from .ports import plan_inputs
 
-__all__ = ["Cut", "TrigSeries", "TrigTable", "fit_trig", "fit_trig_table", "pow2_scale", "Normaliser", "CylindricalStage", "CartesianStage",
-           "coordinate_stage"]
+__all__ = ["Cut", "CutGrid", "TrigSeries", "TrigTable", "fit_trig", "fit_trig_table", "pow2_scale", "Normaliser",
+           "CylindricalStage", "CartesianStage", "coordinate_stage"]
 
 
 def pow2_scale(half_range: float) -> int:
@@ -38,11 +38,25 @@ def pow2_scale(half_range: float) -> int:
 @dataclass(frozen=True)
 class Cut:
     """Cells of 2**shift integers of input port ``port`` (from its lowest value); variable
-    ``var`` of the polynomial is the offset inside the cell, normalised to [-1, 1)."""
-    var: int
+    ``var`` of the polynomial is the offset inside the cell, normalised to [-1, 1) (None: the
+    port is no variable of the polynomial, the cells only select its coefficients)."""
+    var: int | None
     port: str
     shift: int
     cells: int
+
+    @property
+    def cuts(self) -> tuple["Cut", ...]:
+        return (self,)
+
+    @property
+    def entries(self) -> int:
+        """Entries of a coefficient table (one per cell)."""
+        return self.cells
+
+    def table(self, values) -> tuple:
+        """A coefficient's table from its values per cell (cell order: the same)."""
+        return tuple(values)
 
     def rows(self, port, values, cell: int) -> tuple[np.ndarray, np.ndarray]:
         """Rows of real input values of ``port`` (a PlanInput) that cell ``cell`` is fitted on,
@@ -65,6 +79,59 @@ class Cut:
         cell, off = b.cell(u, self.shift)
         f = self.shift - 1
         return cell, b.add(b.reinterpret(off, f), b.const(-1.0, f))
+
+    def address(self, b: PlanBuilder, ports: dict) -> tuple[int, list[int]]:
+        """(table address, offset node per cut) on ``b``; ``ports``: PlanInputs by name."""
+        cell, off = self.build(b, ports[self.port])
+        return cell, [off]
+
+
+@dataclass(frozen=True)
+class CutGrid:
+    """Cells over two input ports: cell (i, j) is cell i of cut ``a`` and cell j of cut ``b``,
+    numbered ``i * b.cells + j``. Its coefficient table is addressed by the concatenation of
+    both cell numbers, ``i * 2**bits + j`` (``bits`` those of b's largest cell number): a shift
+    and an add of the two index nodes, no product; the ``2**bits - b.cells`` unused entries
+    after each row but the last repeat the row's last entry (so no table interval widens)."""
+    a: Cut
+    b: Cut
+
+    def __post_init__(self):
+        if self.a.port == self.b.port:
+            raise ValueError(f"a cut grid needs two ports, not {self.a.port!r} twice")
+
+    @property
+    def cuts(self) -> tuple[Cut, Cut]:
+        return (self.a, self.b)
+
+    @property
+    def cells(self) -> int:
+        return self.a.cells * self.b.cells
+
+    @property
+    def bits(self) -> int:
+        return (self.b.cells - 1).bit_length()
+
+    @property
+    def entries(self) -> int:
+        return (self.a.cells - 1) * 2 ** self.bits + self.b.cells
+
+    def table(self, values) -> tuple:
+        """A coefficient's table, in address order, from its values in cell order."""
+        nb, row = self.b.cells, 2 ** self.bits
+        out = []
+        for i in range(self.a.cells):
+            vals = list(values[i * nb:(i + 1) * nb])
+            out += vals + ([vals[-1]] * (row - nb) if i < self.a.cells - 1 else [])
+        return tuple(out)
+
+    def address(self, b: PlanBuilder, ports: dict) -> tuple[int, list[int]]:
+        """(table address, [offset in a's cell, offset in b's cell]) nodes on ``b``."""
+        ia_, oa = self.a.build(b, ports[self.a.port])
+        ib, ob = self.b.build(b, ports[self.b.port])
+        if self.bits:      # i * 2**bits: the same integer read with -bits fractional bits, widened
+            ia_ = b.align(b.reinterpret(ia_, -self.bits), 0)
+        return b.add(ia_, ib), [oa, ob]
 
 
 @dataclass(frozen=True)

@@ -40,15 +40,18 @@ def parity_variable(fs: FeatureSet) -> int | None:
 
 def poly_inputs(b: PlanBuilder, fs: FeatureSet, feats: list[int], fv: int) -> tuple[list[int], object]:
     """The variable nodes of a servo polynomial over ``fs`` and its coefficient builder: for a
-    piecewise polynomial the cut variable becomes the offset in the cell (exact, widened to the
+    piecewise polynomial each cut variable becomes the offset in its cell (exact, widened to the
     features' ``fv`` fractional bits so that its powers keep them) and the coefficients are
-    looked up by cell (``b.lut``); else ``feats`` and None (constants)."""
+    looked up by cell (``b.lut`` of the cut's table address, the table in address order); else
+    ``feats`` and None (constants)."""
     if fs.cut is None:
         return feats, None
-    port = next(i for i in b.inputs if i.name == fs.cut.port)
-    cell, off = fs.cut.build(b, port)
-    off = b.align(off, max(fv, b.frac(off)))
-    return feats[:fs.cut.var] + [off] + feats[fs.cut.var + 1:], lambda v, f: b.lut(cell, v, f)
+    address, offsets = fs.cut.address(b, {i.name: i for i in b.inputs})
+    feats = list(feats)
+    for c, off in zip(fs.cut.cuts, offsets):
+        if c.var is not None:
+            feats[c.var] = b.align(off, max(fv, b.frac(off)))
+    return feats, lambda v, f: b.lut(address, fs.cut.table(v), f)
 
 
 def servo_nodes(b: PlanBuilder, fs: FeatureSet, poly: dict, feats: list[int], fv: int, frac: int,

@@ -234,9 +234,19 @@ def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.n
             coef[cols] = fit.coef
             return dataclasses.replace(fit, coef=coef)
         _, _, piv = scipy.linalg.qr(full.T, mode="economic", pivoting=True)
-        active = np.union1d(active, piv[:n + 1])
-        a = basis.rows(terms, active) / norm
-        first = _start(a)
+        for take in (n + 1, 4 * (n + 1), 16 * (n + 1)):   # the most independent rows: n + 1 of
+            active = np.union1d(active, piv[:take])       # them can fall short of the rank test
+            a = basis.rows(terms, active) / norm          # the whole pool passes
+            first = _start(a)
+            if first is not None:
+                break
+        else:                    # a borderline rank: fit the terms independent over these rows
+            cols = _independent(a)   # (at least the least independent one dropped), from them
+            cols = cols if len(cols) < n else np.sort(scipy.linalg.qr(a, mode="economic", pivoting=True)[2][:n - 1])
+            fit = minimax(basis, target, [terms[j] for j in cols], budget, regions, active, settle)
+            coef = np.zeros(n)
+            coef[cols] = fit.coef
+            return dataclasses.replace(fit, coef=coef)
     frame = _frame(a) / norm[:, None]
     a = basis.rows(terms, active) @ frame
     ex = _Exchange(a, target[active], *first)

@@ -310,7 +310,10 @@ def _lut_bounds(a, frac, param, ideal, inputs):
 
 
 def _lut_real(n, a, x, ports):
-    return np.asarray(n.ideal if n.ideal is not None else n.param, dtype=np.float64)[x[0]] * (
+    # the index is an exact integer, but a sum of cell numbers (a grid's address) is a float
+    index = np.asarray(x[0])
+    index = index if index.dtype.kind in "iu" else np.floor(index).astype(np.int64)
+    return np.asarray(n.ideal if n.ideal is not None else n.param, dtype=np.float64)[index] * (
         1.0 if n.ideal is not None else _scale(n))
 
 

@@ -1,12 +1,14 @@
 """The structure search of one servo: the cheapest polynomial that meets its budget.
 
 Per candidate variable set the degree rises until the minimax fit (:mod:`.minimax`) over the fit
-and check samples meets the approximation budget; the best set is then tried piecewise; the
-winner is pruned term by term while every removal saves a multiplier.
+and check samples meets the approximation budget; the best set is then tried piecewise, cut
+along one input port and then on a grid over two; the winner is pruned term by term while every
+removal saves a multiplier.
 """
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -18,14 +20,18 @@ from .minimax import minimax, region_ids
 from .polyfit import Basis
 from .structure import FeatureSet, ServoFit
 
-__all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "PRUNE_REJECTS", "FINALISTS",
-           "FINALIST_MARGIN"]
+__all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "GRID_CELLS", "MAX_GRID_CELLS",
+           "PRUNE_REJECTS", "FINALISTS", "FINALIST_MARGIN"]
 
 MAX_DEGREE = 12
 PRUNE_REJECTS = 5                # refused removals in a row that end pruning (a refusal is cheap: a lower bound)
 FINALISTS = 2                    # the cheapest structures found that are pruned (the fewest multipliers after wins),
 FINALIST_MARGIN = 3              # those costing at most this much more than the cheapest
 CUT_CELLS = (4, 8, 16)           # cell counts tried for a piecewise plan (tables of <= 16 entries)
+GRID_CELLS = (2, 4)              # cells tried per port of a two-port grid (rounded to the ports' powers of two);
+                                 # with 8 too, cylinder-leg's plan needs products wider than 18 x 18 (fit.products = "dsp" refused)
+SCREEN_STRIDE = 1                # a grid's screening fit: every this many fit samples (a subset of the pool)
+MAX_GRID_CELLS = 16              # cells and table entries (row padding included) of a grid at most
 
 
 class Rows:
@@ -82,24 +88,34 @@ class Cells:
     """The pool (:class:`Rows`: fit and check samples, features (N, n) and target ticks) of one
     servo polynomial per cell of a piecewise fit (a single cell otherwise)."""
     rows: list
+    hard: int = 0          # the cell that refused the last fit
 
     @classmethod
     def whole(cls, fit_set, check_set) -> "Cells":
         return cls([Rows(np.concatenate([fit_set[0], check_set[0]]), np.concatenate([fit_set[1], check_set[1]]))])
 
     @classmethod
-    def cut(cls, fs: FeatureSet, port, fit_set, check_set, raw) -> "Cells":
-        """Rows of each cell of ``fs.cut``, the cut variable replaced by the offset in the cell;
-        ``raw`` = real values of the cut port at the fit and check rows."""
+    def cut(cls, fs: FeatureSet, ports: dict, fit_set, check_set, raw: dict, memo: dict | None = None) -> "Cells":
+        """Rows of each cell of ``fs.cut`` (a grid's cells in its cell order), each cut variable
+        replaced by the offset in its cell; ``ports``: PlanInputs by name, ``raw[port]`` = real
+        values of a cut port at the fit and check rows; ``memo``: a dict keeping each cut's
+        per-cell offsets for the next call on the same samples."""
+        memo = {} if memo is None else memo
+        cuts = fs.cut.cuts
+        per_cut = [_cut_offsets(c, ports[c.port], raw[c.port], memo) for c in cuts]
         out = cls([])
-        for c in range(fs.cut.cells):
+        for cell in range(fs.cut.cells):
+            per = np.unravel_index(cell, [c.cells for c in cuts])
             xs, ts = [], []
-            for (x, t), v in ((fit_set, raw[0]), (check_set, raw[1])):
-                sel, off = fs.cut.rows(port, v, c)
-                xc = x[sel].copy()
-                xc[:, fs.cut.var] = off
+            for s, (x, t) in enumerate((fit_set, check_set)):
+                offs = [po[int(k)][s] for po, k in zip(per_cut, per)]
+                keep = np.logical_and.reduce([~np.isnan(o) for o in offs])
+                xc = x[keep]
+                for c, off in zip(cuts, offs):
+                    if c.var is not None:
+                        xc[:, c.var] = off[keep]
                 xs.append(xc)
-                ts.append(t[sel])
+                ts.append(t[keep])
             out.rows.append(Rows(np.concatenate(xs), np.concatenate(ts)))
         return out
 
@@ -116,20 +132,40 @@ class Cells:
     def fit_terms(self, terms, budget_ticks, warm=None, settle=True) -> CellsFit:
         """The minimax fit in every cell, refused as soon as one cell's is; ``warm``: the states
         of a related fit (their active rows start this one's); without ``settle`` the first
-        coefficients within the budget (enough to decide)."""
-        coefs, err, states = [], 0.0, []
-        for c, rows in enumerate(self.rows):
-            st = rows.fit(terms, budget_ticks, None if warm is None else warm[c].active, settle)
+        coefficients within the budget (enough to decide). The cell that refused last is fitted
+        first (the next, larger term set is likely refused there too): the outcome and the fit
+        are the same in any order, only a refusal's lower bound may come from another cell."""
+        order = [self.hard] + [c for c in range(len(self.rows)) if c != self.hard]
+        err, states = 0.0, [None] * len(self.rows)
+        for c in order:
+            st = self.rows[c].fit(terms, budget_ticks, None if warm is None else warm[c].active, settle)
             if st.refused:
-                return CellsFit(None, st.error, states + [st], True)
-            coefs.append(st.coef)
-            err, states = max(err, st.error), states + [st]
-        return CellsFit(np.array(coefs), err, states, False)
+                self.hard = c
+                return CellsFit(None, st.error, [st], True)
+            err, states[c] = max(err, st.error), st
+        return CellsFit(np.array([st.coef for st in states]), err, states, False)
 
     def forget_columns(self) -> None:
         """Drop the kept monomial columns (they can take hundreds of MB per servo)."""
         for rows in self.rows:
             rows.basis = Basis(rows.x)
+
+
+def _cut_offsets(cut, port, raw, memo: dict) -> list:
+    """Per cell of ``cut``, per sample set (fit, check), the offset in the cell of every row
+    (NaN off the cell), kept in ``memo``."""
+    key = (cut.port, cut.shift, cut.cells)
+    if key not in memo:
+        memo[key] = []
+        for cell in range(cut.cells):
+            per_set = []
+            for values in raw:
+                sel, off = cut.rows(port, values, cell)
+                full = np.full(len(values), np.nan)
+                full[sel] = off
+                per_set.append(full)
+            memo[key].append(per_set)
+    return memo[key]
 
 
 def _fit_note(fit: CellsFit) -> str:
@@ -149,7 +185,10 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     plan found. Then the best variable set is tried piecewise, with either term set (total
     degree or tensor): cut along each of its variables that is an input port into
     ``CUT_CELLS`` cells (coefficient tables, a lower degree); a piecewise plan wins only with
-    strictly fewer multipliers, the fewest cells first. The ``FINALISTS`` cheapest structures
+    strictly fewer multipliers, the fewest cells first. Then the best variable set is tried on
+    two-port grids (:func:`_grid_sets`, :class:`_Grids`: every pair of input ports, each in
+    ``GRID_CELLS`` cells, at most ``MAX_GRID_CELLS`` table entries), again winning only with strictly
+    fewer multipliers. The ``FINALISTS`` cheapest structures
     found (those within ``FINALIST_MARGIN`` of the cheapest) are each pruned (a cheaper one may
     prune less), the fewest multipliers after pruning winning (on a tie the cheaper before). The
     candidates of one kind share their pool (and its monomial columns).
@@ -178,18 +217,85 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
         raise FitError(f"servo {name}: no polynomial up to total degree {MAX_DEGREE} reaches the "
                        f"approximation budget of {budget_ticks:g} ticks")
     ports = {i.name: i for i in ctx.inputs}
-    for base in _cut_bases(found[-1][1].features, candidates):
+    memo: dict = {}
+    bases = _cut_bases(found[-1][1].features, candidates)
+    for base in bases:
         for var, nm in enumerate(base.names):
             if nm not in ports or base.allowed[var] == "none":
                 continue
             for cells in CUT_CELLS:
                 fs = base.piecewise(var, ports[nm], cells)
                 if fs.cut.cells > 1:
-                    search(fs, Cells.cut(fs, ports[nm], *sets[base.kind], raw[nm]))
+                    search(fs, Cells.cut(fs, ports, *sets[base.kind], raw, memo))
+    grid = _Grids(ctx, name, sets[bases[0].kind], raw, ports, budget_ticks, progress)
+    for fs in _grid_sets(bases[0], ports):
+        grid.search(fs, found)
     pools.clear()
     finalists = [e for e in found[::-1][:FINALISTS] if e[0] <= found[-1][0] + FINALIST_MARGIN]
     pruned = [_settle_and_prune(ctx, entry, budget_ticks, progress) for entry in finalists]
     return min(pruned, key=lambda p: p[0])[1]
+
+
+class _Grids:
+    """The search of one servo's grids (:class:`~.features.CutGrid`) over one variable kind's
+    samples ``sets`` = (fit set, check set)."""
+
+    def __init__(self, ctx, name, sets, raw, ports, budget_ticks, progress):
+        self.ctx, self.name, self.sets, self.raw, self.ports = ctx, name, sets, raw, ports
+        self.budget, self.progress = budget_ticks, progress
+        self.memo, self.screen_memo = {}, {}
+        k = SCREEN_STRIDE
+        self.screen_sets = ((sets[0][0][::k], sets[0][1][::k]), (sets[1][0][:0], sets[1][1][:0]))
+        self.screen_raw = {p: (v[0][::k], v[1][:0]) for p, v in raw.items()}
+
+    def search(self, fs: FeatureSet, found: list) -> None:
+        """Append to ``found`` the fit of ``fs`` at the lowest degree meeting the budget that
+        costs less than ``found[-1]``, if any. The term sets rise with the degree, each holding
+        the last, so a refusal at the costliest affordable degree refuses every lower one (a
+        minimax refusal is a lower bound): that degree is tried first, on every ``SCREEN_STRIDE``-th
+        fit sample alone (a subset of the pool, so a refusal there is one on the pool), then
+        downwards on the pool until refused."""
+        degrees = []
+        for deg in range(1, MAX_DEGREE + 1):
+            cost = structure_cost(self.ctx, fs, fs.terms(deg), self.name)
+            if cost >= found[-1][0]:
+                break
+            degrees.append((deg, cost))
+        if not degrees:
+            return
+        screen = Cells.cut(fs, self.ports, *self.screen_sets, self.screen_raw, self.screen_memo)
+        if not self._fits(fs, screen, *degrees[-1], "screen samples"):
+            return
+        data, best = Cells.cut(fs, self.ports, *self.sets, self.raw, self.memo), None
+        for deg, cost in degrees[::-1]:
+            fit = self._fits(fs, data, deg, cost)
+            if not fit:
+                break
+            best = (cost, ServoFit(self.name, fs, deg, data.poly(fs.terms(deg), fit.coef), fit.error), fit.states, data)
+        if best is not None:
+            found.append(best)
+
+    def _fits(self, fs, data, deg, cost, note="") -> CellsFit | None:
+        terms = fs.terms(deg)
+        fit = data.fit_terms(terms, self.budget, settle=False)
+        self.progress(f"  {self.name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
+                      f"{len(terms)} terms, {cost} multipliers{', ' + note if note else ''}, {_fit_note(fit)}")
+        return None if fit.refused or fit.error > self.budget else fit
+
+
+def _grid_sets(base: FeatureSet, ports: dict) -> list:
+    """The grids tried for ``base``: every pair of input ports (a variable of ``base``, made the
+    offset in its cell, or a port that is no variable), ``GRID_CELLS`` cells each, at most
+    ``MAX_GRID_CELLS`` table entries (so cells) in all."""
+    var = {nm: (base.names.index(nm) if nm in base.names else None) for nm in ports}
+    use = [nm for nm in ports if var[nm] is None or base.allowed[var[nm]] != "none"]
+    out = []
+    for pa, pb in itertools.combinations(use, 2):
+        for ca, cb in itertools.product(GRID_CELLS, repeat=2):
+            fs = base.piecewise(var[pa], ports[pa], ca, (var[pb], ports[pb], cb))
+            if fs.cut.a.cells > 1 and fs.cut.b.cells > 1 and fs.cut.entries <= MAX_GRID_CELLS:
+                out.append(fs)
+    return out
 
 
 def _cut_bases(fs: FeatureSet, candidates) -> list:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..kinematics import UnreachableError
-from .features import Cut, Normaliser
+from .features import Cut, CutGrid, Normaliser
 from .plan import bits_for, quantize
 from .polyfit import total_degree_terms
 
@@ -37,7 +37,7 @@ class FeatureSet:
     allowed: tuple
     zero_free: int | None = None
     tensor: bool = False      # every power up to ``degree`` per variable, not total degree
-    cut: "Cut | None" = None  # piecewise: variable ``cut.var`` is the offset in a cell of its port
+    cut: "Cut | CutGrid | None" = None  # piecewise: cells of one port or a grid over two
 
     def label(self) -> str:
         return f"{self.kind} {'/'.join(self.names)}" + self.extras()
@@ -47,26 +47,46 @@ class FeatureSet:
         return self.kind + self.extras().replace(" tensor", ", tensor terms")
 
     def piecewise_record(self) -> dict | None:
-        """JSON-ready description of the cells (None if not piecewise)."""
+        """JSON-ready description of the cells (None if not piecewise): per cut port its
+        variable (None if the port is no variable), cells and port values per cell; a grid also
+        its table entries and address (``cell_a * 2**bits + cell_b``)."""
         if self.cut is None:
             return None
-        return {"input": self.cut.port, "variable": self.names[self.cut.var], "cells": self.cut.cells,
-                "port_values_per_cell": 2 ** self.cut.shift}
+        rec = [{"input": c.port, "variable": None if c.var is None else self.names[c.var], "cells": c.cells,
+                "port_values_per_cell": 2 ** c.shift} for c in self.cut.cuts]
+        if isinstance(self.cut, Cut):
+            return rec[0]
+        return {"grid": rec, "cells": self.cut.cells, "table_entries": self.cut.entries,
+                "address_bits_b": self.cut.bits}
 
     def extras(self) -> str:
-        return (" tensor" if self.tensor else "") + (f", {self.cut.cells} cells in {self.cut.port}"
-                                                      if self.cut else "")
+        if self.cut is None:
+            cells = ""
+        elif isinstance(self.cut, Cut):
+            cells = f", {self.cut.cells} cells in {self.cut.port}"
+        else:
+            cells = f", {self.cut.a.cells}x{self.cut.b.cells} cells in {self.cut.a.port} x {self.cut.b.port}"
+        return (" tensor" if self.tensor else "") + cells
 
-    def piecewise(self, var: int, port, cells: int) -> "FeatureSet":
-        """The same variables with variable ``var`` (the normalised input ``port``) replaced by
-        the offset inside ``cells`` equal cells of the port's integer range: the offset has no
-        symmetry, so its powers are "any"."""
+    def piecewise(self, var: int | None, port, cells: int, second: tuple | None = None) -> "FeatureSet":
+        """The same variables cut into ``cells`` equal cells of the integer range of input
+        ``port``: variable ``var`` (the normalised port; None if the port is no variable)
+        becomes the offset inside the cell, which has no symmetry, so its powers are "any".
+        ``second`` = (var, port, cells): a grid over both ports (:class:`CutGrid`)."""
+        fs, cut = self._cut_one(var, port, cells)
+        if second is None:
+            return dataclasses.replace(fs, cut=cut)
+        fs, cut_b = fs._cut_one(*second)
+        return dataclasses.replace(fs, cut=CutGrid(cut, cut_b))
+
+    def _cut_one(self, var, port, cells) -> tuple["FeatureSet", Cut]:
         per = -(-(port.hi - port.lo + 1) // cells)          # port values per cell, rounded up
         shift = max(1, (per - 1).bit_length())
-        allowed = self.allowed[:var] + ("any",) + self.allowed[var + 1:]
-        zero_free = None if self.zero_free == var else self.zero_free
-        return dataclasses.replace(self, allowed=allowed, zero_free=zero_free,
-                                   cut=Cut(var, port.name, shift, ((port.hi - port.lo) >> shift) + 1))
+        fs = self
+        if var is not None:
+            fs = dataclasses.replace(self, allowed=self.allowed[:var] + ("any",) + self.allowed[var + 1:],
+                                     zero_free=None if self.zero_free == var else self.zero_free)
+        return fs, Cut(var, port.name, shift, ((port.hi - port.lo) >> shift) + 1)
 
     def terms(self, degree: int) -> list:
         if self.tensor:

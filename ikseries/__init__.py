@@ -4,4 +4,4 @@ Importing the package changes no environment; the ``ikseries`` command sets sing
 BLAS itself (:func:`ikseries.threads.single_threaded_blas`).
 """
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"

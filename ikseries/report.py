@@ -314,13 +314,24 @@ def _coefficients_section(r: dict) -> list[str]:
                 _row(["---"] * 3)]
         cut = s.get("piecewise")
         if cut:
-            out[-2:-2] = [f"Piecewise: one coefficient per cell of input {cut['input']} (cells of "
-                          f"{cut['port_values_per_cell']} port values from its lowest value), in cell order; "
-                          f"variable {cut['variable']} is the offset inside the cell, normalised to [-1, 1).", ""]
+            out[-2:-2] = [_piecewise_note(cut), ""]
         out += [_row([" ".join(map(str, c["exponents"])), _values(c["integer"], "{}"), _values(c["value"], "{:.10g}")])
                 for c in s["coefficients"]]
         out.append("")
     return out
+
+
+def _piecewise_note(cut: dict) -> str:
+    """The coefficients' cells in words: one input's cells or a grid over two."""
+    def one(c):
+        var = (f"; variable {c['variable']} is the offset inside the cell, normalised to [-1, 1)"
+               if c["variable"] is not None else f" ({c['input']} is no variable of the polynomial)")
+        return f"cells of {c['port_values_per_cell']} port values of input {c['input']} from its lowest value{var}"
+    if "grid" in cut:
+        a, b = cut["grid"]
+        return (f"Piecewise: one coefficient per cell of a {a['cells']} x {b['cells']} grid, cell i * {b['cells']} + j "
+                f"in cell order for cell i of the first input and j of the second: {one(a)}; {one(b)}.")
+    return f"Piecewise: one coefficient per cell, in cell order: {one(cut)}."
 
 
 def _board_record(b, robot) -> dict:

@@ -44,6 +44,38 @@ def tiny_piecewise_plan(seed=0, shift=2, degree=3, clamp=(-100, 100), operand_bi
     return b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
 
 
+def tiny_grid_plan(seed=0, shifts=(2, 2), degree=2, clamp=(-100, 100)) -> tuple:
+    """``tiny_plan``'s inputs cut into a grid (:class:`~ikseries.fit.features.CutGrid`): a into
+    cells of 2**shifts[0] port values, the signed b into cells of 2**shifts[1] (from its lowest
+    value); a random polynomial per cell in both offsets (each on [-1, 1)), its coefficients
+    looked up by the grid's table address, rounded and clamped. Returns the plan and the
+    polynomial (exponents -> coefficient per cell, in cell order)."""
+    from ikseries.fit.features import Cut, CutGrid
+    rng = np.random.default_rng(seed)
+    inputs = [PlanInput("a", "mm", 2, 0, 12, 4, False), PlanInput("b", "deg", 1, -10, 9, 5, True)]
+    b = PlanBuilder(inputs)
+    grid = CutGrid(*(Cut(k, i.name, s, ((i.hi - i.lo) >> s) + 1) for k, (i, s) in enumerate(zip(inputs, shifts))))
+    address, offsets = grid.address(b, {i.name: i for i in inputs})
+    poly = {(i, j): tuple(float(v) for v in rng.normal(size=grid.cells) * 50)
+            for i in range(degree + 1) for j in range(degree + 1) if i + j <= degree}
+    acc = horner(b, poly, offsets, 5, lambda v, f: b.lut(address, grid.table(v), f))
+    out = b.clamp(b.round(acc, 0), *clamp)
+    return b.build([PlanOutput("y", out, acc, "ticks", 1.0)]), grid, poly
+
+
+def grid_reference(grid, poly, ports) -> np.ndarray:
+    """The float value of :func:`tiny_grid_plan`'s polynomial at port values ``ports`` (clamped
+    to the input ranges as the plan's inputs are): cell and offsets computed directly."""
+    cells, offs = [], []
+    for c, (lo, hi) in zip(grid.cuts, ((0, 12), (-10, 9))):
+        u = np.clip(ports[c.port], lo, hi) - lo
+        cells.append(u >> c.shift)
+        half = 2 ** (c.shift - 1)
+        offs.append(((u & (2 ** c.shift - 1)) - half) / half)
+    cell = cells[0] * grid.b.cells + cells[1]
+    return sum(np.asarray(c)[cell] * offs[0] ** i * offs[1] ** j for (i, j), c in poly.items())
+
+
 def signed_cell_plan() -> Plan:
     """Cells of the signed input b: ``index`` and ``mask`` of negative values (outputs too),
     a lut indexed by a computed cell number, and a lut whose index never takes its first

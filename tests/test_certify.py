@@ -161,6 +161,65 @@ def test_piecewise_enclosures_hold_on_random_sub_boxes(offset, top):
     assert jumps > 0                                                  # straddling boxes were seen
 
 
+def _grid_plan(wrong=None):
+    """P(a, b) ~ sin(a) + b**2 on a in [0, 1], b in [-1, 1] (6 fractional bits each) on a grid
+    (:class:`~ikseries.fit.features.CutGrid`): a in cells of 1/8, b in cells of 1/4 (the last
+    one the single point b = 1), per cell (i, j) a quadratic in the offsets (sin: least
+    squares, b**2: exact), looked up by the grid's table address; in cell ``wrong`` = (i, j)
+    the constant term is 0.75 too large."""
+    from ikseries.fit.features import Cut, CutGrid
+    inputs = [PlanInput("a", "mm", 6, 0, 64, 7, False), PlanInput("b", "mm", 6, -64, 64, 8, True)]
+    b = PlanBuilder(inputs)
+    grid = CutGrid(Cut(0, "a", 3, 9), Cut(1, "b", 4, 9))
+    address, (ta, tb) = grid.address(b, {i.name: i for i in inputs})
+    t = np.linspace(-1, 1, 65)
+    poly = {(0, 0): [], (1, 0): [], (2, 0): [], (0, 1): [], (0, 2): []}
+    for i in range(9):
+        sa = np.polynomial.polynomial.polyfit(t, np.sin(i / 8 + (t + 1) / 16), 2)
+        for j in range(9):
+            lo = -1 + j / 4                      # b = lo + (tb + 1) / 8
+            c0 = sa[0] + (lo + 1 / 8) ** 2 + (0.75 if wrong == (i, j) else 0.0)
+            for e, v in zip(poly, (c0, sa[1], sa[2], (lo + 1 / 8) / 4, 1 / 64)):
+                poly[e].append(v)
+    ta, tb = (b.align(v, 12) for v in (ta, tb))
+    acc = horner(b, {e: tuple(v) for e, v in poly.items()}, [ta, tb], 14, lambda v, f: b.lut(address, grid.table(v), f))
+    return b.build([PlanOutput("y", b.clamp(b.round(acc, 0), -10, 10), acc, "ticks", 1.0)])
+
+
+def _grid_sampled_error(plan):
+    """max |P - f| over every port value (every cell corner and edge, the box corners)."""
+    a, bb = np.meshgrid(np.arange(0, 65), np.arange(-64, 65), indexing="ij")
+    acc = plan.outputs[0].preround
+    p = evaluate_ideal(plan, {"a": a.ravel(), "b": bb.ravel()}, keep=[acc])[acc]
+    return np.abs(p - np.sin(a.ravel() / 64) - (bb.ravel() / 64) ** 2).max()
+
+
+def test_grid_bound_holds_and_initial_cells_follow_both_tables():
+    """A two-port grid: the certifier's initial cells are cut at both tables' edges (with a
+    degenerate last slab along each), so every cell converges; the bound is at least the
+    error at every port value (cell corners and edges, box corners) and close to it."""
+    plan = _grid_plan()
+    edges, cut = _table_edges(plan, range(len(plan.nodes)), ["a", "b"], [0.0, -1.0], [1.0, 1.0])
+    assert cut == [True, True]
+    assert edges[0].tolist() == [m / 8 for m in range(1, 8)] and edges[1].tolist() == [m / 4 - 1 for m in range(1, 8)]
+    sampled = _grid_sampled_error(plan)
+    s = certify(_robot(), plan, target_pu=1.05 * sampled).servos[0]
+    assert s.converged and sampled <= s.approximation_pu <= 1.05 * sampled + 1e-3
+
+
+@pytest.mark.parametrize("wrong", [(3, 5), (8, 8), (0, 8)])
+def test_grid_plan_with_a_wrong_table_entry_is_refused(wrong):
+    """Also in the cells holding the single points a = 1 or b = 1 (the box's upper corner)."""
+    bad = certify(_robot(tolerance=1.0), _grid_plan(wrong=wrong))
+    with pytest.raises(CertificationError, match=r"servo y: certified error"):
+        bad.check(1.0)
+    s = bad.servos[0]
+    assert s.approximation_pu >= 0.74      # 0.75 less the cell's own (tiny) error
+    i, j = wrong
+    assert i / 8 <= s.worst["lo"]["a"] <= s.worst["hi"]["a"] <= min(1.0, (i + 1) / 8)
+    assert j / 4 - 1 <= s.worst["lo"]["b"] <= s.worst["hi"]["b"] <= min(1.0, (j + 1) / 4 - 1)
+
+
 def test_bound_encloses_a_known_sup_tightly():
     cert = certify(_robot(), _plan(), target_pu=SIN1 + 0.002)
     s = cert.servos[0]

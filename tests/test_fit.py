@@ -90,12 +90,13 @@ def test_verification_points_are_every_point_of_a_small_workspace(small_robot):
 
 
 def test_fit_is_deterministic(small_robot, small_plan):
-    """A second fit gives the same plan (the certificate's determinism is pinned by test_cli's
-    byte-identical builds)."""
+    """A second fit gives the same plan, byte for byte (the certificate's determinism is pinned
+    by test_cli's byte-identical builds); one of its servos is a two-port grid."""
     again = json.loads(fit_robot(small_robot, certified=False).plan.dumps())
     first = json.loads(small_plan.dumps())
     first["meta"].pop("certificate")
-    assert again == first
+    assert json.dumps(again) == json.dumps(first)
+    assert any((s["piecewise"] or {}).get("grid") for s in first["meta"]["servos"])
 
 
 def test_tolerance_below_output_rounding_is_refused(robot):
@@ -184,6 +185,36 @@ def test_coefficients_are_reoptimised_on_their_grid(fitted):
             naive = np.round(data.coef(sf.poly, terms) * 2.0 ** frac) / 2.0 ** frac
             assert err <= max(float(np.max(np.abs(vander(cpts, terms) @ n - ctarget)))
                               for n, (cpts, ctarget) in zip(naive, data.rows))
+
+
+def test_grid_cells_of_the_fit_are_the_cells_of_the_plan():
+    """A grid over z (a variable, made the offset) and r (no variable: its cells only select
+    coefficients): at every port value the fitter's cell and z offset (its data rows) are the
+    plan's (table address i * 2**bits + j, mask), every row of a plan cell is in the fit's."""
+    from ikseries.fit.fitter import FeatureSet
+    from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
+    from ikseries.fit.search import Cells
+    from ikseries.sim import golden
+    z, r = PlanInput("z", "mm", 3, -7, 313, 10, True), PlanInput("r", "mm", 3, 0, 100, 7, False)
+    fs = FeatureSet("radial", ("rho2", "z"), ("any", "odd"), zero_free=1).piecewise(1, z, 4, (None, r, 2))
+    assert fs.allowed == ("any", "any") and fs.zero_free is None and "3x2 cells in z x r" in fs.label()
+    assert fs.piecewise_record()["grid"][1] == {"input": "r", "variable": None, "cells": 2, "port_values_per_cell": 64}
+    b = PlanBuilder([z, r])
+    address, (oz, _) = fs.cut.address(b, {"z": z, "r": r})
+    plan = b.build([PlanOutput("c", address, address, "ticks", 1.0), PlanOutput("o", oz, oz, "ticks", 1.0)])
+    zz, rr = (g.ravel() for g in np.meshgrid(np.arange(z.lo, z.hi + 1), np.arange(r.lo, r.hi + 1), indexing="ij"))
+    got = golden.evaluate(plan, {"z": zz, "r": rr}, keep={plan.outputs[0].node, plan.outputs[1].node})
+    addr, off = got[plan.outputs[0].node], got[plan.outputs[1].node] * 2.0 ** -6
+    cell = (addr >> fs.cut.bits) * fs.cut.b.cells + (addr & (2 ** fs.cut.bits - 1))
+    rows = (np.stack([np.zeros(len(zz)), np.zeros(len(zz))], 1), np.arange(len(zz), dtype=np.float64))
+    empty = (rows[0][:0], rows[1][:0])
+    data = Cells.cut(fs, {"z": z, "r": r}, rows, empty, {"z": (zz / 8, zz[:0]), "r": (rr / 8, rr[:0])})
+    assert len(data.rows) == fs.cut.cells == 6
+    for c, rc in enumerate(data.rows):
+        idx = rc.t.astype(int)
+        mine = cell[idx] == c
+        assert np.array_equal(rc.x[mine, 1], off[idx[mine]]) and np.all(rc.x[:, 0] == 0)
+        assert set(np.flatnonzero(cell == c)) <= set(idx.tolist())
 
 
 def test_piecewise_cells_of_the_fit_are_the_cells_of_the_plan():

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
-from helpers import all_ports, signed_cell_plan, tiny_piecewise_plan, tiny_plan
+from helpers import all_ports, signed_cell_plan, tiny_grid_plan, tiny_piecewise_plan, tiny_plan
 from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
 from ikseries.hdl.evaluator import PlanEvaluator
 from ikseries.hdl.folded import FoldedEvaluator
@@ -83,6 +83,15 @@ def test_folded_piecewise_exhaustive(seed, k, dsp):
     assert sum(o.alu == "and" for o in prog.ops) == plan.count("mask") == 1
     assert prog.lut_init()[:len(prog.tables[0])] == list(prog.tables[0])
     assert core.initiation_interval == core.latency == prog.steps + 1
+    t = all_ports(plan)
+    assert_bit_exact(plan, run_back_to_back(core, t), t)
+
+
+def test_folded_grid_exhaustive():
+    """A two-port grid plan: both cell numbers, the address (a shift and an ALU add) and the
+    table-ROM lookups, every port value, bit for bit."""
+    plan = tiny_grid_plan(2, (2, 2))[0]
+    core = FoldedEvaluator(plan, multipliers=1, dsp=(16, 16))
     t = all_ports(plan)
     assert_bit_exact(plan, run_back_to_back(core, t), t)
 

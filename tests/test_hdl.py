@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
-from helpers import all_ports, signed_cell_plan, simulate_bit_exact, tiny_piecewise_plan, tiny_plan
+from helpers import all_ports, signed_cell_plan, simulate_bit_exact, tiny_grid_plan, tiny_piecewise_plan, tiny_plan
 from ikseries.hdl.evaluator import PlanEvaluator, lut_groups, lut_rom_init
 from ikseries.hdl.leg import LegCore
 from ikseries.hdl.pwm import ServoPWM
@@ -38,6 +38,19 @@ def test_evaluator_piecewise_exhaustive(seed, shift):
     assert set(res.latencies.tolist()) == {core.latency} == {plan.depth}
     res = simulate_bit_exact(core, plan, t, ready_prob=0.5, valid_prob=0.6, seed=seed)
     assert res.latencies.min() == core.latency
+
+
+def test_evaluator_grid_exhaustive():
+    """A two-port grid plan (cells of a x cells of the signed b, the table address from both
+    cell numbers), every port value, bit for bit, at the latency property, also under random
+    backpressure."""
+    plan = tiny_grid_plan(1, (1, 3))[0]
+    core = PlanEvaluator(plan)
+    assert len(lut_groups(plan)) == 1 and plan.count("index") == 2
+    t = all_ports(plan)
+    res = simulate_bit_exact(core, plan, t)
+    assert set(res.latencies.tolist()) == {core.latency} == {plan.depth}
+    simulate_bit_exact(core, plan, t, ready_prob=0.5, valid_prob=0.6, seed=3)
 
 
 def test_evaluator_signed_cells_exhaustive():

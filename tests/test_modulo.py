@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from helpers import all_ports, simulate_bit_exact, tiny_piecewise_plan, tiny_plan
+from helpers import all_ports, simulate_bit_exact, tiny_grid_plan, tiny_piecewise_plan, tiny_plan
 from ikseries.hdl.modulo import CLAMP_LATENCY, MUL_LATENCY, WIDE_MUL_LATENCY, ModuloEvaluator, modulo_schedule
 from ikseries.sim.targets import corner_targets, random_targets
 
@@ -24,6 +24,13 @@ def test_piecewise_plan_bit_exact_with_backpressure(seed):
     plan = tiny_piecewise_plan(seed)
     core = ModuloEvaluator(plan, 4)
     simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.6, valid_prob=0.7, seed=seed)
+
+
+def test_grid_plan_bit_exact_with_backpressure():
+    """A two-port grid plan (the table address from both cell numbers)."""
+    plan = tiny_grid_plan(0, (2, 2))[0]
+    core = ModuloEvaluator(plan, 3)
+    simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.6, valid_prob=0.7, seed=2)
 
 
 @pytest.mark.parametrize("clamp", [(-100, 100), (0, 100)])

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from helpers import all_ports, check_exhaustively, tiny_piecewise_plan, tiny_plan
+from helpers import all_ports, check_exhaustively, grid_reference, tiny_grid_plan, tiny_piecewise_plan, tiny_plan
 from ikseries.fit.horner import parity_split
 from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for
 from ikseries.sim import golden
@@ -129,6 +129,31 @@ def test_piecewise_plan_is_the_float_polynomial_of_each_cell():
     got = golden.evaluate_ideal(plan, ports)[plan.outputs[0].preround]
     assert np.allclose(got, want, rtol=0, atol=1e-9)
     assert Plan.from_json(json.loads(plan.dumps())).dumps() == plan.dumps()
+
+
+@pytest.mark.parametrize("seed, shifts", [(0, (2, 2)), (1, (1, 3)), (2, (3, 1))])
+def test_grid_plan_is_the_float_polynomial_of_each_cell(seed, shifts):
+    """A two-port grid: at every port value (every cell corner and edge, out-of-range values
+    clamped) the ideal value is the float polynomial of cell (i, j) in both offsets; the
+    intervals and rounding bound hold; the table address is i * 2**bits + j with no product,
+    and the JSON form round-trips."""
+    plan, grid, poly = tiny_grid_plan(seed, shifts)
+    assert plan.count("index") == 2 and plan.count("mask") == 2 and plan.count("mul") <= 2 * len(poly)
+    ports = all_ports(plan)
+    got = golden.evaluate_ideal(plan, ports)[plan.outputs[0].preround]
+    assert np.allclose(got, grid_reference(grid, poly, ports), rtol=0, atol=1e-9)
+    check_exhaustively(plan)
+    assert Plan.from_json(json.loads(plan.dumps())).dumps() == plan.dumps()
+
+
+def test_grid_table_pads_each_row_with_its_last_entry():
+    from ikseries.fit.features import Cut, CutGrid
+    grid = CutGrid(Cut(0, "a", 2, 3), Cut(None, "b", 2, 3))
+    assert (grid.cells, grid.bits, grid.entries) == (9, 2, 11)
+    assert grid.table(range(9)) == (0, 1, 2, 2, 3, 4, 5, 5, 6, 7, 8)
+    assert CutGrid(Cut(0, "a", 2, 2), Cut(1, "b", 1, 4)).table(range(8)) == tuple(range(8))
+    with pytest.raises(ValueError, match="a cut grid needs two ports, not 'a' twice"):
+        CutGrid(Cut(0, "a", 2, 3), Cut(1, "a", 1, 3))
 
 
 def test_lut_and_cell_operations_check_their_operands():
