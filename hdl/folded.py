@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..fit.plan import Plan
 from .evaluator import input_layout, output_layout
-from .limbmul import LimbMultiplier
+from .limbmul import LimbMultiplier, check_dsp_registers
 from .planmemo import per_plan
 from .schedule import ALU_OPS, Program, compile_program
 
@@ -80,6 +80,11 @@ class FoldedEvaluator(wiring.Component):
         Signed operand widths of the DSP multiplier (a family's
         :attr:`~ikseries.constraints.facts.Family.dsp`). Wider products are
         computed limb by limb (:class:`LimbMultiplier`). None: full-width multipliers.
+    dsp_registers : None or str
+        A family with a DSP primitive: each unit's limb product on that primitive with its own
+        registers (``dsp`` must be its size; see :class:`LimbMultiplier`), same timing and
+        values; the Amaranth simulator cannot run it (simulate the core with None, the exported
+        Verilog with the primitive's model). None (default): fabric registers.
 
     Attributes
     ----------
@@ -111,9 +116,11 @@ class FoldedEvaluator(wiring.Component):
     A held output (``o.ready`` low) blocks the next input, never an evaluation in flight.
     """
 
-    def __init__(self, plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None):
+    def __init__(self, plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None,
+                 dsp_registers: str | None = None):
         self._prog = folded_program(plan, multipliers, dsp)
-        self._plan = plan
+        check_dsp_registers(dsp_registers, self._prog.dsp)
+        self._plan, self._dsp_registers = plan, dsp_registers
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),
             "o": Out(stream.Signature(output_layout(plan))),
@@ -134,6 +141,10 @@ class FoldedEvaluator(wiring.Component):
     @property
     def dsp(self):
         return self._prog.dsp
+
+    @property
+    def dsp_registers(self) -> str | None:
+        return self._dsp_registers
 
     @property
     def latency(self) -> int:
@@ -231,7 +242,7 @@ class FoldedEvaluator(wiring.Component):
         wa, wb = prog.mul_widths
         muls = []
         for u in range(prog.multipliers):
-            mu = LimbMultiplier(wa, wb, prog.dsp, prog.acc_width)
+            mu = LimbMultiplier(wa, wb, prog.dsp, prog.acc_width, self._dsp_registers)
             m.submodules[f"mul{u}"] = mu
             m.d.comb += [mu.i.valid.eq(running & w.go[u]),
                          mu.i.payload.a.eq(x), mu.i.payload.b.eq(y)]

@@ -3,11 +3,13 @@ from __future__ import annotations
 
 import math
 
-from amaranth.hdl import Module, Mux, Signal, signed
+from amaranth.hdl import Const, Module, Signal, signed
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-__all__ = ["LimbMultiplier", "check_dsp", "limb_split"]
+from ..constraints.devices import PRIMITIVES, Primitive, dsp_size, family_primitives
+
+__all__ = ["LimbMultiplier", "check_dsp", "check_dsp_registers", "limb_split"]
 
 
 def _check_width(name, w):
@@ -22,6 +24,19 @@ def check_dsp(dsp):
     if not ok:
         raise ValueError(f"dsp must be None or a pair of signed operand widths >= 2 such as (16, 16), "
                          f"not {dsp!r}")
+
+
+def check_dsp_registers(dsp_registers, dsp) -> Primitive | None:
+    """The DSP primitive of family ``dsp_registers`` (None for None); refuses a family without
+    one, or a ``dsp`` size that is not the family's."""
+    families = dict.fromkeys(p.family for p in PRIMITIVES.values())
+    if dsp_registers is None:
+        return None
+    if not isinstance(dsp_registers, str) or dsp_registers not in families or dsp != dsp_size(dsp_registers):
+        raise ValueError("dsp_registers must be None, or "
+                         + " or ".join(f"{f!r} with dsp={dsp_size(f)}" for f in families)
+                         + f", not {dsp_registers!r}" + (f" with dsp={dsp}" if dsp_registers in families else ""))
+    return family_primitives(dsp_registers)[0]
 
 
 def limb_split(a_width: int, b_width: int, dsp: tuple[int, int] | None):
@@ -61,6 +76,14 @@ class LimbMultiplier(wiring.Component):
         Signed operand widths of the DSP product; None: one full-width product.
     product_width : int, optional
         Signed width of the result (default ``a_width + b_width``).
+    dsp_registers : None or str
+        None (default): the limb product's operand and product registers are fabric flip-flops
+        (Yosys maps the product to a DSP block without absorbing them: they reset
+        synchronously, its registers do not). A family with a DSP primitive
+        (:data:`ikseries.constraints.devices.PRIMITIVES`; ``dsp`` must be its size): the limb
+        product is an instantiated primitive whose own input and output registers are those
+        registers (always enabled: its operand registers then also load while no limb pair is
+        due, a product no later stage reads), same timing and outputs.
 
     Attributes
     ----------
@@ -81,8 +104,9 @@ class LimbMultiplier(wiring.Component):
     """
 
     def __init__(self, a_width: int, b_width: int, dsp: tuple[int, int] | None = None,
-                 product_width: int | None = None):
+                 product_width: int | None = None, dsp_registers: str | None = None):
         self._bits, self._limbs, self._regw = limb_split(a_width, b_width, dsp)
+        self._primitive = check_dsp_registers(dsp_registers, dsp)
         if product_width is None:
             product_width = a_width + b_width
         _check_width("product_width", product_width)
@@ -91,6 +115,11 @@ class LimbMultiplier(wiring.Component):
             "i": In(stream.Signature(data.StructLayout({"a": signed(a_width), "b": signed(b_width)}))),
             "o": Out(stream.Signature(signed(product_width), always_ready=True)),
         })
+
+    @property
+    def dsp_registers(self) -> str | None:
+        """The family whose DSP primitive holds the limb product and its registers, or None."""
+        return None if self._primitive is None else self._primitive.family
 
     @property
     def limbs(self) -> tuple[int, int]:
@@ -133,16 +162,25 @@ class LimbMultiplier(wiring.Component):
             return x if n == 1 else x[l * k:l * (k + 1)] if k < n - 1 else x[l * k:].as_signed()
 
         m.d.sync += [s2.eq(s1), v2.eq(v1)]
-        with m.If(v1):
+        p = Signal(signed(len(da) + len(db)))
+        if self._primitive is None:
+            with m.If(v1):
+                with m.Switch(s1):
+                    for s in range(nl):
+                        with m.Case(s):
+                            m.d.sync += [da.eq(limb(a, na, la, s // nb)), db.eq(limb(b, nb, lb, s % nb))]
+            # stage 3: the DSP's output register
+            m.d.sync += p.eq(da * db)
+        else:   # stages 2 and 3 inside the primitive: the limb pair selected before its registers
+            pa, pb = Signal.like(da, name="limb_a"), Signal.like(db, name="limb_b")
             with m.Switch(s1):
                 for s in range(nl):
                     with m.Case(s):
-                        m.d.sync += [da.eq(limb(a, na, la, s // nb)), db.eq(limb(b, nb, lb, s % nb))]
-        # stage 3: the DSP's output register
-        p = Signal(signed(len(da) + len(db)))
+                        m.d.comb += [pa.eq(limb(a, na, la, s // nb)), pb.eq(limb(b, nb, lb, s % nb))]
+            m.submodules.dsp = self._primitive.instance(m, pa, pb, p, Const(1, 1))
         s3 = Signal(range(nl))
         v3 = Signal()
-        m.d.sync += [p.eq(da * db), s3.eq(s2), v3.eq(v2)]
+        m.d.sync += [s3.eq(s2), v3.eq(v2)]
         # stage 4: accumulate, each partial product shifted to its place
         acc = Signal(signed(self._pw))
         shifted = Signal(signed(self._pw))
@@ -151,7 +189,17 @@ class LimbMultiplier(wiring.Component):
                 with m.Case(s):
                     m.d.comb += shifted.eq(p << (la * (s // nb) + lb * (s % nb)))
         with m.If(v3):
-            m.d.sync += acc.eq(Mux(s3 == 0, 0, acc) + shifted)
+            if nl == 1:
+                m.d.sync += acc.eq(shifted)
+            else:
+                # the first partial product (shift 0) is loaded; every later one is shifted by
+                # at least k bits, so acc's k low bits are final and the adder (the unit's
+                # longest path, a carry chain) is k bits shorter than the product
+                k = min(l for l, n in ((la, na), (lb, nb)) if n > 1)
+                with m.If(s3 == 0):
+                    m.d.sync += acc.eq(shifted)
+                with m.Else():
+                    m.d.sync += acc[k:].eq(acc[k:] + shifted[k:])
         done = Signal()
         m.d.sync += done.eq(v3 & (s3 == nl - 1))
         m.d.comb += [self.o.valid.eq(done), self.o.payload.eq(acc)]

@@ -69,8 +69,10 @@ def test_cordic_architectures_time_their_solver(robot):
 @pytest.mark.parametrize("make, msg", [
     (lambda: Modulo(0), r"^interval must be an integer >= 1, not 0$"),
     (lambda: Modulo(True), r"^interval must be an integer >= 1, not True$"),
-    (lambda: Modulo(4, "ice40", primitives=True), r"^dsp must be one of ecp5 with primitives \(the families whose "
-                                                  r"DSP primitives are instantiated\), not 'ice40'$"),
+    (lambda: Modulo(4, "xc7", primitives=True), r"^dsp must be one of ice40, ecp5 with primitives \(the families "
+                                                r"whose DSP primitives are instantiated\), not 'xc7'$"),
+    (lambda: Folded(1, None, primitives=True), r"^dsp must be one of ice40, ecp5 with primitives \(the families "
+                                               r"whose DSP primitives are instantiated\), not None$"),
     (lambda: Modulo(4, "ecp5", primitives="yes"), r"^primitives must be true or false, not 'yes'$"),
     (lambda: Folded(0), r"^multipliers must be an integer >= 1, not 0$"),
     (lambda: Folded(1, "virtex"), r"^dsp must be None, 'none' or one of ice40, ecp5, xc7, not 'virtex'$"),
