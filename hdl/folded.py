@@ -191,9 +191,19 @@ class FoldedEvaluator(wiring.Component):
         last = pc == steps - 1
         in_reg = Signal(input_layout(plan))
         accept = Signal()
+        # the ROM address of the next cycle's read, from a register (an adder and a comparison
+        # in front of the block RAM's address were the core's longest path): pc + 2 while
+        # running and within the program, else 0; an input transfer reads word 1
+        fetch = Signal(range(steps), name="fetch")
         m.d.comb += [self.i.ready.eq(~running & (~self.o.valid | self.o.ready)),
                      accept.eq(self.i.valid & self.i.ready),
-                     code.addr.eq(Mux(accept, 1 % steps, Mux(running & (pc + 2 < steps), pc + 2, 0)))]
+                     code.addr.eq(Mux(accept, 1 % steps, fetch))]
+        with m.If(accept):
+            m.d.sync += fetch.eq(2 if 2 < steps else 0)
+        with m.Elif(running & ~last & (pc + 3 < steps)):
+            m.d.sync += fetch.eq(pc + 3)
+        with m.Else():
+            m.d.sync += fetch.eq(0)
         with m.If(running & ~last):
             m.d.sync += w.eq(code.data)
         with m.Else():
