@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-from amaranth.hdl import Const, Module, Signal, signed
+from amaranth.hdl import Cat, Const, Module, Signal, signed
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -137,6 +137,17 @@ class LimbMultiplier(wiring.Component):
     def initiation_interval(self) -> int:
         return self.n_limbs
 
+    def _pairs(self) -> list[tuple[int, int]]:
+        """The (a limb, b limb) of each step. With one operand in one limb, from the top limb
+        down: the accumulator is then Horner's rule, ``acc << bits + p``, a constant shift
+        (no shift multiplexer before its adder); otherwise a-limb major, from the bottom."""
+        (na, nb), nl = self._limbs, self.n_limbs
+        if nb == 1:
+            return [(na - 1 - s, 0) for s in range(nl)]
+        if na == 1:
+            return [(0, nb - 1 - s) for s in range(nl)]
+        return [(s // nb, s % nb) for s in range(nl)]
+
     def elaborate(self, platform):
         m = Module()
         (la, lb), (na, nb), (wa, wb) = self._bits, self._limbs, self._regw
@@ -166,41 +177,53 @@ class LimbMultiplier(wiring.Component):
         if self._primitive is None:
             with m.If(v1):
                 with m.Switch(s1):
-                    for s in range(nl):
+                    for s, (i, j) in enumerate(self._pairs()):
                         with m.Case(s):
-                            m.d.sync += [da.eq(limb(a, na, la, s // nb)), db.eq(limb(b, nb, lb, s % nb))]
+                            m.d.sync += [da.eq(limb(a, na, la, i)), db.eq(limb(b, nb, lb, j))]
             # stage 3: the DSP's output register
             m.d.sync += p.eq(da * db)
         else:   # stages 2 and 3 inside the primitive: the limb pair selected before its registers
             pa, pb = Signal.like(da, name="limb_a"), Signal.like(db, name="limb_b")
             with m.Switch(s1):
-                for s in range(nl):
+                for s, (i, j) in enumerate(self._pairs()):
                     with m.Case(s):
-                        m.d.comb += [pa.eq(limb(a, na, la, s // nb)), pb.eq(limb(b, nb, lb, s % nb))]
+                        m.d.comb += [pa.eq(limb(a, na, la, i)), pb.eq(limb(b, nb, lb, j))]
             m.submodules.dsp = self._primitive.instance(m, pa, pb, p, Const(1, 1))
         s3 = Signal(range(nl))
         v3 = Signal()
         m.d.sync += [s3.eq(s2), v3.eq(v2)]
-        # stage 4: accumulate, each partial product shifted to its place
-        acc = Signal(signed(self._pw))
-        shifted = Signal(signed(self._pw))
-        with m.Switch(s3):
-            for s in range(nl):
-                with m.Case(s):
-                    m.d.comb += shifted.eq(p << (la * (s // nb) + lb * (s % nb)))
-        with m.If(v3):
-            if nl == 1:
-                m.d.sync += acc.eq(shifted)
-            else:
-                # the first partial product (shift 0) is loaded; every later one is shifted by
-                # at least k bits, so acc's k low bits are final and the adder (the unit's
-                # longest path, a carry chain) is k bits shorter than the product
-                k = min(l for l, n in ((la, na), (lb, nb)) if n > 1)
-                with m.If(s3 == 0):
-                    m.d.sync += acc.eq(shifted)
-                with m.Else():
-                    m.d.sync += acc[k:].eq(acc[k:] + shifted[k:])
+        acc = self._accumulate(m, p, s3, v3)
         done = Signal()
         m.d.sync += done.eq(v3 & (s3 == nl - 1))
         m.d.comb += [self.o.valid.eq(done), self.o.payload.eq(acc)]
         return m
+
+    def _accumulate(self, m, p, s3, v3):
+        """Stage 4: the partial product ``p`` of step ``s3`` accumulated (when ``v3``), modulo
+        ``2**product_width``; the accumulator register."""
+        (la, lb), (na, nb), nl = self._bits, self._limbs, self.n_limbs
+        acc = Signal(signed(self._pw))
+        if nl == 1:
+            with m.If(v3):
+                m.d.sync += acc.eq(p)
+            return acc
+        if na == 1 or nb == 1:
+            # Horner, top limb first: (acc << l) + p, whose l low bits are p's: the adder is
+            # l bits narrower than the product and has no multiplexer in front
+            l = la if nb == 1 else lb
+            lo, hi, step = 0, len(acc), Cat(p[:l], acc + (p >> l))
+        else:
+            # each product shifted to its place; every one after the first is shifted by at
+            # least k bits, so acc's k low bits are final and the adder k bits narrower
+            k = min(la, lb)
+            shifted = Signal(signed(self._pw))
+            with m.Switch(s3):
+                for s, (i, j) in enumerate(self._pairs()):
+                    with m.Case(s):
+                        m.d.comb += shifted.eq(p << (la * i + lb * j))
+            lo, hi, step = k, len(acc), acc[k:] + shifted[k:]
+        with m.If(v3 & (s3 == 0)):
+            m.d.sync += acc.eq(p)
+        with m.Elif(v3):
+            m.d.sync += acc[lo:hi].eq(step)
+        return acc
