@@ -94,7 +94,9 @@ class FoldedEvaluator(wiring.Component):
         The schedule and microcode.
 
     The long paths are registered for clock speed: the microcode ROM's word (the ROM reads
-    two words ahead; word 0 is a constant loaded while idle), the memory's read data before
+    two words ahead, its address from a counter of its own; word 0 is a constant loaded while
+    idle; a copy of the running flag gates the datapath, so the handshake's flag drives only
+    the sequencer), the memory's read data before
     the ALU, multipliers and table ROM, the ALU between its sum/comparison and its selection,
     and the write-back between the source selection and the view shift, and again before the
     memory write port and the output registers. The compiler's timing model
@@ -161,12 +163,12 @@ class FoldedEvaluator(wiring.Component):
         # microcode register after the ROM's read: the ROM reads two words ahead, word 0
         # comes from a constant (the machine is idle, or in its last step, before step 0)
         w = Signal(layout, init=self._prog.words[0])
-        running, in_reg = self._sequencer(m, layout, code, w)
+        running, busy, in_reg = self._sequencer(m, layout, code, w)
         x, y = self._read_register(m, w, rx, ry)
         alu = self._alu(m, w, x, y)
-        muls = self._multipliers(m, w, running, x, y)
+        muls = self._multipliers(m, w, busy, x, y)
         lut = self._tables(m, w, x)
-        wb_data, wb_cap = self._write_back(m, w, running, in_reg, alu, muls, lut, wr)
+        wb_data, wb_cap = self._write_back(m, w, busy, in_reg, alu, muls, lut, wr)
         self._outputs(m, wb_data, wb_cap)
         return m
 
@@ -183,40 +185,49 @@ class FoldedEvaluator(wiring.Component):
         return code, rx, ry, wr
 
     def _sequencer(self, m, layout, code, w):
-        """Handshake, step counter and microcode fetch; the running flag and the input register."""
+        """Handshake, step counter and microcode fetch; the running flag, its copy for the
+        datapath and the input register."""
         prog, plan = self._prog, self._plan
         steps = prog.steps
         running = Signal()
+        # a second running flag for the datapath's gates (the microcode register, multiplier
+        # starts, write enables, the input register's load): running's own loads are then the
+        # sequencer's, not a net of some hundred loads in front of pc and the handshake; its
+        # own feedback keeps Yosys from merging the two
+        busy = Signal(name="busy")
         pc = Signal(range(steps))
         last = pc == steps - 1
         in_reg = Signal(input_layout(plan))
         accept = Signal()
-        # the ROM address of the next cycle's read, from a register (an adder and a comparison
-        # in front of the block RAM's address were the core's longest path): pc + 2 while
-        # running and within the program, else 0; an input transfer reads word 1
+        # the ROM address of the next cycle's read from a counter of its own (an adder and a
+        # comparison of pc in front of the block RAM's address were the core's longest path):
+        # pc + 2 while that is in the program, else 0 (2 after an input transfer, which
+        # itself reads word 1; fetch counts up to steps - 1, then rests at 0)
         fetch = Signal(range(steps), name="fetch")
         m.d.comb += [self.i.ready.eq(~running & (~self.o.valid | self.o.ready)),
                      accept.eq(self.i.valid & self.i.ready),
                      code.addr.eq(Mux(accept, 1 % steps, fetch))]
         with m.If(accept):
             m.d.sync += fetch.eq(2 if 2 < steps else 0)
-        with m.Elif(running & ~last & (pc + 3 < steps)):
-            m.d.sync += fetch.eq(pc + 3)
+        with m.Elif((fetch != 0) & (fetch != steps - 1)):
+            m.d.sync += fetch.eq(fetch + 1)
         with m.Else():
             m.d.sync += fetch.eq(0)
-        with m.If(running & ~last):
+        with m.If(busy & ~last):
             m.d.sync += w.eq(code.data)
         with m.Else():
             m.d.sync += w.eq(layout.const(prog.words[0]))
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
+        with m.If(~busy):   # idle: the input register follows the port (latched at accept)
+            m.d.sync += in_reg.eq(self.i.payload)
         with m.If(accept):
-            m.d.sync += [in_reg.eq(self.i.payload), running.eq(1), pc.eq(0)]
+            m.d.sync += [running.eq(1), busy.eq(1), pc.eq(0)]
         with m.Elif(running):
             m.d.sync += pc.eq(pc + 1)
             with m.If(last):
-                m.d.sync += [running.eq(0), pc.eq(0), self.o.valid.eq(1)]
-        return running, in_reg
+                m.d.sync += [running.eq(0), busy.eq(0), pc.eq(0), self.o.valid.eq(1)]
+        return running, busy, in_reg
 
     def _read_register(self, m, w, rx, ry):
         """The read register: the units see the data read two cycles before (memory, register)."""

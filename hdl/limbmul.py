@@ -65,7 +65,9 @@ class LimbMultiplier(wiring.Component):
     ``limbs_a * limbs_b`` partial products go through one registered multiplier (inputs
     and output registered, so it maps onto one DSP block of the family whose
     :attr:`~ikseries.constraints.facts.Family.dsp` is ``dsp``), one per cycle, and are
-    accumulated, shifted into place, modulo ``2**product_width``. The accumulated sum is
+    accumulated, shifted into place, modulo ``2**product_width`` (one operand in one limb:
+    the other's limbs from the top down, Horner's rule, a constant shift; the adder never
+    spans the bits a later product cannot change). The accumulated sum is
     the exact product whenever that fits ``product_width`` signed bits.
 
     Parameters
