@@ -1,6 +1,9 @@
 """Folded evaluator: the whole plan on a few shared units, driven by a microcode ROM."""
 from __future__ import annotations
 
+import functools
+import operator
+
 from amaranth.hdl import Cat, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
@@ -163,12 +166,12 @@ class FoldedEvaluator(wiring.Component):
         # microcode register after the ROM's read: the ROM reads two words ahead, word 0
         # comes from a constant (the machine is idle, or in its last step, before step 0)
         w = Signal(layout, init=self._prog.words[0])
-        running, busy, in_reg = self._sequencer(m, layout, code, w)
+        running, busy, in_reg, hot = self._sequencer(m, layout, code, w)
         x, y = self._read_register(m, w, rx, ry)
         alu = self._alu(m, w, x, y)
         muls = self._multipliers(m, w, busy, x, y)
         lut = self._tables(m, w, x)
-        wb_data, wb_cap = self._write_back(m, w, busy, in_reg, alu, muls, lut, wr)
+        wb_data, wb_cap = self._write_back(m, w, hot, busy, in_reg, alu, muls, lut, wr)
         self._outputs(m, wb_data, wb_cap)
         return m
 
@@ -213,10 +216,14 @@ class FoldedEvaluator(wiring.Component):
             m.d.sync += fetch.eq(fetch + 1)
         with m.Else():
             m.d.sync += fetch.eq(0)
+        # the write-back's source one-hot, registered with the word: an and-or selection is a
+        # LUT level shorter than a multiplexer on the encoded field
+        n_src = 1 + prog.multipliers + len(plan.inputs) + bool(prog.tables)
+        hot = Signal(n_src, name="src_hot", init=1 << prog.words[0]["src"])
         with m.If(busy & ~last):
-            m.d.sync += w.eq(code.data)
+            m.d.sync += [w.eq(code.data), hot.eq(Cat(*(code.data.src == v for v in range(n_src))))]
         with m.Else():
-            m.d.sync += w.eq(layout.const(prog.words[0]))
+            m.d.sync += [w.eq(layout.const(prog.words[0])), hot.eq(1 << prog.words[0]["src"])]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
         with m.If(~busy):   # idle: the input register follows the port (latched at accept)
@@ -227,7 +234,7 @@ class FoldedEvaluator(wiring.Component):
             m.d.sync += pc.eq(pc + 1)
             with m.If(last):
                 m.d.sync += [running.eq(0), busy.eq(0), pc.eq(0), self.o.valid.eq(1)]
-        return running, busy, in_reg
+        return running, busy, in_reg, hot
 
     def _read_register(self, m, w, rx, ry):
         """The read register: the units see the data read two cycles before (memory, register)."""
@@ -282,25 +289,21 @@ class FoldedEvaluator(wiring.Component):
         m.d.comb += lut.addr.eq(Cat(x[:prog.lut_index_bits], w.tab))
         return lut
 
-    def _write_back(self, m, w, running, in_reg, alu, muls, lut, wr):
-        """Write-back, two registered stages: the source (field src of the word at w), then the
-        view shift with the memory write and output capture fields of the word at w + 1; the
-        memory write happens at w + 2. The written value and the capture bits."""
+    def _write_back(self, m, w, hot, running, in_reg, alu, muls, lut, wr):
+        """Write-back, two registered stages: the source (field src of the word at w, one-hot in
+        ``hot``), then the view shift with the memory write and output capture fields of the
+        word at w + 1; the memory write happens at w + 2. The written value and the capture bits."""
         prog, plan = self._prog, self._plan
-        k = prog.multipliers
+        sources = [alu, *(mu.o.payload for mu in muls), *(in_reg[inp.name] for inp in plan.inputs)]
+        if prog.tables:
+            sources.append(lut.data)
         wbv = Signal(signed(prog.wb_width))
-        with m.Switch(w.src):
-            with m.Case(0):
-                m.d.sync += wbv.eq(alu)
-            for u, mu in enumerate(muls):
-                with m.Case(1 + u):
-                    m.d.sync += wbv.eq(mu.o.payload)
-            for j, inp in enumerate(plan.inputs):
-                with m.Case(1 + k + j):
-                    m.d.sync += wbv.eq(in_reg[inp.name])
-            if prog.tables:
-                with m.Case(1 + k + len(plan.inputs)):
-                    m.d.sync += wbv.eq(lut.data)
+        terms = []
+        for v, src in enumerate(sources):
+            t = Signal(signed(prog.wb_width), name=f"wb_src{v}")
+            m.d.comb += t.eq(Mux(hot[v], src, 0))
+            terms.append(t)
+        m.d.sync += wbv.eq(functools.reduce(operator.or_, terms))
         value = Signal(signed(prog.store_width))
         with m.Switch(w.view):
             for v, (a, b) in enumerate(prog.views):
