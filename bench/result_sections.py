@@ -347,6 +347,23 @@ def chain_fit(res: dict) -> list[str]:
             "for every robot too).", "", *table(head, rows)]
 
 
+def ice40_dsp(res: dict) -> list[str]:
+    """Lines of the ``bench/ice40_dsp.py`` section from its JSON ``res``."""
+    clk = res["clock_hz"]
+    rows = []
+    for r in res["rows"]:
+        u, cp = r["median_run"]["utilisation"], r["median_run"]["critical_path"]
+        rows.append(("SB_MAC16 primitive" if r["primitives"] else "fabric", num(r["median_fmax_mhz"], ".3f"),
+                     f"{r['median_fmax_mhz'] * 1e6 / clk - 1:.1%}", " / ".join(num(x["fmax_mhz"], ".3f") for x in r["runs"]),
+                     u["LC"]["used"], u["DSP"]["used"], u["BRAM"]["used"], r["latency_cycles"],
+                     f"`{cp.get('from', '?')}` -> `{cp.get('to', '?')}`"))
+    return [f"The `hexapod` preset's core (the shared folded evaluator) at {clk / 1e6:g} MHz on `{res['device']}` "
+            f"(timing harness included in LC), nextpnr seeds {', '.join(map(str, res['seeds']))}, the median; the "
+            f"target: {res['margin_target']:.0%} margin.", "",
+            *table(("limb product registers", "Fmax MHz", "margin", "per seed", "LC", "DSP", "BRAM", "latency",
+                    "critical path (median run)"), rows)]
+
+
 SECTIONS = {
     "fit_benchmark": ("Fits of every preset", "Per preset and servo: what the fit costs and achieves.",
                       fit_benchmark),
@@ -381,6 +398,8 @@ SECTIONS = {
                     "(speed, acceleration, timed moves, failsafe) for a hexapod.", servo_cells),
     "controller_cells": ("Robot controller area", "Yosys counts of the hexapod robot controller, "
                          "its parts and what it adds beyond its IK core.", controller_cells),
+    "ice40_dsp": ("The hexapod core at 48 MHz on the iCE40UP5K", "Place and route with the limb products' "
+                  "registers in the fabric and on an instantiated SB_MAC16.", ice40_dsp),
     "chain_fit": ("A chain against its closed form", "The hexapod leg fitted and certified as formulas and "
                   "as a serial chain (numeric IK, Krawczyk enclosures), CPU seconds in one run.", chain_fit),
 }

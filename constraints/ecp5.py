@@ -9,7 +9,7 @@ so ``LUT`` counts 2 per CCU2C, the way Lattice's map report counts LUT4s ("logic
 """
 from __future__ import annotations
 
-from .facts import Family, Nextpnr, Part, PnrDevice, Primitive
+from .facts import Family, Nextpnr, Part, PnrDevice, Primitive, check_operands
 
 __all__ = ["FAMILY", "PARTS", "PNR_DEVICES", "PRIMITIVES"]
 
@@ -52,6 +52,7 @@ def mult18x18d(m, a, b, product, enable):
     synchronously by the domain's reset. ``a`` and ``b`` (at most 18 bits signed) and
     ``product`` are connected to its ports in ``m``'s comb domain; returns the ``Instance``."""
     from amaranth.hdl import ClockSignal, Const, Instance, ResetSignal, Signal, signed
+    check_operands("MULT18X18D", 18, 36, a, b, product)
     sa, sb, out = Signal(signed(18)), Signal(signed(18)), Signal(36)
     m.d.comb += [sa.eq(a), sb.eq(b), product.eq(out.as_signed())]
     regs = {f"p_REG_{r}_{f}": v for r in ("INPUTA", "INPUTB", "OUTPUT")

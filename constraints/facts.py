@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["CATEGORIES", "Family", "Nextpnr", "Part", "PnrDevice", "Primitive"]
+__all__ = ["CATEGORIES", "Family", "Nextpnr", "Part", "PnrDevice", "Primitive", "check_operands"]
 
 #: resource categories of a synthesised design; every raw Yosys cell falls in exactly one
 #: (unknown cells in "other")
@@ -218,8 +218,10 @@ class Primitive:
     instance : callable
         ``instance(m, a, b, product, enable)`` -> the Amaranth ``Instance`` of one registered
         multiplication ``product = a * b`` in the sync domain (operand and product registers
-        inside the primitive, clock enable ``enable``, synchronous reset = the domain's reset),
-        its ports connected to the operands and ``product`` in ``m``'s comb domain.
+        inside the primitive, clock enable ``enable``, cleared by the domain's reset: at every
+        clock edge the values of fabric registers reset synchronously), its ports connected to
+        the operands and ``product`` in ``m``'s comb domain; ValueError (one line,
+        :func:`check_operands`) for an operand wider than :attr:`operand_bits`.
     """
     name: str
     family: str
@@ -232,3 +234,17 @@ class Primitive:
     def model_path(self) -> Path:
         """Path of :attr:`model`, a file of the ``ikseries.sim`` package."""
         return Path(__file__).resolve().parent.parent / "sim" / "models" / self.model
+
+
+def check_operands(name: str, operand_bits: int, product_bits: int, a, b, product) -> None:
+    """Refuse operands ``a``, ``b`` (Amaranth values) wider than the ``operand_bits`` signed
+    ports of primitive ``name``, or a ``product`` narrower than their exact product (at most
+    ``product_bits``), with one line naming the width."""
+    for what, v in (("a", a), ("b", b)):
+        if len(v) > operand_bits:
+            raise ValueError(f"{what} must be at most {operand_bits} bits signed (the {name} operand), "
+                             f"not {len(v)} bits")
+    need = min(len(a) + len(b), product_bits)
+    if len(product) < need:
+        raise ValueError(f"product must be at least {need} bits (a {len(a)} x {len(b)}-bit signed product "
+                         f"on the {name}), not {len(product)} bits")

@@ -1,6 +1,9 @@
 """Folded evaluator: the whole plan on a few shared units, driven by a microcode ROM."""
 from __future__ import annotations
 
+import functools
+import operator
+
 from amaranth.hdl import Cat, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
@@ -8,7 +11,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..fit.plan import Plan
 from .evaluator import input_layout, output_layout
-from .limbmul import LimbMultiplier
+from .limbmul import LimbMultiplier, check_dsp_registers
 from .planmemo import per_plan
 from .schedule import ALU_OPS, Program, compile_program
 
@@ -80,6 +83,11 @@ class FoldedEvaluator(wiring.Component):
         Signed operand widths of the DSP multiplier (a family's
         :attr:`~ikseries.constraints.facts.Family.dsp`). Wider products are
         computed limb by limb (:class:`LimbMultiplier`). None: full-width multipliers.
+    dsp_registers : None or str
+        A family with a DSP primitive: each unit's limb product on that primitive with its own
+        registers (``dsp`` must be its size; see :class:`LimbMultiplier`), same timing and
+        values; the Amaranth simulator cannot run it (simulate the core with None, the exported
+        Verilog with the primitive's model). None (default): fabric registers.
 
     Attributes
     ----------
@@ -89,7 +97,9 @@ class FoldedEvaluator(wiring.Component):
         The schedule and microcode.
 
     The long paths are registered for clock speed: the microcode ROM's word (the ROM reads
-    two words ahead; word 0 is a constant loaded while idle), the memory's read data before
+    two words ahead, its address from a counter of its own; word 0 is a constant loaded while
+    idle; a copy of the running flag gates the datapath, so the handshake's flag drives only
+    the sequencer), the memory's read data before
     the ALU, multipliers and table ROM, the ALU between its sum/comparison and its selection,
     and the write-back between the source selection and the view shift, and again before the
     memory write port and the output registers. The compiler's timing model
@@ -111,9 +121,11 @@ class FoldedEvaluator(wiring.Component):
     A held output (``o.ready`` low) blocks the next input, never an evaluation in flight.
     """
 
-    def __init__(self, plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None):
+    def __init__(self, plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None,
+                 dsp_registers: str | None = None):
         self._prog = folded_program(plan, multipliers, dsp)
-        self._plan = plan
+        check_dsp_registers(dsp_registers, self._prog.dsp)
+        self._plan, self._dsp_registers = plan, dsp_registers
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),
             "o": Out(stream.Signature(output_layout(plan))),
@@ -136,6 +148,10 @@ class FoldedEvaluator(wiring.Component):
         return self._prog.dsp
 
     @property
+    def dsp_registers(self) -> str | None:
+        return self._dsp_registers
+
+    @property
     def latency(self) -> int:
         return self._prog.steps + 1
 
@@ -150,12 +166,12 @@ class FoldedEvaluator(wiring.Component):
         # microcode register after the ROM's read: the ROM reads two words ahead, word 0
         # comes from a constant (the machine is idle, or in its last step, before step 0)
         w = Signal(layout, init=self._prog.words[0])
-        running, in_reg = self._sequencer(m, layout, code, w)
+        running, busy, in_reg, hot = self._sequencer(m, layout, code, w)
         x, y = self._read_register(m, w, rx, ry)
         alu = self._alu(m, w, x, y)
-        muls = self._multipliers(m, w, running, x, y)
+        muls = self._multipliers(m, w, busy, x, y)
         lut = self._tables(m, w, x)
-        wb_data, wb_cap = self._write_back(m, w, running, in_reg, alu, muls, lut, wr)
+        wb_data, wb_cap = self._write_back(m, w, hot, busy, in_reg, alu, muls, lut, wr)
         self._outputs(m, wb_data, wb_cap)
         return m
 
@@ -172,30 +188,53 @@ class FoldedEvaluator(wiring.Component):
         return code, rx, ry, wr
 
     def _sequencer(self, m, layout, code, w):
-        """Handshake, step counter and microcode fetch; the running flag and the input register."""
+        """Handshake, step counter and microcode fetch; the running flag, its copy for the
+        datapath and the input register."""
         prog, plan = self._prog, self._plan
         steps = prog.steps
         running = Signal()
+        # a second running flag for the datapath's gates (the microcode register, multiplier
+        # starts, write enables, the input register's load): running's own loads are then the
+        # sequencer's, not a net of some hundred loads in front of pc and the handshake; its
+        # own feedback keeps Yosys from merging the two
+        busy = Signal(name="busy")
         pc = Signal(range(steps))
         last = pc == steps - 1
         in_reg = Signal(input_layout(plan))
         accept = Signal()
+        # the ROM address of the next cycle's read from a counter of its own (an adder and a
+        # comparison of pc in front of the block RAM's address were the core's longest path):
+        # pc + 2 while that is in the program, else 0 (2 after an input transfer, which
+        # itself reads word 1; fetch counts up to steps - 1, then rests at 0)
+        fetch = Signal(range(steps), name="fetch")
         m.d.comb += [self.i.ready.eq(~running & (~self.o.valid | self.o.ready)),
                      accept.eq(self.i.valid & self.i.ready),
-                     code.addr.eq(Mux(accept, 1 % steps, Mux(running & (pc + 2 < steps), pc + 2, 0)))]
-        with m.If(running & ~last):
-            m.d.sync += w.eq(code.data)
+                     code.addr.eq(Mux(accept, 1 % steps, fetch))]
+        with m.If(accept):
+            m.d.sync += fetch.eq(2 if 2 < steps else 0)
+        with m.Elif((fetch != 0) & (fetch != steps - 1)):
+            m.d.sync += fetch.eq(fetch + 1)
         with m.Else():
-            m.d.sync += w.eq(layout.const(prog.words[0]))
+            m.d.sync += fetch.eq(0)
+        # the write-back's source one-hot, registered with the word: an and-or selection is a
+        # LUT level shorter than a multiplexer on the encoded field
+        n_src = 1 + prog.multipliers + len(plan.inputs) + bool(prog.tables)
+        hot = Signal(n_src, name="src_hot", init=1 << prog.words[0]["src"])
+        with m.If(busy & ~last):
+            m.d.sync += [w.eq(code.data), hot.eq(Cat(*(code.data.src == v for v in range(n_src))))]
+        with m.Else():
+            m.d.sync += [w.eq(layout.const(prog.words[0])), hot.eq(1 << prog.words[0]["src"])]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
+        with m.If(~busy):   # idle: the input register follows the port (latched at accept)
+            m.d.sync += in_reg.eq(self.i.payload)
         with m.If(accept):
-            m.d.sync += [in_reg.eq(self.i.payload), running.eq(1), pc.eq(0)]
+            m.d.sync += [running.eq(1), busy.eq(1), pc.eq(0)]
         with m.Elif(running):
             m.d.sync += pc.eq(pc + 1)
             with m.If(last):
-                m.d.sync += [running.eq(0), pc.eq(0), self.o.valid.eq(1)]
-        return running, in_reg
+                m.d.sync += [running.eq(0), busy.eq(0), pc.eq(0), self.o.valid.eq(1)]
+        return running, busy, in_reg, hot
 
     def _read_register(self, m, w, rx, ry):
         """The read register: the units see the data read two cycles before (memory, register)."""
@@ -231,7 +270,7 @@ class FoldedEvaluator(wiring.Component):
         wa, wb = prog.mul_widths
         muls = []
         for u in range(prog.multipliers):
-            mu = LimbMultiplier(wa, wb, prog.dsp, prog.acc_width)
+            mu = LimbMultiplier(wa, wb, prog.dsp, prog.acc_width, self._dsp_registers)
             m.submodules[f"mul{u}"] = mu
             m.d.comb += [mu.i.valid.eq(running & w.go[u]),
                          mu.i.payload.a.eq(x), mu.i.payload.b.eq(y)]
@@ -250,25 +289,21 @@ class FoldedEvaluator(wiring.Component):
         m.d.comb += lut.addr.eq(Cat(x[:prog.lut_index_bits], w.tab))
         return lut
 
-    def _write_back(self, m, w, running, in_reg, alu, muls, lut, wr):
-        """Write-back, two registered stages: the source (field src of the word at w), then the
-        view shift with the memory write and output capture fields of the word at w + 1; the
-        memory write happens at w + 2. The written value and the capture bits."""
+    def _write_back(self, m, w, hot, running, in_reg, alu, muls, lut, wr):
+        """Write-back, two registered stages: the source (field src of the word at w, one-hot in
+        ``hot``), then the view shift with the memory write and output capture fields of the
+        word at w + 1; the memory write happens at w + 2. The written value and the capture bits."""
         prog, plan = self._prog, self._plan
-        k = prog.multipliers
+        sources = [alu, *(mu.o.payload for mu in muls), *(in_reg[inp.name] for inp in plan.inputs)]
+        if prog.tables:
+            sources.append(lut.data)
         wbv = Signal(signed(prog.wb_width))
-        with m.Switch(w.src):
-            with m.Case(0):
-                m.d.sync += wbv.eq(alu)
-            for u, mu in enumerate(muls):
-                with m.Case(1 + u):
-                    m.d.sync += wbv.eq(mu.o.payload)
-            for j, inp in enumerate(plan.inputs):
-                with m.Case(1 + k + j):
-                    m.d.sync += wbv.eq(in_reg[inp.name])
-            if prog.tables:
-                with m.Case(1 + k + len(plan.inputs)):
-                    m.d.sync += wbv.eq(lut.data)
+        terms = []
+        for v, src in enumerate(sources):
+            t = Signal(signed(prog.wb_width), name=f"wb_src{v}")
+            m.d.comb += t.eq(Mux(hot[v], src, 0))
+            terms.append(t)
+        m.d.sync += wbv.eq(functools.reduce(operator.or_, terms))
         value = Signal(signed(prog.store_width))
         with m.Switch(w.view):
             for v, (a, b) in enumerate(prog.views):

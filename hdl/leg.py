@@ -40,9 +40,10 @@ class LegCore(wiring.Component):
         :class:`FoldedEvaluator`); only with ``multipliers`` or ``interval``.
     interval : int, optional
         Initiation interval of a :class:`ModuloEvaluator` (not with ``multipliers``).
-    dsp_registers : None or "ecp5", optional
-        With ``interval``: the modulo evaluator's products on instantiated DSP primitives of
-        that family with their own registers (see :class:`ModuloEvaluator`).
+    dsp_registers : None, "ice40" or "ecp5", optional
+        With ``interval`` or ``multipliers``: the modulo or folded evaluator's products on
+        instantiated DSP primitives of that family with their own registers (see
+        :class:`ModuloEvaluator`, :class:`FoldedEvaluator`).
 
     Attributes
     ----------
@@ -73,9 +74,9 @@ class LegCore(wiring.Component):
                  interval: int | None = None, dsp_registers: str | None = None):
         self._args = (plan, period, reset_widths, dict(multipliers=multipliers, dsp=dsp, interval=interval))
         self._dsp_registers = dsp_registers
-        if dsp_registers is not None and interval is None:
-            raise ValueError(f"dsp_registers must be None without interval (only the modulo-scheduled "
-                             f"evaluator instantiates DSP primitives), not {dsp_registers!r}")
+        if dsp_registers is not None and interval is None and multipliers is None:
+            raise ValueError(f"dsp_registers must be None without interval or multipliers (the pipelined "
+                             f"evaluator instantiates no DSP primitives), not {dsp_registers!r}")
         if interval is not None:
             if multipliers is not None:
                 raise ValueError(f"multipliers must be None with interval (a modulo-scheduled evaluator "
@@ -88,7 +89,7 @@ class LegCore(wiring.Component):
         else:
             if not isinstance(multipliers, int) or isinstance(multipliers, bool) or multipliers < 1:
                 raise ValueError(f"multipliers must be None or an integer >= 1, not {multipliers!r}")
-            self._evaluator = FoldedEvaluator(plan, multipliers, dsp)
+            self._evaluator = FoldedEvaluator(plan, multipliers, dsp, dsp_registers)
         self._servos, reset_widths = servo_channels(plan, reset_widths)
         layout = output_layout(plan)
         self._pwms = {s: ServoPWM(period, layout.members[s].width, reset_widths.get(s, 0))
@@ -116,7 +117,7 @@ class LegCore(wiring.Component):
 
     @property
     def dsp_registers(self) -> str | None:
-        """The family ("ecp5") when the products run on its instantiated DSP primitives, else None."""
+        """The family ("ice40", "ecp5") when the products run on its instantiated DSP primitives, else None."""
         return self._dsp_registers
 
     def simulation_model(self) -> "LegCore":

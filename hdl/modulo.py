@@ -8,11 +8,11 @@ from amaranth.hdl import Cat, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ..constraints.devices import PRIMITIVES, dsp_size, family_primitives
+from ..constraints.devices import dsp_size
 from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan
 from .evaluator import input_layout, node_expression, output_layout
-from .limbmul import check_dsp
+from .limbmul import check_dsp, check_dsp_registers
 from .planmemo import per_plan
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
@@ -265,10 +265,10 @@ class ModuloEvaluator(wiring.Component):
         None (default): the operand and product registers are fabric flip-flops (Yosys maps
         the product to a DSP block without absorbing them, so every product path runs fabric
         -> DSP -> fabric). A family with a DSP primitive
-        (:data:`ikseries.constraints.devices.PRIMITIVES`, ``"ecp5"``; ``dsp`` must be that
+        (:data:`ikseries.constraints.devices.PRIMITIVES`: ``"ice40"``, ``"ecp5"``; ``dsp`` must be that
         family's size): each block product is an instantiated primitive whose own
         input and output registers are the operand and product registers (clock enable = the
-        pipeline enable, synchronous reset = the domain's reset), same timing and values. The
+        pipeline enable, cleared by the domain's reset), same timing and values. The
         Amaranth simulator cannot run an ``Instance``: simulate the same core with None; the
         exported Verilog runs in Icarus and Verilator with the primitive's model
         (:attr:`~ikseries.constraints.facts.Primitive.model_path`; :func:`ikseries.sim.runner.run`
@@ -301,12 +301,7 @@ class ModuloEvaluator(wiring.Component):
                 or initiation_interval < 1:
             raise ValueError(f"initiation_interval must be an integer >= 1, not {initiation_interval!r}")
         check_dsp(dsp)
-        prim_families = dict.fromkeys(p.family for p in PRIMITIVES.values())
-        if dsp_registers is not None and (not isinstance(dsp_registers, str) or dsp_registers not in prim_families
-                                          or dsp != dsp_size(dsp_registers)):
-            raise ValueError("dsp_registers must be None, or "
-                             + " or ".join(f"{f!r} with dsp={dsp_size(f)}" for f in prim_families)
-                             + f", not {dsp_registers!r}")
+        self._primitive = check_dsp_registers(dsp_registers, dsp)
         self._plan = plan
         self._dsp = dsp
         self._dsp_registers = dsp_registers
@@ -347,7 +342,7 @@ class ModuloEvaluator(wiring.Component):
             with m.If(en):
                 m.d.sync += [ar.eq(a), br.eq(b), p.eq(ar * br)]
             return p
-        m.submodules[f"{name}_dsp"] = family_primitives(self._dsp_registers)[0].instance(m, a, b, p, en)
+        m.submodules[f"{name}_dsp"] = self._primitive.instance(m, a, b, p, en)
         return p
 
     def elaborate(self, platform):

@@ -88,7 +88,11 @@ class ServoPWMBank(wiring.Component):
         m = Module()
         g, k = self._groups, self._per_group
         count = Signal(range(self._period))
-        last = count == self._period - 1
+        # high while count is period - 1, from a register: it enables every active width
+        # register, a net of hundreds of loads that a comparator in front would lengthen
+        # (period >= 2: count wraps from period - 1 to 0, never period - 1 twice in a row)
+        last = Signal(name="last")
+        m.d.sync += last.eq(count == self._period - 2)
         m.d.comb += self.i.ready.eq(1)
         with m.If(last):
             m.d.sync += count.eq(0)

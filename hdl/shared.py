@@ -67,8 +67,10 @@ class RobotCore(wiring.Component):
         PWM period in clock cycles.
     clock_hz : float
         Clock frequency the core will run at; only used for ``refresh_hz``.
-    multipliers, dsp
-        As for :class:`FoldedEvaluator`.
+    multipliers, dsp, dsp_registers
+        As for :class:`FoldedEvaluator` (``dsp_registers``: the units' limb products on that
+        family's DSP primitive; :meth:`simulation_model` is then the twin with fabric
+        registers the Amaranth simulator runs).
     reset_widths : dict, optional
         Pulse width per servo name (the same for every leg) until its leg's first target.
     channels : ChannelTable, optional
@@ -105,12 +107,14 @@ class RobotCore(wiring.Component):
 
     def __init__(self, plan: Plan, legs: int, period: int, clock_hz: float, *, multipliers: int = 1,
                  dsp: tuple[int, int] | None = None, reset_widths: dict | None = None,
-                 channels: ChannelTable | None = None):
+                 channels: ChannelTable | None = None, dsp_registers: str | None = None):
+        self._args = ((plan, legs, period, clock_hz), dict(multipliers=multipliers, dsp=dsp,
+                                                           reset_widths=reset_widths, channels=channels))
         if not isinstance(legs, int) or isinstance(legs, bool) or legs < 1:
             raise ValueError(f"legs must be a positive integer, not {legs!r}")
         if isinstance(clock_hz, bool) or not isinstance(clock_hz, (int, float)) or not clock_hz > 0:
             raise ValueError(f"clock_hz must be a positive number, not {clock_hz!r}")
-        self._evaluator = FoldedEvaluator(plan, multipliers, dsp)
+        self._evaluator = FoldedEvaluator(plan, multipliers, dsp, dsp_registers)
         self._servos, reset_widths = servo_channels(plan, reset_widths)
         width_bits = max(plan.nodes[o.node].width for o in plan.outputs)
         self._bank = ServoPWMBank(period, width_bits, legs, len(self._servos),
@@ -133,6 +137,19 @@ class RobotCore(wiring.Component):
     @property
     def legs(self) -> int:
         return self._legs
+
+    @property
+    def dsp_registers(self) -> str | None:
+        """The family ("ice40", "ecp5") when the products run on its DSP primitives, else None."""
+        return self._evaluator.dsp_registers
+
+    def simulation_model(self) -> "RobotCore":
+        """A core the Amaranth simulator can run with the same ports, timing and values: this
+        one, or with ``dsp_registers`` a twin whose DSP registers are fabric flip-flops."""
+        if self.dsp_registers is None:
+            return self
+        args, kw = self._args
+        return RobotCore(*args, **kw)
 
     @property
     def servos(self) -> list[str]:

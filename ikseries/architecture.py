@@ -104,13 +104,13 @@ def build_target(robot) -> BuildTarget:
 
 
 def _configuration(arch: str, k, robot) -> Architecture:
+    prim = robot.hardware.dsp_primitives and robot.hardware.dsp in primitive_families()
     if robot.legs > 1:
-        return Shared(robot.legs, k, robot.hardware.dsp, channel_table(robot))
+        return Shared(robot.legs, k, robot.hardware.dsp, channel_table(robot), primitives=prim)
     if arch == "modulo":
-        prim = robot.hardware.dsp_primitives and robot.hardware.dsp in primitive_families()
         return Modulo(k, robot.hardware.dsp, primitives=prim)
     if arch == "folded":
-        return Folded(k, robot.hardware.dsp)
+        return Folded(k, robot.hardware.dsp, primitives=prim)
     return Pipelined()
 
 

@@ -466,7 +466,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="override hardware.fit_device (with --architecture fastest): "
                         f"{', '.join(FIT_DEVICES)}; also sets --dsp to the device's family unless --dsp is given")
     b.add_argument("--dsp-primitives", action="store_true",
-                   help="override hardware.dsp_primitives: put a modulo core's products on instantiated "
+                   help="override hardware.dsp_primitives: put a modulo, folded or shared core's products on instantiated "
                         + ", ".join(f"{FAMILIES[p.family].label} {p.name}" for p in PRIMITIVES.values())
                         + " blocks with their own registers (needs --dsp "
                         + " or ".join(dict.fromkeys(p.family for p in PRIMITIVES.values())) + ")")

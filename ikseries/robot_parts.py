@@ -407,7 +407,7 @@ class HardwareOptions:
     dsp: str = "ice40"              # one of DSP_CHOICES
     min_refresh_hz: float = 1000.0  # every leg's servos re-evaluated at least this often
     fit_device: str | None = None   # one of FIT_DEVICES: the device "fastest" must fit
-    dsp_primitives: bool = False    # modulo cores: products on instantiated DSP primitives with their registers
+    dsp_primitives: bool = False    # modulo, folded, shared cores: products on DSP primitives with their registers
 
     @property
     def pwm_period_ticks(self) -> int:
@@ -450,8 +450,8 @@ class HardwareOptions:
             raise RobotError(f"{lab['dsp_primitives']} must be true or false, not {prim!r}")
         prim_families = {p.family: p for p in PRIMITIVES.values()}
         if prim and self.dsp not in prim_families:
-            raise RobotError(f"{lab['dsp']} must be {', '.join(prim_families)} when {lab['dsp_primitives']} is "
-                             f"true (the only DSP primitive instantiated is the "
+            raise RobotError(f"{lab['dsp']} must be {' or '.join(prim_families)} when {lab['dsp_primitives']} is "
+                             f"true (the DSP primitives instantiated: "
                              + ", ".join(f"{FAMILIES[f].label} {p.name}" for f, p in prim_families.items())
                              + f"), not {self.dsp!r}")
 

@@ -161,7 +161,7 @@ def simulate(core, plan: Plan, progress, vcd=None) -> Simulation:
     shared = isinstance(core, RobotCore)
     if shared:
         legs = np.random.default_rng(11).integers(0, core.legs, n)
-        res = simulate_robot(core, legs, targets, vcd=vcd)
+        res = simulate_robot(core.simulation_model(), legs, targets, vcd=vcd)
         leg_mismatches = int(np.count_nonzero(res.legs != legs))
     else:
         res = simulate_leg(core.simulation_model(), targets, vcd=vcd)

@@ -69,8 +69,9 @@ def test_defaults_and_hexapod_preset():
     ({}, {"colour": 1}, "unknown field hardware.colour (expected one of: architecture, clock_hz, dsp, "
                         "dsp_primitives, fit_device, interval, min_refresh_hz, multipliers, pwm_period_us)"),
     ({}, {"dsp_primitives": "yes"}, "hardware.dsp_primitives must be true or false, not 'yes'"),
-    ({}, {"dsp_primitives": True}, "hardware.dsp must be ecp5 when hardware.dsp_primitives is true (the only "
-                                   "DSP primitive instantiated is the ECP5 MULT18X18D), not 'ice40'"),
+    ({}, {"dsp_primitives": True, "dsp": "xc7"}, "hardware.dsp must be ice40 or ecp5 when hardware.dsp_primitives "
+                                                 "is true (the DSP primitives instantiated: iCE40 SB_MAC16, ECP5 "
+                                                 "MULT18X18D), not 'xc7'"),
     ({}, {"architecture": "fastest", "fit_device": "foo"},
      "hardware.fit_device must be one of ice40-up5k, ecp5-25f, xc7a35t, not 'foo'"),
     ({}, {"architecture": "fastest", "fit_device": 3},
@@ -252,8 +253,8 @@ def test_flat_robot_top_ports_match_the_manifest(auto_robot, small_plan):
     (["--multipliers", "two"], "--multipliers must be an integer >= 1, not 'two'"),
     (["--dsp", "gowin"], "--dsp must be one of ice40, ecp5, xc7, none, not 'gowin'"),
     (["--products", "narrow"], "--products must be one of exact, dsp, not 'narrow'"),
-    (["--dsp-primitives", "--dsp", "xc7"], "--dsp must be ecp5 when --dsp-primitives is true (the only "
-                                           "DSP primitive instantiated is the ECP5 MULT18X18D), not 'xc7'"),
+    (["--dsp-primitives", "--dsp", "xc7"], "--dsp must be ice40 or ecp5 when --dsp-primitives is true (the DSP "
+                                           "primitives instantiated: iCE40 SB_MAC16, ECP5 MULT18X18D), not 'xc7'"),
     (["--preset", "hexapod", "--architecture", "pipelined"],
      "--architecture must be auto, folded or fastest for legs = 6 (the legs share one folded evaluator), "
      "not 'pipelined'"),

@@ -13,8 +13,9 @@ from ikseries.hdl.architectures.modulo import Modulo
 from ikseries.hdl.architectures.pipelined import Pipelined
 from ikseries.hdl.architectures.shared import Shared
 
-POLYNOMIAL = [Pipelined(), Modulo(3), Modulo(8, "ice40"), Modulo(5, "ecp5", primitives=True), Folded(1, "ice40"),
-              Folded(2, "none"), Shared(3, 1, "ecp5")]
+POLYNOMIAL = [Pipelined(), Modulo(3), Modulo(8, "ice40"), Modulo(5, "ecp5", primitives=True),
+              Modulo(6, "ice40", primitives=True), Folded(1, "ice40"), Folded(1, "ice40", primitives=True),
+              Folded(2, "none"), Shared(3, 1, "ecp5"), Shared(3, 1, "ice40", primitives=True)]
 
 
 def test_every_architecture_is_registered_by_its_name():
@@ -42,6 +43,7 @@ def test_timing_from_pure_data_is_the_built_cores(arch, small_plan, robot):
     assert (t.latency, t.initiation_interval) == (core.latency, core.initiation_interval)
     assert t.stream_rule in STREAM_RULES and t.legs == arch.legs
     assert stream_rule(core) == t.stream_rule
+    assert getattr(core, "dsp_registers", None) == (arch.dsp if getattr(arch, "primitives", False) else None)
 
 
 def test_stream_rules_and_rates(small_plan):
@@ -69,8 +71,10 @@ def test_cordic_architectures_time_their_solver(robot):
 @pytest.mark.parametrize("make, msg", [
     (lambda: Modulo(0), r"^interval must be an integer >= 1, not 0$"),
     (lambda: Modulo(True), r"^interval must be an integer >= 1, not True$"),
-    (lambda: Modulo(4, "ice40", primitives=True), r"^dsp must be one of ecp5 with primitives \(the families whose "
-                                                  r"DSP primitives are instantiated\), not 'ice40'$"),
+    (lambda: Modulo(4, "xc7", primitives=True), r"^dsp must be one of ice40, ecp5 with primitives \(the families "
+                                                r"whose DSP primitives are instantiated\), not 'xc7'$"),
+    (lambda: Folded(1, None, primitives=True), r"^dsp must be one of ice40, ecp5 with primitives \(the families "
+                                               r"whose DSP primitives are instantiated\), not None$"),
     (lambda: Modulo(4, "ecp5", primitives="yes"), r"^primitives must be true or false, not 'yes'$"),
     (lambda: Folded(0), r"^multipliers must be an integer >= 1, not 0$"),
     (lambda: Folded(1, "virtex"), r"^dsp must be None, 'none' or one of ice40, ecp5, xc7, not 'virtex'$"),

@@ -224,24 +224,60 @@ def test_piecewise_plan_on_icarus(folded, tmp_path_factory):
     assert (res.latency, res.initiation_interval) == (core.latency, core.initiation_interval)
 
 
+#: per family with a DSP primitive: its DSP size, the primitive and a parameter text every
+#: registered instance carries
+DSP_PRIMITIVES = {"ecp5": ((18, 18), "MULT18X18D", '.REG_OUTPUT_CLK("CLK0")'),
+                  "ice40": ((16, 16), "SB_MAC16", ".PIPELINE_16x16_MULT_REG2(1'h1)")}
+
+
+def _exported(build_dir) -> str:
+    return next(build_dir.glob("*.v")).read_text()
+
+
+@pytest.mark.parametrize("family", list(DSP_PRIMITIVES))
 @pytest.mark.parametrize("simulator", ["icarus", "verilator"])
-def test_modulo_core_on_ecp5_dsp_primitives_cocotb(simulator, small_plan, small_plan_file, tmp_path_factory):
-    """The modulo core with its products on instantiated MULT18X18D blocks (their own input and
-    output registers, ``dsp_registers="ecp5"``; single-block and limb-split products): the
-    exported Verilog runs with the primitive's model and stays bit-exact at the same latency."""
+def test_modulo_core_on_dsp_primitives_cocotb(simulator, family, small_plan, small_plan_file, tmp_path_factory):
+    """The modulo core with its products on instantiated MULT18X18D (ECP5) or SB_MAC16 (iCE40)
+    blocks, their own input and output registers (``dsp_registers``; single-block and
+    limb-split products): the exported Verilog runs with the primitive's model and stays
+    bit-exact at the same latency."""
     from ikseries.hdl.leg import LegCore
     from ikseries.constraints.devices import primitive
     from ikseries.sim.runner import primitive_models
     _skip_unless_available(simulator)
-    core = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=(18, 18), dsp_registers="ecp5")
-    plain = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=(18, 18))
+    dsp, cell, registered = DSP_PRIMITIVES[family]
+    core = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=dsp, dsp_registers=family)
+    plain = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=dsp)
     assert core.latency == plain.latency and core.initiation_interval == 3
-    build_dir = tmp_path_factory.mktemp(f"cocotb_{simulator}_modulo_dsp")
+    build_dir = tmp_path_factory.mktemp(f"cocotb_{simulator}_modulo_{family}_dsp")
     res = run(small_plan_file, PWM_PERIOD, simulator, build_dir, core=core, n_random=300)
-    verilog = (build_dir / "ikseries_leg.v").read_text() if (build_dir / "ikseries_leg.v").exists() else \
-        next(build_dir.glob("*.v")).read_text()
-    assert verilog.count("REG_OUTPUT_CLK") >= 2 and primitive_models(verilog) == [primitive("MULT18X18D").model_path]
+    verilog = _exported(build_dir)
+    # every instance registered; at least one per unit (a limb-split unit has one per limb pair)
+    assert verilog.count(registered) == verilog.count(f"{cell} #(") >= max(2, core.evaluator.multipliers)
+    assert primitive_models(verilog) == [primitive(cell).model_path]
     print(res.summary())
     assert set(res.tests) == COCOTB_TESTS, res.summary()
     assert res.ok, res.summary()
     assert (res.latency, res.initiation_interval) == (core.latency, 3)
+
+
+@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+def test_robot_core_on_sb_mac16_primitives_cocotb(simulator, small_plan, small_plan_file, tmp_path_factory):
+    """The shared robot top (three legs, one folded evaluator) with its limb products on an
+    instantiated SB_MAC16 with its own registers: bit-exact on both simulators with the
+    primitive's model, at the latency and initiation interval of the core with fabric
+    registers."""
+    from ikseries.hdl.shared import RobotCore
+    _skip_unless_available(simulator)
+    core = RobotCore(small_plan, 3, PWM_PERIOD, 48e6, multipliers=1, dsp=(16, 16), dsp_registers="ice40")
+    twin = core.simulation_model()
+    assert twin.dsp_registers is None and (twin.latency, twin.initiation_interval) == \
+        (core.latency, core.initiation_interval)
+    build_dir = tmp_path_factory.mktemp(f"cocotb_{simulator}_robot_sb_mac16")
+    res = run(small_plan_file, PWM_PERIOD, simulator, build_dir, core=core)
+    assert _exported(build_dir).count(DSP_PRIMITIVES["ice40"][2]) == 1
+    print(res.summary())
+    assert set(res.tests) == COCOTB_TESTS, res.summary()
+    assert res.ok, res.summary()
+    assert (res.top, res.legs, res.latency, res.initiation_interval) == \
+        ("robot", 3, core.latency, core.initiation_interval)

@@ -219,9 +219,12 @@ def test_folded_rejects_bad_plan():
 
 
 # -- limb multiplier -----------------------------------------------------------------------
-@pytest.mark.parametrize("aw, bw, dsp", [(5, 4, (3, 3)), (6, 3, (4, 2)), (5, 5, None)])
+@pytest.mark.parametrize("aw, bw, dsp", [(5, 4, (3, 3)), (6, 3, (4, 2)), (5, 5, None),
+                                         (7, 4, (4, 4)), (8, 3, (3, 3)), (4, 8, (4, 4))])
 def test_limb_multiplier_exhaustive(aw, bw, dsp):
-    """Every signed operand pair, one pair per initiation interval, exact latency."""
+    """Every signed operand pair, one pair per initiation interval, exact latency: both
+    operands split (each product shifted into place), one split (Horner, the top limb first:
+    2, 4 limbs of a, 3 of b) and no split."""
     mul = LimbMultiplier(aw, bw, dsp)
     pairs = [(a, b) for a in range(-2 ** (aw - 1), 2 ** (aw - 1)) for b in range(-2 ** (bw - 1), 2 ** (bw - 1))]
     got, when = [], []

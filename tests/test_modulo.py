@@ -110,10 +110,27 @@ def test_ecp5_dsp_registers_instantiate_the_primitive_with_its_registers():
     for reg in ("INPUTA", "INPUTB", "OUTPUT"):
         assert text.count(f'.REG_{reg}_CLK("CLK0")') == n
     assert ".CE0(en)" in text.replace(" ", "")
-    with pytest.raises(ValueError, match="dsp_registers must be None, or 'ecp5' with dsp=.18, 18., not 'ice40'"):
+    options = r"^dsp_registers must be None, or 'ice40' with dsp=\(16, 16\) or 'ecp5' with dsp=\(18, 18\), not "
+    with pytest.raises(ValueError, match=options + r"'ice40' with dsp=\(18, 18\)$"):
         ModuloEvaluator(plan, 2, dsp_registers="ice40")
-    with pytest.raises(ValueError, match="dsp_registers must be None"):
+    with pytest.raises(ValueError, match=options + r"'ecp5' with dsp=\(16, 16\)$"):
         ModuloEvaluator(plan, 2, dsp=(16, 16), dsp_registers="ecp5")
+    with pytest.raises(ValueError, match=options + r"'xc7'$"):
+        ModuloEvaluator(plan, 2, dsp=(16, 16), dsp_registers="xc7")
+
+
+def test_ice40_dsp_registers_instantiate_sb_mac16_with_its_registers():
+    """Every block product an SB_MAC16 with its input and product registers on the pipeline
+    enable and the domain's reset (simulated with the primitive's model in test_cocotb.py)."""
+    from amaranth.back import verilog
+    plan = tiny_plan(2)
+    core = ModuloEvaluator(plan, 2, dsp=(16, 16), dsp_registers="ice40")
+    text = verilog.convert(core, name="m", emit_src=False).replace(" ", "")
+    n = text.count("SB_MAC16#(")
+    assert n == core.multipliers and n > 0
+    for p in ("A_REG(1'h1)", "B_REG(1'h1)", "PIPELINE_16x16_MULT_REG2(1'h1)", "TOPOUTPUT_SELECT(2'h3)",
+              "BOTOUTPUT_SELECT(2'h3)", ".CE(en)", ".IRSTTOP(rst)", ".IRSTBOT(rst)"):
+        assert text.count(p) == n, p
 
 
 def test_leg_core_on_dsp_primitives_has_a_fabric_twin_for_the_amaranth_simulator():
@@ -126,9 +143,12 @@ def test_leg_core_on_dsp_primitives_has_a_fabric_twin_for_the_amaranth_simulator
     plain = LegCore(plan, 400, interval=3)
     assert plain.simulation_model() is plain
     simulate_bit_exact(twin, plan, all_ports(plan))
-    with pytest.raises(ValueError, match=r"^dsp_registers must be None without interval \(only the "
-                                         r"modulo-scheduled evaluator instantiates DSP primitives\), not 'ecp5'$"):
-        LegCore(plan, 400, multipliers=1, dsp_registers="ecp5")
+    with pytest.raises(ValueError, match=r"^dsp_registers must be None without interval or multipliers \(the "
+                                         r"pipelined evaluator instantiates no DSP primitives\), not 'ecp5'$"):
+        LegCore(plan, 400, dsp_registers="ecp5")
+    folded = LegCore(plan, 400, multipliers=1, dsp=(16, 16), dsp_registers="ice40")
+    assert folded.dsp_registers == folded.evaluator.dsp_registers == "ice40"
+    assert folded.simulation_model().evaluator.dsp_registers is None
 
 
 def test_schedule_puts_products_that_share_an_operand_on_one_multiplier():

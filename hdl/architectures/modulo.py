@@ -4,7 +4,7 @@ from __future__ import annotations
 from ..leg import LegCore
 from ..modulo import ModuloEvaluator, modulo_schedule
 from . import Architecture, BuildTarget, Timing
-from .options import dsp_label, dsp_size, positive_int, primitive_families
+from .options import check_primitives, dsp_label, dsp_size, positive_int
 
 __all__ = ["Modulo"]
 
@@ -30,12 +30,7 @@ class Modulo(Architecture):
     def __init__(self, interval: int, dsp: str | None = None, primitives: bool = False):
         self.interval = positive_int(interval, "interval")
         dsp_size(dsp)
-        if not isinstance(primitives, bool):
-            raise ValueError(f"primitives must be true or false, not {primitives!r}")
-        if primitives and dsp not in primitive_families():
-            raise ValueError(f"dsp must be one of {', '.join(primitive_families())} with primitives (the "
-                             f"families whose DSP primitives are instantiated), not {dsp!r}")
-        self.dsp, self.primitives = dsp, primitives
+        self.dsp, self.primitives = dsp, check_primitives(primitives, dsp)
 
     @property
     def _size(self):

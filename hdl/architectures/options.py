@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from ...constraints.devices import FAMILIES, PRIMITIVES
 
-__all__ = ["dsp_size", "positive_int", "dsp_label", "primitive_families"]
+__all__ = ["dsp_size", "positive_int", "dsp_label", "primitive_families", "check_primitives"]
 
 
 def dsp_size(dsp: str | None) -> tuple[int, int] | None:
@@ -31,3 +31,13 @@ def positive_int(value, name: str) -> int:
 def primitive_families() -> tuple[str, ...]:
     """Families whose DSP primitives a modulo core can instantiate (with their registers)."""
     return tuple(dict.fromkeys(p.family for p in PRIMITIVES.values()))
+
+
+def check_primitives(primitives, dsp: str | None) -> bool:
+    """``primitives`` if it is a bool and, when true, ``dsp`` a family with DSP primitives."""
+    if not isinstance(primitives, bool):
+        raise ValueError(f"primitives must be true or false, not {primitives!r}")
+    if primitives and dsp not in primitive_families():
+        raise ValueError(f"dsp must be one of {', '.join(primitive_families())} with primitives (the "
+                         f"families whose DSP primitives are instantiated), not {dsp!r}")
+    return primitives

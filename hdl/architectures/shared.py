@@ -17,8 +17,9 @@ class Shared(Folded):
 
     name = "shared"
 
-    def __init__(self, legs: int, multipliers: int = 1, dsp: str | None = None, channels=None):
-        super().__init__(multipliers, dsp)
+    def __init__(self, legs: int, multipliers: int = 1, dsp: str | None = None, channels=None,
+                 primitives: bool = False):
+        super().__init__(multipliers, dsp, primitives)
         self.legs = positive_int(legs, "legs")
         self.channels = channels
 
@@ -29,7 +30,7 @@ class Shared(Folded):
 
     def build(self, plan, target: BuildTarget):
         return RobotCore(plan, self.legs, target.period, target.clock_hz, multipliers=self.multipliers,
-                         dsp=dsp_size(self.dsp), channels=self.channels)
+                         dsp=dsp_size(self.dsp), channels=self.channels, dsp_registers=self._registers)
 
     def describe(self) -> str:
         k = self.multipliers
