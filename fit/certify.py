@@ -57,7 +57,7 @@ from . import centred as cn
 from . import interval as ia
 from .cut import chain_range, cut_chain
 from .ops import OPS
-from .parallel import check_jobs, servo_map
+from .parallel import servo_map
 from .plan import Plan
 
 __all__ = ["CertificationError", "UnboundedCellError", "ServoCertificate", "Certificate", "certify", "output_rounding",
@@ -612,7 +612,6 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
     if target_pu is not None and (isinstance(target_pu, bool) or not isinstance(target_pu, (int, float))
                                   or not target_pu > 0):
         raise ValueError(f"target_pu must be a number > 0 pu or None, not {target_pu!r}")
-    check_jobs(jobs)
     names, box_lo, box_hi = _box(robot, plan)
     quant = plan.rounding_bounds()
 

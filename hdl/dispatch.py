@@ -328,16 +328,11 @@ class Dispatcher(wiring.Component):
             m.d.sync += r.s.eq(Cat(r.s[1:], self._flag & ~u["sz"]))
         with m.If(sh["load"]):
             m.d.sync += r.s.eq(self.rd_data)
-        with m.If(e["CLRO"]):
-            m.d.sync += r.out.eq(0)
-        with m.If(e["OUTS"]):
-            m.d.sync += r.out.eq(1)
-        with m.If(e["MT"]):
-            m.d.sync += r.move_time.eq(r.f)
-        with m.If(e["NACK"]):
-            m.d.sync += r.nack.eq(1)
-        with m.If(e["IDENT"]):
-            m.d.sync += r.ident.eq(1)
+        # one-register strobes, in this order (a later one wins in the same cycle)
+        for strobe, reg, value in (("CLRO", r.out, 0), ("OUTS", r.out, 1), ("MT", r.move_time, r.f),
+                                   ("NACK", r.nack, 1), ("IDENT", r.ident, 1)):
+            with m.If(e[strobe]):
+                m.d.sync += reg.eq(value)
         # every cycle of the idle wait: the request's command is held while it is offered; the
         # identity answer's region is kept while it is sent
         with m.If(e["TAKE"]):
