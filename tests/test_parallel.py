@@ -91,13 +91,14 @@ def test_cli_refuses_a_bad_jobs_value_before_fitting(capsys, tmp_path):
 
 
 _HANGING_FIT = """
-import signal, sys, time
+import os, signal, sys, time
 signal.signal(signal.SIGINT, signal.default_int_handler)
 import ikseries.fit.fitter as fitter
 from ikseries.cli import main
 
 def hang(ctx, name, *args):
-    print("worker", flush=True)
+    # One write of a whole line: a pipe write under PIPE_BUF is atomic, so two workers' lines never interleave.
+    os.write(1, b"worker\\n")
     time.sleep(600)
 fitter.fit_servo = hang
 sys.exit(main(["build", "--preset", "planar-arm", "-q", "--no-synth", "--cocotb", "none", "-j", "2",
