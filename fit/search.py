@@ -20,10 +20,13 @@ from .minimax import minimax, region_ids
 from .polyfit import Basis
 from .structure import FeatureSet, ServoFit
 
-__all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "CUT_CELLS", "GRID_CELLS", "MAX_GRID_CELLS",
+__all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "MAX_COST", "CUT_CELLS", "GRID_CELLS", "MAX_GRID_CELLS",
            "PRUNE_REJECTS", "FINALISTS", "FINALIST_MARGIN"]
 
 MAX_DEGREE = 12
+MAX_COST = 100                   # no structure costing more is tried (issue 3: <= 100 multiply-adds per servo):
+                                 # where no whole polynomial fits, the climb to MAX_DEGREE of a tensor set of three
+                                 # variables reaches 1183 terms, a minimax fit of minutes each, all futile
 PRUNE_REJECTS = 5                # refused removals in a row that end pruning (a refusal is cheap: a lower bound)
 FINALISTS = 2                    # the cheapest structures found that are pruned (the fewest multipliers after wins),
 FINALIST_MARGIN = 3              # those costing at most this much more than the cheapest
@@ -200,7 +203,7 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
         for deg in range(1, MAX_DEGREE + 1):
             terms = fs.terms(deg)
             cost = structure_cost(ctx, fs, terms, name)
-            if found and cost >= found[-1][0]:
+            if cost >= _ceiling(found):
                 return
             fit = data.fit_terms(terms, budget_ticks, settle=False)
             progress(f"  {name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
@@ -213,12 +216,12 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
         if fs.kind not in pools:
             pools[fs.kind] = Cells.whole(*sets[fs.kind])
         search(fs, pools[fs.kind])
-    if not found:
-        raise FitError(f"servo {name}: no polynomial up to total degree {MAX_DEGREE} reaches the "
-                       f"approximation budget of {budget_ticks:g} ticks")
+    if not found:   # an enlarged box: cells may still fit, cut from the cheapest-looking candidate
+        progress(f"  {name}: no whole polynomial of at most {MAX_COST} multipliers reaches the budget; "
+                 f"trying cells of {candidates[0].label()}")
     ports = {i.name: i for i in ctx.inputs}
     memo: dict = {}
-    bases = _cut_bases(found[-1][1].features, candidates)
+    bases = _cut_bases(found[-1][1].features if found else candidates[0], candidates)
     for base in bases:
         for var, nm in enumerate(base.names):
             if nm not in ports or base.allowed[var] == "none":
@@ -230,10 +233,19 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     grid = _Grids(ctx, name, sets[bases[0].kind], raw, ports, budget_ticks, progress)
     for fs in _grid_sets(bases[0], ports):
         grid.search(fs, found)
+    if not found:
+        raise FitError(f"servo {name}: no polynomial of at most {MAX_COST} multipliers (total degree <= "
+                       f"{MAX_DEGREE}, whole or in cells) reaches the approximation budget of {budget_ticks:g} ticks")
     pools.clear()
     finalists = [e for e in found[::-1][:FINALISTS] if e[0] <= found[-1][0] + FINALIST_MARGIN]
     pruned = [_settle_and_prune(ctx, entry, budget_ticks, progress) for entry in finalists]
     return min(pruned, key=lambda p: p[0])[1]
+
+
+def _ceiling(found: list) -> float:
+    """The cost a structure must stay below to be tried: the best found so far, else just above
+    ``MAX_COST``."""
+    return found[-1][0] if found else MAX_COST + 1
 
 
 class _Grids:
@@ -258,7 +270,7 @@ class _Grids:
         degrees = []
         for deg in range(1, MAX_DEGREE + 1):
             cost = structure_cost(self.ctx, fs, fs.terms(deg), self.name)
-            if cost >= found[-1][0]:
+            if cost >= _ceiling(found):
                 break
             degrees.append((deg, cost))
         if not degrees:
