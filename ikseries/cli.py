@@ -28,16 +28,13 @@ def _robot(args):
 
 def _jobs(args) -> int:
     """``--jobs``: processes for the servos of a fit (default: every core this process may use)."""
-    from .fit.parallel import usable_cores
+    from .fit.parallel import check_jobs, usable_cores
     if args.jobs is None:
         return usable_cores()
     try:
-        jobs = int(args.jobs)
-    except ValueError:
-        jobs = 0
-    if jobs < 1:
-        raise CliError(f"--jobs must be a positive integer (processes for the servos), not {args.jobs!r}")
-    return jobs
+        return check_jobs(int(args.jobs))
+    except ValueError:      # not an integer, or not positive: the rule is check_jobs'
+        raise CliError(f"--jobs must be a positive integer (processes for the servos), not {args.jobs!r}") from None
 
 
 def _progress(quiet):
