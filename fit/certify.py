@@ -36,7 +36,10 @@ cut input, cells are half-open along cut inputs with a degenerate last slab at t
 end, so that on every cell each index is one value, the looked-up coefficients are constants
 and the offset in the cell an exact affine function of the input; a grid over two inputs
 (its table address from both cell numbers) is aligned along both (see :mod:`ikseries.fit.cut`
-for the argument).
+for the argument). A cut of a computed, rounded value (a feature cut: its cell edges are curves
+across the certifier's cells) is split into cases instead, one per cell number the feature can
+take over the certifier's cell once widened by its rounding bound, each case smooth and bounded
+on its own (:class:`_ErrorFunction`).
 
 The certified total error per servo adds the certified quantization bound of the integer
 accumulator (:meth:`Plan.rounding_bounds`), the rounding from the accumulator to the output
@@ -49,13 +52,14 @@ so it covers every value the hardware can see.
 from __future__ import annotations
 
 import time
+from functools import partial
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from . import centred as cn
 from . import interval as ia
-from .cut import chain_range, cut_chain
+from .cut import chain_range, cut_chain, feature_cuts, forced_cell
 from .ops import OPS
 from .parallel import servo_map
 from .plan import Plan
@@ -142,9 +146,11 @@ class Certificate:
 
 # -- the plan's ideal function over intervals ----------------------------------------------------
 def _plan_function(plan: Plan, node: int):
-    """``values -> Interval`` of the ideal real value of ``node`` for input Intervals by name
-    (over each cell; half-open along the inputs that index / mask nodes cut, unless degenerate
-    there: see :mod:`ikseries.fit.cut`)."""
+    """``(values, force) -> Interval`` of the ideal real value of ``node`` for input Intervals by
+    name (over each cell; half-open along the inputs that index / mask nodes cut, unless
+    degenerate there: see :mod:`ikseries.fit.cut`); ``force`` maps a feature cut's ``(argument
+    node, shift)`` to the cell number its index and mask nodes take in each cell
+    (:func:`~ikseries.fit.cut.forced_cell`)."""
     order = sorted(plan.cone(node))
     last = {}
     for i in order:
@@ -152,12 +158,16 @@ def _plan_function(plan: Plan, node: int):
             last[a] = i
     nodes = plan.nodes
 
-    def run(values: dict) -> ia.Interval:
+    def run(values: dict, force: dict | None = None) -> ia.Interval:
         vals: dict = {}
         with np.errstate(invalid="ignore"):     # 0 * inf of an unbounded derivative: NaN, no bound
             for i in order:
                 n = nodes[i]
-                vals[i] = OPS[n.op].enclose(n, nodes, [vals[a] for a in n.args], values)
+                key = (n.args[0], n.param) if n.op in ("index", "mask") else None
+                if force is not None and key in force:
+                    vals[i] = forced_cell(n, nodes, vals[n.args[0]], force[key])
+                else:
+                    vals[i] = OPS[n.op].enclose(n, nodes, [vals[a] for a in n.args], values)
                 for a in set(n.args):
                     if last.get(a) == i and a != node:
                         del vals[a]
@@ -309,7 +319,33 @@ def _check_centres(e_c, names, lo, hi):
 
 def _cell_bounds(err, names, lo, hi) -> _Bounds:
     """Bounds of |e| on cells [lo, hi] (shape (N, n)): the least of the plain enclosure, the
-    mean-value form and the second-order Taylor form, from a centred evaluation over each cell."""
+    mean-value form and the second-order Taylor form, from a centred evaluation over each cell;
+    with feature cuts, those of the worst case (:meth:`_ErrorFunction.cases`)."""
+    if not err.keys:
+        return _cell_bounds_at(err, names, lo, hi)
+    rows, force, wild = err.cases(dict(zip(names, cn.variables(lo, hi))), len(lo))
+    return _worst_case(_cell_bounds_at(partial(err, force=force), names, lo[rows], hi[rows]), rows, wild)
+
+
+def _worst_case(b: _Bounds, rows, wild) -> _Bounds:
+    """Per cell, the figures of its worst case among ``b``'s (case ``i`` in cell ``rows[i]``):
+    no bound where ``wild``; the least |e(c)| of the cases (the hardware's is one of them);
+    no second derivatives where there are several cases (a sub-cell's centre form must not
+    take one case's for all)."""
+    size = len(wild)
+    order = np.lexsort((b.bound, rows))
+    r = rows[order]
+    pick = order[np.append(r[1:] != r[:-1], True)]           # the worst case of each cell, in order
+    several = (np.bincount(rows, minlength=size) > 1) | wild
+    centre = np.full(size, np.inf)
+    np.minimum.at(centre, rows, b.centre)
+    he, hf = (np.where(several, np.nan, x[:, pick]) for x in (b.he, b.hf))
+    return _Bounds(np.where(wild, np.inf, b.bound[pick]), np.where(wild[:, None], np.inf, b.contrib[pick]),
+                   np.where(wild, 0.0, centre), b.f_lo[pick], b.f_hi[pick], he, hf, None)
+
+
+def _cell_bounds_at(err, names, lo, hi) -> _Bounds:
+    """:func:`_cell_bounds` of one case per cell (``err`` with its cell numbers forced)."""
     n = len(names)
     cvars = cn.variables(lo, hi)
     h = cvars[0].h                                                        # (n, N) half-widths
@@ -334,7 +370,20 @@ def _centre_bounds(err, names, lo, hi, parent: _Bounds) -> _Bounds:
     second derivatives ``parent.he`` of a cell containing each one: the Taylor form with the
     parent's Hessian enclosure (valid, as the sub-cell's supremum is at most the parent's),
     without the Hessians of every intermediate value that :func:`_cell_bounds` carries. The
-    range of f is the parent's, intersected with f's own Taylor form."""
+    range of f is the parent's, intersected with f's own Taylor form. With feature cuts, a cell
+    whose centre reaches more than one case gets no bound (its parent's derivatives are those
+    of the one case the parent reached)."""
+    if not err.keys:
+        return _centre_bounds_at(err, names, lo, hi, parent)
+    c, _ = cn.centres(lo, hi)
+    _, force, wild = err.cases(dict(zip(names, ia.variables(c, c, order=1))), len(lo), single=True)
+    b = _centre_bounds_at(partial(err, force=force), names, lo, hi, parent)
+    b.bound = np.where(wild, np.inf, b.bound)
+    return b
+
+
+def _centre_bounds_at(err, names, lo, hi, parent: _Bounds) -> _Bounds:
+    """:func:`_centre_bounds` of one case per cell."""
     c, h = cn.centres(lo, hi)
     with ia.lenient():
         e_c, f_c = err(dict(zip(names, ia.variables(c, c, order=1))))
@@ -543,19 +592,73 @@ def _unbounded(err, names, servo: str, best: dict) -> str:
     return f"servo {servo}: no finite error bound over the cell ({box}) once the cell budget is spent: {why}"
 
 
-def _error_function(plan: Plan, robot, k: int):
-    """``values -> (e, f)`` Intervals: e = P - f and f for output k, in ticks."""
-    o = plan.outputs[k]
-    if o.name not in robot.servos:
-        raise ValueError(f"plan output must be one of the robot's servos {list(robot.servos)}, "
-                         f"not {o.name!r}")
-    p_fn = _plan_function(plan, o.preround)
-    f_fn = _reference_function(robot, robot.servos.index(o.name), o.ticks_per_pu)
+class _ErrorFunction:
+    """``values -> (e, f)`` Intervals: e = P - f and f for output ``k``, in ticks; and the case
+    split of the plan's feature cuts (:meth:`cases`).
 
-    def run(values):
-        f = f_fn(values)
-        return p_fn(values) - f, f
-    return run
+    A feature cut takes cells of a computed, rounded value: the hardware's cell number and
+    offset come from the integer feature, within ``quant`` (its rounding bound) of the ideal
+    one, so near a cell edge either neighbour's polynomial may be the one evaluated. Per
+    certifier cell, every cell number the feature's enclosure widened by its rounding bound
+    reaches is a case: the ideal function with the index forced to that number and the offset
+    taken from it (exact and affine, a little outside the cell near its edges) is smooth over
+    the whole certifier cell, so the centred forms apply to each case, and the cell's bound is
+    the worst case's. The hardware's value at any point is its case's, with the offset
+    rounded as :meth:`Plan.rounding_bounds` accounts (the index then exact)."""
+
+    def __init__(self, plan: Plan, robot, k: int, quant):
+        o = plan.outputs[k]
+        if o.name not in robot.servos:
+            raise ValueError(f"plan output must be one of the robot's servos {list(robot.servos)}, "
+                             f"not {o.name!r}")
+        self.p_fn = _plan_function(plan, o.preround)
+        self.f_fn = _reference_function(robot, robot.servos.index(o.name), o.ticks_per_pu)
+        self.keys = feature_cuts(plan.nodes, plan.cone(o.preround))
+        self._args = [(_plan_function(plan, a), float(quant[a]), plan.nodes[a].frac - sh,
+                       plan.nodes[a].lo >> sh, plan.nodes[a].hi >> sh) for a, sh in self.keys]
+
+    def __call__(self, values, force=None):
+        f = self.f_fn(values)
+        return self.p_fn(values, force) - f, f
+
+    def cases(self, values, size: int, single: bool = False):
+        """``(rows, force, wild)`` (with feature cuts, ``keys``): the certifier cell of each
+        case, the forced cell numbers per case (``force`` of :func:`_plan_function`), and per
+        cell whether it has no bound (an enclosure that is not finite, more than
+        ``MAX_CASES`` cases, or with ``single`` more than one; such a cell gets one case, to
+        be evaluated and then discarded)."""
+        ranges, wild = [], np.zeros(size, dtype=bool)
+        with ia.lenient():
+            for fn, eps, k, imin, imax in self._args:
+                v = fn(values)
+                v = v.x if isinstance(v, cn.Centred) else v
+                lo = np.floor(np.ldexp(np.broadcast_to(ia._down(v.lo - eps), (size,)), k))
+                hi = np.floor(np.ldexp(np.broadcast_to(ia._up(v.hi + eps), (size,)), k))
+                bad = ~(np.isfinite(lo) & np.isfinite(hi))
+                lo = np.clip(np.where(bad, imin, lo), imin, imax)
+                ranges.append((lo, np.maximum(lo, np.clip(np.where(bad, imin, hi), imin, imax))))
+                wild |= bad
+        count = np.prod([hi - lo + 1 for lo, hi in ranges], axis=0)
+        wild |= count > (1 if single else MAX_CASES)
+        count = np.where(wild, 1, count).astype(np.int64)
+        rows = np.repeat(np.arange(size), count)
+        j = np.arange(len(rows)) - np.repeat(np.cumsum(count) - count, count)   # case number in its cell
+        force = {}
+        for key, (lo, hi) in zip(self.keys, ranges):
+            m = np.where(wild, 1, hi - lo + 1).astype(np.int64)[rows]
+            force[key], j = lo[rows] + j % m, j // m
+        return rows, force, wild
+
+
+#: most cases (combinations of cell numbers of the feature cuts) per certifier cell; a cell
+#: with more is split instead
+MAX_CASES = 4
+
+
+def _error_function(plan: Plan, robot, k: int, quant=None) -> _ErrorFunction:
+    """The error function of output ``k`` (``quant``: the plan's rounding bounds, computed if
+    not given)."""
+    return _ErrorFunction(plan, robot, k, plan.rounding_bounds() if quant is None else quant)
 
 
 def _box(robot, plan: Plan) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -632,7 +735,7 @@ def _certify_output(robot, plan, k, names, box_lo, box_hi, quant, target_pu, max
     out_round, clamp_rng = output_rounding(plan, k)
     rounding_pu, out_pu = quant[o.preround] / tpp, out_round / tpp
     target = robot.fit.tolerance_pu - rounding_pu - out_pu if target_pu is None else float(target_pu)
-    err = _error_function(plan, robot, k)
+    err = _error_function(plan, robot, k, quant)
     edges, cut = _table_edges(plan, plan.cone(o.preround), names, box_lo, box_hi)
     best, sampled, cells, evaluated, (f_lo, f_hi) = _refine(
         err, names, box_lo, box_hi, target * tpp, [initial] * len(names), max_cells, say, o.name,

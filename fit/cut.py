@@ -33,6 +33,12 @@ derivatives, and the address enclosure contains every address reachable from the
 ranges; the lut is then the hull of the contiguous entries between the least and greatest
 address, a superset of the reachable ones (the unused entries after a row copy a real entry),
 with unbounded derivatives: sound again, and refined away.
+
+A cut of a computed value (a feature, :func:`feature_cuts`) has no input to align cells to: its
+edges are curves. The certifier encloses it case by case instead (``fit/certify.py``
+``_ErrorFunction``): in each case the index is forced to one reachable cell number and the
+mask is the exact offset from that cell (:func:`forced_cell`), so every case is smooth over the
+whole certifier cell.
 """
 from __future__ import annotations
 
@@ -41,7 +47,8 @@ import numpy as np
 from . import centred as cn
 from . import interval as ia
 
-__all__ = ["add_exact", "cell_enclosure", "chain_range", "cut_chain", "dims", "index_cell", "index_range",
+__all__ = ["add_exact", "cell_enclosure", "chain_range", "cut_chain", "dims", "feature_cuts", "forced_cell",
+           "index_cell", "index_range",
            "lut_cell", "mask_cell", "unbounded_where"]
 
 
@@ -174,3 +181,26 @@ def cell_enclosure(rule, n, nodes, a, inputs: dict):
         return cn.Centred(*(rule(n, nodes, getattr(a, p), {k: getattr(v, p) for k, v in inputs.items()},
                                  a.h.shape[0]) for p in ("c", "x")), a.h, tighten=False)
     return rule(n, nodes, a, inputs, dims(inputs))
+
+
+def feature_cuts(nodes, cone) -> tuple:
+    """``(argument node, shift)`` of every index or mask node of ``cone`` whose argument is no
+    :func:`cut_chain` of an input: cells of a computed value (a feature), whose edges are
+    curves across the certifier's cells, not planes it can be aligned to."""
+    keys = {(nodes[i].args[0], nodes[i].param) for i in cone
+            if nodes[i].op in ("index", "mask") and cut_chain(nodes, nodes[i].args[0]) is None}
+    return tuple(sorted(keys))
+
+
+def forced_cell(n, nodes, a, k):
+    """Enclosure of index or mask node ``n`` (argument enclosure ``a``, an Interval or a
+    centred form) with its cell number taken to be ``k`` (one per certifier cell): the constant
+    ``k``, or the exact affine offset ``a - k 2**shift`` from that cell, which lies outside
+    [0, 2**shift) wherever the argument does not lie in cell ``k`` (a caller forcing every cell
+    number the argument can reach encloses the node's value over the whole cell, case by case)."""
+    k = np.asarray(k, dtype=np.float64)
+    if n.op == "mask":
+        return a - k * np.ldexp(1.0, n.param - nodes[n.args[0]].frac)
+    if isinstance(a, cn.Centred):
+        return cn.Centred(ia.Interval(k, k, order=a.c.order), ia.Interval(k, k, order=a.x.order), a.h, tighten=False)
+    return ia.Interval(k, k, order=a.order)

@@ -292,8 +292,16 @@ def _mask_real(n, a, x, ports):
     return x[0] - _cell(n, a[0], x[0]) * 2.0 ** (n.param - a[0].frac)
 
 
-def _cut_rounding(n, a, e):  # a cell of an exact value only: a rounded one could pick another cell
-    return 0.0 if e[0] == 0.0 else float("inf")
+# A cut of a rounded value (a feature cut) may put the integer argument in another cell than the
+# ideal one near an edge: there the ideal index and mask are those of the integer argument's
+# cell (the certifier encloses every cell the rounded argument can reach, fit/certify.py
+# _ErrorFunction), so the index is exact and the mask off by the argument's rounding only.
+def _index_rounding(n, a, e):
+    return 0.0
+
+
+def _mask_rounding(n, a, e):
+    return e[0]
 
 
 def _lut_bounds(a, frac, param, ideal, inputs):
@@ -362,11 +370,11 @@ OPS: dict[str, Op] = {op.name: op for op in (
        integer=lambda n, x, ports: x[0], real=_frac_real, rounding=_frac_rounding,
        enclose=_frac_enclose, rtl=lambda n, x: x[0], view=lambda n: (0, 0)),
     Op("index", 1, "wiring", _index_bounds,
-       integer=lambda n, x, ports: x[0] >> n.param, real=_index_real, rounding=_cut_rounding,
+       integer=lambda n, x, ports: x[0] >> n.param, real=_index_real, rounding=_index_rounding,
        enclose=_cell_enclose(cut.index_cell), rtl=_shift_right, view=lambda n: (n.param, 0), cuts=True),
     # two's complement low bits: non-negative, zero-extended
     Op("mask", 1, "wiring", _mask_bounds,
-       integer=lambda n, x, ports: x[0] & ((1 << n.param) - 1), real=_mask_real, rounding=_cut_rounding,
+       integer=lambda n, x, ports: x[0] & ((1 << n.param) - 1), real=_mask_real, rounding=_mask_rounding,
        enclose=_cell_enclose(cut.mask_cell), rtl=lambda n, x: x[0] & Const((1 << n.param) - 1, unsigned(n.param)),
        cuts=True),
     Op("lut", 1, "table", _lut_bounds,

@@ -155,8 +155,11 @@ class Plan:
 
         The ideal value is the same dataflow evaluated in exact real arithmetic
         with unrounded constants and no truncating shifts (see
-        :func:`ikseries.sim.golden.evaluate_ideal`). The bound is rigorous for
-        every in-range input: it follows the interval of each node.
+        :func:`ikseries.sim.golden.evaluate_ideal`), except that cells of a rounded
+        value (a feature cut) are those of its integer value: the ideal index and mask are
+        the integer argument's cell and the ideal argument's offset from it, as the
+        certifier's case split takes them. The bound is rigorous for every in-range input:
+        it follows the interval of each node.
         """
         err: list[float] = []
         for n in self.nodes:

@@ -184,3 +184,16 @@ def shared_fit(tmp_path_factory, name: str, robot):
         if not path.exists():
             path.write_bytes(pickle.dumps(fit_robot(robot)))
         return pickle.loads(path.read_bytes())
+
+
+def toy_robot(geometry, tolerance=0.5):
+    """A robot of ``geometry`` (inputs a, b; one servo y, its angle formula over a math
+    namespace) with an identity calibration (pulse = angle), for the certifier's tests."""
+    from types import SimpleNamespace
+
+    from ikseries.calibration import Calibration
+    return SimpleNamespace(
+        geometry=geometry, servos=("y",), fit=SimpleNamespace(tolerance_pu=tolerance),
+        workspace=SimpleNamespace(inputs=(SimpleNamespace(name="a"), SimpleNamespace(name="b"))),
+        joint_calibration=Calibration.linear(neutral_angles=(0.0,), directions=(1,), neutral_pulse_pu=0.0,
+                                             pu_per_degree=1.0))

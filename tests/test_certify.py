@@ -3,6 +3,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from helpers import toy_robot
 
 from ikseries.accuracy import measure, verification_points
 from ikseries.fit import centred as cn
@@ -11,7 +12,6 @@ from ikseries.fit.certify import (CertificationError, _initial_cells, _plan_func
                                   output_rounding)
 from ikseries.fit.horner import horner
 from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
-from ikseries.calibration import Calibration
 from ikseries.robot import load_preset
 from ikseries.sim.golden import evaluate_ideal
 
@@ -28,12 +28,7 @@ class _SineGeometry:
 
 
 def _robot(tolerance=0.5):
-    """A robot with the geometry above and an identity calibration (pulse = angle)."""
-    return SimpleNamespace(
-        geometry=_SineGeometry(), servos=("y",), fit=SimpleNamespace(tolerance_pu=tolerance),
-        workspace=SimpleNamespace(inputs=(SimpleNamespace(name="a"), SimpleNamespace(name="b"))),
-        joint_calibration=Calibration.linear(neutral_angles=(0.0,), directions=(1,), neutral_pulse_pu=0.0,
-                                             pu_per_degree=1.0))
+    return toy_robot(_SineGeometry(), tolerance)
 
 
 def _plan(offset=0.0, floor_only=False, clamp=(-10, 10)):
