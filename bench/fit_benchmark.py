@@ -19,9 +19,11 @@ plus certification <= 10 s CPU on one core ("a fit ten times faster").
 """
 from __future__ import annotations
 
+from ikseries.memory import keep_freed_memory
 from ikseries.threads import single_threaded_blas
 
 single_threaded_blas()   # before anything loads numpy's BLAS
+keep_freed_memory()      # as the ikseries command does: freed arrays reused, not fresh pages
 
 import argparse
 import contextlib

@@ -46,6 +46,7 @@ class Basis:
         self._columns: dict = {}
         self._magnitudes: dict = {}
         self._norms: dict = {}
+        self._scratch = None
 
     def __getstate__(self):
         return {"points": self.points}
@@ -84,9 +85,17 @@ class Basis:
     def norm(self, term: tuple[int, ...]) -> float:
         """Root mean square of column(term) over the points (1 for a zero column)."""
         if term not in self._norms:
-            v = float(np.sqrt(np.mean(np.square(self.column(term)))))
+            v = float(np.sqrt(np.mean(np.square(self.column(term), out=self.scratch()))))
             self._norms[term] = v if v > 0 else 1.0
         return self._norms[term]
+
+    def scratch(self) -> np.ndarray:
+        """A work array of one column's length, kept: a column-sized temporary freed at the top
+        of the heap is handed back to the system and page-faulted in again on the next use, which
+        cost more than the arithmetic on it (a third of the search's CPU time went to the kernel)."""
+        if self._scratch is None:
+            self._scratch = np.empty(len(self.points))
+        return self._scratch
 
     def matrix(self, terms: list[tuple[int, ...]]) -> np.ndarray:
         if not terms:
@@ -101,7 +110,7 @@ class Basis:
         """target - matrix(terms) @ coef, a column at a time (no matrix of all points is formed:
         at a few hundred thousand points its allocation costs more than the products)."""
         r = np.array(target, dtype=np.float64)
-        tmp = np.empty_like(r)
+        tmp = self.scratch()
         for t, c in zip(terms, coef):
             np.multiply(self.column(tuple(t)), c, out=tmp)
             r -= tmp

@@ -566,8 +566,10 @@ def _signals_interrupt():
 
 def main(argv=None):
     """The ``ikseries`` command; returns its exit status."""
+    from .memory import keep_freed_memory
     from .threads import single_threaded_blas
     single_threaded_blas()       # before anything imports numpy
+    keep_freed_memory()          # the fitter's arrays reuse freed memory, not fresh pages
     args = _parser().parse_args(argv)
     try:
         with _signals_interrupt():
