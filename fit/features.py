@@ -26,7 +26,7 @@ from .plan import PlanBuilder
 from .polyfit import fit_lawson, total_degree_terms, vander
 from .ports import plan_inputs
 
-__all__ = ["Cut", "CutGrid", "TrigSeries", "TrigTable", "fit_trig", "fit_trig_table", "pow2_scale", "Normaliser",
+__all__ = ["Cut", "CutGrid", "FeatureCut", "TrigSeries", "TrigTable", "fit_trig", "fit_trig_table", "pow2_scale", "Normaliser",
            "CylindricalStage", "CartesianStage", "coordinate_stage"]
 
 
@@ -80,10 +80,68 @@ class Cut:
         f = self.shift - 1
         return cell, b.add(b.reinterpret(off, f), b.const(-1.0, f))
 
-    def address(self, b: PlanBuilder, ports: dict) -> tuple[int, list[int]]:
-        """(table address, offset node per cut) on ``b``; ``ports``: PlanInputs by name."""
-        cell, off = self.build(b, ports[self.port])
+    def locate(self, b: PlanBuilder, ports: dict, feats) -> tuple[int, int]:
+        """(cell, offset) nodes on ``b`` (:meth:`build` of the port); ``ports``: PlanInputs by name."""
+        return self.build(b, ports[self.port])
+
+    def address(self, b: PlanBuilder, ports: dict, feats=None) -> tuple[int, list[int]]:
+        """(table address, offset node per cut) on ``b``; ``ports``: PlanInputs by name,
+        ``feats``: the polynomial's variable nodes (read by a :class:`FeatureCut` only)."""
+        cell, off = self.locate(b, ports, feats)
         return cell, [off]
+
+
+@dataclass(frozen=True)
+class FeatureCut:
+    """Cells of a computed variable of the polynomial (a feature such as the normalised rho2,
+    in [-1, 1)): variable ``var`` (named ``name``) cut into ``2**(bits + 1)`` cells of width
+    ``2**-bits``, cell m = [-1 + m 2**-bits, -1 + (m + 1) 2**-bits), and replaced by the
+    offset inside its cell, normalised to [-1, 1). The hardware cuts the feature as rounded to
+    the plan's feature bits, so near an edge it may take the neighbour cell; the certifier
+    encloses both cases (:mod:`ikseries.fit.cut`)."""
+    var: int
+    name: str
+    bits: int
+
+    port = None                      # no input port: a grid's two cuts are told apart by ``var``
+    address = Cut.address
+
+    @property
+    def cuts(self) -> tuple["FeatureCut", ...]:
+        return (self,)
+
+    @property
+    def cells(self) -> int:
+        return 2 ** (self.bits + 1)
+
+    @property
+    def entries(self) -> int:
+        return self.cells
+
+    def table(self, values) -> tuple:
+        return tuple(values)
+
+    def offsets(self, values, cell: int) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of exact feature ``values`` in cell ``cell`` (the edges' own cells: the last
+        holds the range's top) and their normalised offsets from the cell."""
+        u = (np.asarray(values, dtype=np.float64) + 1.0) * 2.0 ** self.bits
+        sel = np.flatnonzero(np.clip(np.floor(u), 0, self.cells - 1) == cell)
+        return sel, 2.0 * (u[sel] - cell) - 1.0
+
+    def locate(self, b: PlanBuilder, ports: dict, feats) -> tuple[int, int]:
+        """(cell, offset) nodes of feature node ``feats[var]`` (``fv`` fractional bits, at
+        least ``bits + 1``): the value plus one, clamped into [0, 2) (interval analysis may
+        widen the feature's range past it; the true values stay inside), cut every
+        ``2**(fv - bits)`` integers."""
+        node = feats[self.var]
+        fv = b.frac(node)
+        if fv <= self.bits:
+            raise ValueError(f"a feature cut of {2 ** -self.bits:g} needs more than {self.bits} "
+                             f"fractional bits of its feature, not {fv}")
+        u = b.clamp(b.add(node, b.const(1.0, fv)), 0, 2 ** (fv + 1) - 1)
+        shift = fv - self.bits
+        cell, off = b.cell(b.reinterpret(u, 0), shift)
+        return cell, b.add(b.reinterpret(off, shift - 1), b.const(-1.0, shift - 1))
 
 
 @dataclass(frozen=True)
@@ -97,8 +155,10 @@ class CutGrid:
     b: Cut
 
     def __post_init__(self):
-        if self.a.port == self.b.port:
+        if self.a.port is not None and self.a.port == self.b.port:
             raise ValueError(f"a cut grid needs two ports, not {self.a.port!r} twice")
+        if self.a.var is not None and self.a.var == self.b.var:
+            raise ValueError(f"a cut grid needs two variables, not variable {self.a.var} twice")
 
     @property
     def cuts(self) -> tuple[Cut, Cut]:
@@ -125,10 +185,10 @@ class CutGrid:
             out += vals + ([vals[-1]] * (row - nb) if i < self.a.cells - 1 else [])
         return tuple(out)
 
-    def address(self, b: PlanBuilder, ports: dict) -> tuple[int, list[int]]:
+    def address(self, b: PlanBuilder, ports: dict, feats=None) -> tuple[int, list[int]]:
         """(table address, [offset in a's cell, offset in b's cell]) nodes on ``b``."""
-        ia_, oa = self.a.build(b, ports[self.a.port])
-        ib, ob = self.b.build(b, ports[self.b.port])
+        ia_, oa = self.a.locate(b, ports, feats)
+        ib, ob = self.b.locate(b, ports, feats)
         if self.bits:      # i * 2**bits: the same integer read with -bits fractional bits, widened
             ia_ = b.align(b.reinterpret(ia_, -self.bits), 0)
         return b.add(ia_, ib), [oa, ob]

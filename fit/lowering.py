@@ -46,7 +46,7 @@ def poly_inputs(b: PlanBuilder, fs: FeatureSet, feats: list[int], fv: int) -> tu
     ``feats`` and None (constants)."""
     if fs.cut is None:
         return feats, None
-    address, offsets = fs.cut.address(b, {i.name: i for i in b.inputs})
+    address, offsets = fs.cut.address(b, {i.name: i for i in b.inputs}, feats)
     feats = list(feats)
     for c, off in zip(fs.cut.cuts, offsets):
         if c.var is not None:

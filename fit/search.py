@@ -35,6 +35,10 @@ GRID_CELLS = (2, 4)              # cells tried per port of a two-port grid (roun
                                  # with 8 too, cylinder-leg's plan needs products wider than 18 x 18 (fit.products = "dsp" refused)
 SCREEN_STRIDE = 1                # a grid's screening fit: every this many fit samples (a subset of the pool)
 MAX_GRID_CELLS = 16              # cells and table entries (row padding included) of a grid at most
+FEATURE_GRID_ENTRIES = 64        # table entries (fit.table_entries) from which cells of computed features are tried
+FEATURE_BITS = (1, 4)            # a feature's cells are 2**-bits wide (4 to 32 cells over [-1, 1))
+MIN_CELL_ROWS = 32               # a feature cell with fewer sample rows is fitted on a window around it,
+CELL_WINDOWS = (0.0, 0.125, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 64.0)   # widened by these many cell widths each side
 
 
 class Rows:
@@ -102,24 +106,25 @@ class Cells:
         """Rows of each cell of ``fs.cut`` (a grid's cells in its cell order), each cut variable
         replaced by the offset in its cell; ``ports``: PlanInputs by name, ``raw[port]`` = real
         values of a cut port at the fit and check rows; ``memo``: a dict keeping each cut's
-        per-cell offsets for the next call on the same samples."""
+        per-cell offsets for the next call on the same samples. A cell of a computed feature
+        holding fewer than ``MIN_CELL_ROWS`` rows (the feature's range need not fill its cells)
+        is fitted on a window around it, widened until it holds them (its polynomial then
+        extends over the window)."""
         memo = {} if memo is None else memo
         cuts = fs.cut.cuts
-        per_cut = [_cut_offsets(c, ports[c.port], raw[c.port], memo) for c in cuts]
+        per_cut = [_feature_offsets(c, (fit_set[0], check_set[0]), memo) if c.port is None
+                   else _cut_offsets(c, ports[c.port], raw[c.port], memo) for c in cuts]
         out = cls([])
         for cell in range(fs.cut.cells):
             per = np.unravel_index(cell, [c.cells for c in cuts])
-            xs, ts = [], []
-            for s, (x, t) in enumerate((fit_set, check_set)):
-                offs = [po[int(k)][s] for po, k in zip(per_cut, per)]
-                keep = np.logical_and.reduce([~np.isnan(o) for o in offs])
-                xc = x[keep]
-                for c, off in zip(cuts, offs):
-                    if c.var is not None:
-                        xc[:, c.var] = off[keep]
-                xs.append(xc)
-                ts.append(t[keep])
-            out.rows.append(Rows(np.concatenate(xs), np.concatenate(ts)))
+            for widen in CELL_WINDOWS:
+                offs = [[po[int(k)][s] for s in range(2)] if c.port is not None or not widen else
+                        [_widened(c, x[:, c.var], int(k), widen) for x in (fit_set[0], check_set[0])]
+                        for c, po, k in zip(cuts, per_cut, per)]
+                rows = _cell_rows(cuts, offs, (fit_set, check_set))
+                if len(rows.t) >= MIN_CELL_ROWS or all(c.port is not None for c in cuts):
+                    break
+            out.rows.append(rows)
         return out
 
     def poly(self, terms, coef: np.ndarray) -> dict:
@@ -171,6 +176,45 @@ def _cut_offsets(cut, port, raw, memo: dict) -> list:
     return memo[key]
 
 
+def _cell_rows(cuts, offs, sets) -> Rows:
+    """The rows of one cell: per sample set, the rows every cut's offset (``offs[cut][set]``,
+    NaN off the cell) keeps, each cut variable replaced by its offset."""
+    xs, ts = [], []
+    for s, (x, t) in enumerate(sets):
+        keep = np.logical_and.reduce([~np.isnan(o[s]) for o in offs])
+        xc = x[keep]
+        for c, o in zip(cuts, offs):
+            if c.var is not None:
+                xc[:, c.var] = o[s][keep]
+        xs.append(xc)
+        ts.append(t[keep])
+    return Rows(np.concatenate(xs), np.concatenate(ts))
+
+
+def _widened(cut, values, cell: int, widen: float) -> np.ndarray:
+    """Offsets from cell ``cell`` of a feature cut of the rows within ``widen`` cell widths of
+    it (NaN elsewhere)."""
+    u = (np.asarray(values, dtype=np.float64) + 1.0) * 2.0 ** cut.bits - cell
+    return np.where((u >= -widen) & (u < 1.0 + widen), 2.0 * u - 1.0, np.nan)
+
+
+def _feature_offsets(cut, xs, memo: dict) -> list:
+    """:func:`_cut_offsets` of a :class:`~.features.FeatureCut`: from the exact normalised
+    feature values of the fit and check rows ``xs`` (column ``cut.var``)."""
+    key = ("feature", cut.var, cut.bits, *map(id, xs))
+    if key not in memo:
+        memo[key] = []
+        for cell in range(cut.cells):
+            per_set = []
+            for x in xs:
+                sel, off = cut.offsets(x[:, cut.var], cell)
+                full = np.full(len(x), np.nan)
+                full[sel] = off
+                per_set.append(full)
+            memo[key].append(per_set)
+    return memo[key]
+
+
 def _fit_note(fit: CellsFit) -> str:
     if fit.refused:
         return f"minimax error above {fit.error:.4g} ticks"
@@ -191,7 +235,9 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     strictly fewer multipliers, the fewest cells first. Then the best variable set is tried on
     two-port grids (:func:`_grid_sets`, :class:`_Grids`: every pair of input ports, each in
     ``GRID_CELLS`` cells, at most ``MAX_GRID_CELLS`` table entries), again winning only with strictly
-    fewer multipliers. The ``FINALISTS`` cheapest structures
+    fewer multipliers. Where ``fit.table_entries`` allows ``FEATURE_GRID_ENTRIES`` or more, the
+    variable sets with a computed variable (:func:`_feature_bases`) are then tried on cells of
+    it, alone or on a grid with another variable (:func:`_feature_grid_sets`). The ``FINALISTS`` cheapest structures
     found (those within ``FINALIST_MARGIN`` of the cheapest) are each pruned (a cheaper one may
     prune less), the fewest multipliers after pruning winning (on a tie the cheaper before). The
     candidates of one kind share their pool (and its monomial columns).
@@ -233,6 +279,12 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     grid = _Grids(ctx, name, sets[bases[0].kind], raw, ports, budget_ticks, progress)
     for fs in _grid_sets(bases[0], ports):
         grid.search(fs, found)
+    entries = ctx.robot.fit.table_entries
+    if entries >= FEATURE_GRID_ENTRIES:
+        for base in _feature_bases(bases[0], candidates, ports):
+            grid = _Grids(ctx, name, sets[base.kind], raw, ports, budget_ticks, progress)
+            for fs in _feature_grid_sets(base, ports, entries):
+                grid.search(fs, found)
     if not found:
         raise FitError(f"servo {name}: no polynomial of at most {MAX_COST} multipliers (total degree <= "
                        f"{MAX_DEGREE}, whole or in cells) reaches the approximation budget of {budget_ticks:g} ticks")
@@ -308,6 +360,41 @@ def _grid_sets(base: FeatureSet, ports: dict) -> list:
             if fs.cut.a.cells > 1 and fs.cut.b.cells > 1 and fs.cut.entries <= MAX_GRID_CELLS:
                 out.append(fs)
     return out
+
+
+def _feature_bases(fs: FeatureSet, candidates, ports: dict) -> list:
+    """The variable sets tried with feature cells: ``fs`` and every candidate of total degree
+    terms, those with a variable that is no input port (a computed feature) only."""
+    out = []
+    for c in [fs, *candidates]:
+        c = dataclasses.replace(c, tensor=False, cut=None)
+        if c not in out and any(nm not in ports and a != "none" for nm, a in zip(c.names, c.allowed)):
+            out.append(c)
+    return out
+
+
+def _feature_grid_sets(base: FeatureSet, ports: dict, entries: int) -> list:
+    """The feature grids tried for ``base`` with at most ``entries`` table entries: each
+    computed variable (no input port) cut into ``FEATURE_CELLS`` cells alone, and on a grid with
+    each other variable (a port in ``FEATURE_CELLS`` cells, or another feature), the most
+    cells first (the lowest degree)."""
+    live = [j for j, a in enumerate(base.allowed) if a != "none"]
+    feats = [j for j in live if base.names[j] not in ports]
+    out = []
+    for j in feats:
+        bits = [b for b in range(FEATURE_BITS[0], FEATURE_BITS[1] + 1) if 2 ** (b + 1) <= entries]
+        out += [base.feature_piecewise(j, b) for b in bits]
+        for k in live:
+            if k == j or (k in feats and k < j):
+                continue
+            for b, b2 in itertools.product(bits, repeat=2):
+                if base.names[k] in ports:
+                    fs = base.feature_piecewise(j, b, (k, ports[base.names[k]], 2 ** (b2 + 1)))
+                else:
+                    fs = base.feature_piecewise(j, b, (k, b2))
+                if fs.cut.entries <= entries:
+                    out.append(fs)
+    return sorted(out, key=lambda fs: -fs.cut.cells)
 
 
 def _cut_bases(fs: FeatureSet, candidates) -> list:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..kinematics import UnreachableError
-from .features import Cut, CutGrid, Normaliser
+from .features import Cut, CutGrid, FeatureCut, Normaliser
 from .plan import bits_for, quantize
 from .polyfit import total_degree_terms
 
@@ -37,7 +37,7 @@ class FeatureSet:
     allowed: tuple
     zero_free: int | None = None
     tensor: bool = False      # every power up to ``degree`` per variable, not total degree
-    cut: "Cut | CutGrid | None" = None  # piecewise: cells of one port or a grid over two
+    cut: "Cut | FeatureCut | CutGrid | None" = None  # piecewise: cells of one port or feature, or a grid over two
 
     def label(self) -> str:
         return f"{self.kind} {'/'.join(self.names)}" + self.extras()
@@ -52,21 +52,45 @@ class FeatureSet:
         its table entries and address (``cell_a * 2**bits + cell_b``)."""
         if self.cut is None:
             return None
-        rec = [{"input": c.port, "variable": None if c.var is None else self.names[c.var], "cells": c.cells,
-                "port_values_per_cell": 2 ** c.shift} for c in self.cut.cuts]
-        if isinstance(self.cut, Cut):
+        rec = [self._cut_record(c) for c in self.cut.cuts]
+        if not isinstance(self.cut, CutGrid):
             return rec[0]
         return {"grid": rec, "cells": self.cut.cells, "table_entries": self.cut.entries,
                 "address_bits_b": self.cut.bits}
 
+    def _cut_record(self, c) -> dict:
+        if isinstance(c, FeatureCut):      # cells of a computed variable, normalised to [-1, 1)
+            return {"feature": c.name, "variable": c.name, "cells": c.cells, "cell_width": 2.0 ** -c.bits}
+        return {"input": c.port, "variable": None if c.var is None else self.names[c.var], "cells": c.cells,
+                "port_values_per_cell": 2 ** c.shift}
+
     def extras(self) -> str:
         if self.cut is None:
             cells = ""
-        elif isinstance(self.cut, Cut):
-            cells = f", {self.cut.cells} cells in {self.cut.port}"
+        elif isinstance(self.cut, CutGrid):
+            a, b = self.cut.a, self.cut.b
+            cells = f", {a.cells}x{b.cells} cells in {a.port or a.name} x {b.port or b.name}"
         else:
-            cells = f", {self.cut.a.cells}x{self.cut.b.cells} cells in {self.cut.a.port} x {self.cut.b.port}"
+            cells = f", {self.cut.cells} cells in {self.cut.port or self.cut.name}"
         return (" tensor" if self.tensor else "") + cells
+
+    def feature_piecewise(self, var: int, bits: int, second: tuple | None = None) -> "FeatureSet":
+        """The same variables with variable ``var`` (a computed feature) cut into cells of
+        ``2**-bits`` (:class:`FeatureCut`), its powers "any"; ``second`` = (var, port, cells)
+        of a port or (var, bits) of another feature: a grid over both."""
+        cut = FeatureCut(var, self.names[var], bits)
+        fs = self._any(var)
+        if second is None:
+            return dataclasses.replace(fs, cut=cut)
+        if len(second) == 2:
+            fs, cut_b = fs._any(second[0]), FeatureCut(second[0], self.names[second[0]], second[1])
+        else:
+            fs, cut_b = fs._cut_one(*second)
+        return dataclasses.replace(fs, cut=CutGrid(cut, cut_b))
+
+    def _any(self, var: int) -> "FeatureSet":
+        return dataclasses.replace(self, allowed=self.allowed[:var] + ("any",) + self.allowed[var + 1:],
+                                   zero_free=None if self.zero_free == var else self.zero_free)
 
     def piecewise(self, var: int | None, port, cells: int, second: tuple | None = None) -> "FeatureSet":
         """The same variables cut into ``cells`` equal cells of the integer range of input
@@ -82,10 +106,7 @@ class FeatureSet:
     def _cut_one(self, var, port, cells) -> tuple["FeatureSet", Cut]:
         per = -(-(port.hi - port.lo + 1) // cells)          # port values per cell, rounded up
         shift = max(1, (per - 1).bit_length())
-        fs = self
-        if var is not None:
-            fs = dataclasses.replace(self, allowed=self.allowed[:var] + ("any",) + self.allowed[var + 1:],
-                                     zero_free=None if self.zero_free == var else self.zero_free)
+        fs = self if var is None else self._any(var)
         return fs, Cut(var, port.name, shift, ((port.hi - port.lo) >> shift) + 1)
 
     def terms(self, degree: int) -> list:

@@ -324,6 +324,9 @@ def _coefficients_section(r: dict) -> list[str]:
 def _piecewise_note(cut: dict) -> str:
     """The coefficients' cells in words: one input's cells or a grid over two."""
     def one(c):
+        if "feature" in c:
+            return (f"cells of width {c['cell_width']:g} of the normalised variable {c['feature']} from -1 (computed "
+                    f"and rounded in the plan), which becomes the offset inside the cell, normalised to [-1, 1)")
         var = (f"; variable {c['variable']} is the offset inside the cell, normalised to [-1, 1)"
                if c["variable"] is not None else f" ({c['input']} is no variable of the polynomial)")
         return f"cells of {c['port_values_per_cell']} port values of input {c['input']} from its lowest value{var}"

@@ -364,12 +364,19 @@ def _parse_servos(table: dict, geometry) -> dict:
 
 
 # -- fit options -------------------------------------------------------------------------
+#: coefficient-table entries per servo polynomial: the default (small tables: cells along one
+#: input or a grid over two), and the most a description may allow (cells of computed
+#: features too, e.g. rho2 x z, where at least FEATURE_GRID_ENTRIES are allowed; fit/search.py)
+TABLE_ENTRIES, MAX_TABLE_ENTRIES = 16, 4096
+
+
 @dataclass(frozen=True)
 class FitOptions:
     """How the plan is fitted (``[fit]``)."""
     tolerance_pu: float = 0.5
     lowering: str = "mixed"     # one of LOWERINGS: how servo polynomials become plan operations
     products: str = "exact"     # one of PRODUCTS: product widths exact or fitted to hardware.dsp
+    table_entries: int = TABLE_ENTRIES   # most coefficient-table entries per servo polynomial
 
     @classmethod
     def parse(cls, table: dict) -> "FitOptions":
@@ -389,9 +396,18 @@ class FitOptions:
             raise RobotError(f"fit.lowering must be one of {', '.join(LOWERINGS)}, not {self.lowering!r}")
         if self.products not in PRODUCTS:
             raise RobotError(f"fit.products must be one of {', '.join(PRODUCTS)}, not {self.products!r}")
+        n = self.table_entries
+        if isinstance(n, bool) or not isinstance(n, int) or not TABLE_ENTRIES <= n <= MAX_TABLE_ENTRIES:
+            raise RobotError(f"fit.table_entries must be an integer from {TABLE_ENTRIES} to {MAX_TABLE_ENTRIES}, "
+                             f"not {n!r}")
 
     def record(self) -> dict:
-        return dataclasses.asdict(self)
+        """The fields as given; ``table_entries`` only where it is not the default (so records
+        written before it give the same record and plan-cache key)."""
+        rec = dataclasses.asdict(self)
+        if rec["table_entries"] == TABLE_ENTRIES:
+            del rec["table_entries"]
+        return rec
 
 
 # -- hardware options --------------------------------------------------------------------
