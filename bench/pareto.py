@@ -17,6 +17,9 @@ For the cylinder-leg robot, the IK cores alone (no PWM), as flat-port stream top
                fabric); simulated in cocotb with the primitive's model (``Primitive.model_path``,
                tests); its
                accuracy column is that plan's own;
+``pipelinedt``, ``modulo1dt``, ``modulo4dt``  on the ECP5 only: ``pipelined``, ``modulo1d`` and
+               ``modulo4d`` of plans fitted with ``fit.table_entries = LONG_TABLES`` (1024: cells
+               of computed features such as rho2, fewer products, longer coefficient tables);
 ``cordic``     ``CordicLegSolver``, sized with ``size_cordic(margin_pu=0.075)`` (about 1.5 min)
                unless ``--cordic-design JSON`` gives the design; fully pipelined;
 ``cordic_iter`` the same design iterative: each CORDIC and the square root on one set of
@@ -65,6 +68,7 @@ from ikseries.threads import single_threaded_blas
 single_threaded_blas()   # before anything loads numpy's BLAS
 
 import argparse
+import dataclasses
 import json
 import runpy
 import sys
@@ -83,11 +87,15 @@ ECP5_PART = PARTS[PNR_DEVICES[ECP5].part].part
 ECP5_PRIMITIVES = ", ".join(p.name for p in family_primitives("ecp5"))
 MODULO_II = (4, 8, 12)
 MODULO_DSP_II = (1, 4, 7, 16)   # ECP5 only: DSP-sized plan, DSP primitives with their own registers
+#: the "t" designs: the same cores of plans fitted with fit.table_entries = LONG_TABLES (cells of
+#: computed features, fewer products), ECP5 only
+LONG_TABLES = 1024
+LONG_DESIGNS = ("pipelinedt", "modulo1dt", "modulo4dt")
 DESIGNS = ("pipelined", *(f"modulo{ii}" for ii in MODULO_II), *(f"modulo{ii}d" for ii in MODULO_DSP_II),
-           "folded1", "folded2", "cordic", "cordic_iter", "hexapod")
+           *LONG_DESIGNS, "folded1", "folded2", "cordic", "cordic_iter", "hexapod")
 CORDIC_DESIGNS = ("cordic", "cordic_iter")
 DSP_DESIGNS = tuple(f"modulo{ii}d" for ii in MODULO_DSP_II)
-POLY_DESIGNS = tuple(d for d in DESIGNS if d not in (*CORDIC_DESIGNS, "hexapod", *DSP_DESIGNS))
+POLY_DESIGNS = tuple(d for d in DESIGNS if d not in (*CORDIC_DESIGNS, "hexapod", *DSP_DESIGNS, *LONG_DESIGNS))
 TARGET_FMAX_MHZ, TARGET_LATENCY_NS, TARGET_THROUGHPUT = 150.0, 200.0, 20e6
 #: the hexapod target: within the iCE40 part's DSP blocks and logic cells, refreshing >= 1000/s
 HEXAPOD_DSP, HEXAPOD_LC = (PARTS[PNR_DEVICES[ICE40].part].capacities[k] for k in ("DSP", "LUT"))
@@ -151,6 +159,26 @@ def dsp_specs(plan, max_error_pu: float | None, names=DSP_DESIGNS, extra: dict |
                   + f"one target per {ii} cycles, {ECP5_PRIMITIVES} primitives with their registers",
                   max_error_pu, extra or {}, (ECP5,))
             for ii in MODULO_DSP_II if f"modulo{ii}d" in names]
+
+
+def long_table_specs(robot, names, fitted) -> list[DesignSpec]:
+    """The "t" designs of ``names`` (without the "t": ``pipelined``, ``moduloNd``): the plans
+    of ``robot`` fitted (``fitted(robot, what, **extra)``) with ``fit.table_entries =
+    LONG_TABLES``, on the ECP5 only."""
+    from ikseries.robot import with_fit, with_hardware
+
+    long = with_fit(robot, table_entries=LONG_TABLES)
+    note = f"fit.table_entries = {LONG_TABLES} (cells of computed features)"
+    specs = []
+    if "pipelined" in names:
+        plan, worst, extra = fitted(long, "long-table plan", table_entries=LONG_TABLES)
+        specs += [dataclasses.replace(sp, devices=(ECP5,)) for sp in polynomial_specs(plan, worst, ("pipelined",), extra)]
+    dsp = [n for n in names if n in DSP_DESIGNS]
+    if dsp:
+        plan, worst, extra = fitted(with_fit(with_hardware(long, dsp="ecp5"), products="dsp"), "long-table DSP-sized plan",
+                                    products="dsp ({}x{})".format(*dsp_size("ecp5")), table_entries=LONG_TABLES)
+        specs += dsp_specs(plan, worst, dsp, extra)
+    return [dataclasses.replace(sp, name=sp.name + "t", description=f"{sp.description}; {note}") for sp in specs]
 
 
 def folded_specs(plan, max_error_pu: float | None, names, extra: dict) -> list[DesignSpec]:
@@ -501,6 +529,9 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
         plan, worst, extra = fitted(with_fit(with_hardware(robot, dsp="ecp5"), products="dsp"), "DSP-sized plan",
                                     products="dsp ({}x{})".format(*dsp_size("ecp5")))
         specs += dsp_specs(plan, worst, dsp_names, extra)
+    long_names = [d[:-1] for d in designs if d in LONG_DESIGNS]
+    if long_names:
+        specs += long_table_specs(robot, long_names, fitted)
     cordic_names = [d for d in designs if d in CORDIC_DESIGNS]
     if cordic_names:
         points = verification_points(robot) if points is None else points

@@ -26,8 +26,15 @@ from .plan import PlanBuilder
 from .polyfit import fit_lawson, total_degree_terms, vander
 from .ports import plan_inputs
 
-__all__ = ["Cut", "CutGrid", "FeatureCut", "TrigSeries", "TrigTable", "fit_trig", "fit_trig_table", "pow2_scale", "Normaliser",
+__all__ = ["FEATURE_GRID_ENTRIES", "TRIG_TABLE_CELLS", "Cut", "CutGrid", "FeatureCut", "TrigSeries", "TrigTable", "fit_trig", "fit_trig_table", "pow2_scale", "Normaliser",
            "CylindricalStage", "CartesianStage", "coordinate_stage"]
+
+
+#: table entries (fit.table_entries) from which cells of computed features are tried
+#: (fit/search.py) and a cylindrical stage's cos/sin tables may be as long (of a lower degree)
+FEATURE_GRID_ENTRIES = 64
+#: cells of theta a cos/sin table has at most below that
+TRIG_TABLE_CELLS = 32
 
 
 def pow2_scale(half_range: float) -> int:
@@ -235,15 +242,16 @@ class TrigTable:
     max_error: float
 
 
-def fit_trig_table(port, tol: float, max_degree: int = 5, max_cells: int = 32) -> TrigTable | None:
-    """The lowest degree (<= ``max_degree``), then the coarsest cells (<= ``max_cells``: on
-    cylinder-leg 32 gives cubics on 23 cells, whose tables take a folded core to 23 of the
-    iCE40 reference part's block RAMs; 64 cells of quadratics took 32), of the
+def fit_trig_table(port, tol: float, max_degree: int = 5, max_cells: int = TRIG_TABLE_CELLS,
+                   min_degree: int = 2) -> TrigTable | None:
+    """The lowest degree (``min_degree`` to ``max_degree``), then the coarsest cells (<=
+    ``max_cells``: on cylinder-leg 32 gives cubics on 23 cells, whose tables take a folded core
+    to 23 of the iCE40 reference part's block RAMs; 64 cells of quadratics took 32), of the
     theta port ``port`` (a PlanInput in degrees) whose per-cell near-minimax cos/sin
     polynomials stay within ``tol``; None if none does. The last cell is fitted on a full cell
     width, as :meth:`Cut.rows` defines."""
     span = port.hi - port.lo
-    for degree in range(2, max_degree + 1):
+    for degree in range(min_degree, max_degree + 1):
         for shift in range(max(1, span.bit_length() - 2), 0, -1):
             cut = Cut(0, port.name, shift, (span >> shift) + 1)
             if cut.cells > max_cells:
@@ -355,7 +363,11 @@ class CylindricalStage(_Stage):
         self.offset = g.neutral_distance
         self.trig = fit_trig(th.min, th.max, trig_tol)
         port = next(i for i in plan_inputs(robot) if i.name == "theta")
-        self.table = fit_trig_table(port, trig_tol) if table else None
+        # where the description allows long tables, lines on many cells (fewer products, shallower)
+        entries = robot.fit.table_entries
+        long = entries >= FEATURE_GRID_ENTRIES
+        self.table = fit_trig_table(port, trig_tol, max_cells=entries if long else TRIG_TABLE_CELLS,
+                                    min_degree=1 if long else 2) if table else None
         kx = pow2_scale(r.max)
         self.norms = (Normaliser(self.offset, kx), Normaliser(0.0, kx),
                       Normaliser.for_range(z.min, z.max, z.frac_bits))

@@ -18,6 +18,7 @@ from .context import FitError
 from .lowering import structure_cost
 from .minimax import minimax, region_ids
 from .polyfit import Basis
+from .features import FEATURE_GRID_ENTRIES
 from .structure import FeatureSet, ServoFit
 
 __all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "MAX_COST", "CUT_CELLS", "GRID_CELLS", "MAX_GRID_CELLS",
@@ -35,7 +36,6 @@ GRID_CELLS = (2, 4)              # cells tried per port of a two-port grid (roun
                                  # with 8 too, cylinder-leg's plan needs products wider than 18 x 18 (fit.products = "dsp" refused)
 SCREEN_STRIDE = 1                # a grid's screening fit: every this many fit samples (a subset of the pool)
 MAX_GRID_CELLS = 16              # cells and table entries (row padding included) of a grid at most
-FEATURE_GRID_ENTRIES = 64        # table entries (fit.table_entries) from which cells of computed features are tried
 FEATURE_BITS = (1, 4)            # a feature's cells are 2**-bits wide (4 to 32 cells over [-1, 1))
 MIN_CELL_ROWS = 32               # a feature cell with fewer sample rows is fitted on a window around it,
 CELL_WINDOWS = (0.0, 0.125, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 64.0)   # widened by these many cell widths each side

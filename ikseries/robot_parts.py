@@ -366,7 +366,7 @@ def _parse_servos(table: dict, geometry) -> dict:
 # -- fit options -------------------------------------------------------------------------
 #: coefficient-table entries per servo polynomial: the default (small tables: cells along one
 #: input or a grid over two), and the most a description may allow (cells of computed
-#: features too, e.g. rho2 x z, where at least FEATURE_GRID_ENTRIES are allowed; fit/search.py)
+#: features too, e.g. rho2 x z, where at least FEATURE_GRID_ENTRIES are allowed; fit/features.py)
 TABLE_ENTRIES, MAX_TABLE_ENTRIES = 16, 4096
 
 

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from helpers import shared_fit, simulate_bit_exact
 
-from ikseries.fit.features import Cut, CutGrid, FeatureCut
-from ikseries.fit.search import FEATURE_GRID_ENTRIES
+from ikseries.fit.features import FEATURE_GRID_ENTRIES, Cut, CutGrid, FeatureCut
 from ikseries.fit.structure import FeatureSet
 from ikseries.hdl.evaluator import PlanEvaluator
 from ikseries.robot import RobotError, load_preset, with_fit
