@@ -64,9 +64,20 @@ def _positive_int(text: str, option: str) -> int:
     return v
 
 
+def _table_entries(text: str) -> int:
+    from .robot_parts import MAX_TABLE_ENTRIES, TABLE_ENTRIES
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if not TABLE_ENTRIES <= v <= MAX_TABLE_ENTRIES:
+        raise CliError(f"--table-entries must be an integer from {TABLE_ENTRIES} to {MAX_TABLE_ENTRIES}, not {text!r}")
+    return v
+
+
 def _hardware_overrides(robot, args):
     """``robot`` with the build's --architecture / --multipliers / --interval / --dsp / --fit-device /
-    --products applied
+    --products / --table-entries applied
     (validated). --fit-device also sets the DSP size to the device's family unless --dsp is given;
     --architecture other than fastest drops the description's hardware.fit_device."""
     from .constraints.devices import FIT_DEVICES
@@ -98,6 +109,8 @@ def _hardware_overrides(robot, args):
         if args.products not in PRODUCTS:
             raise CliError(f"--products must be one of {', '.join(PRODUCTS)}, not {args.products!r}")
         opts["products"] = args.products
+    if getattr(args, "table_entries", None) is not None:
+        opts["table_entries"] = _table_entries(args.table_entries)
     labels = {"architecture": "--architecture", "multipliers": "--multipliers", "interval": "--interval",
               "dsp": "--dsp", "fit_device": "--fit-device", "dsp_primitives": "--dsp-primitives"}
     given = {k for k in ("architecture", "multipliers", "interval", "dsp", "fit_device")
@@ -106,7 +119,7 @@ def _hardware_overrides(robot, args):
         given |= {"dsp_primitives", "dsp"}
     if given & {"architecture", "fit_device"}:   # either names the other in the error
         given |= {"architecture", "fit_device"}
-    fit = {k: opts.pop(k) for k in ("products",) if k in opts}
+    fit = {k: opts.pop(k) for k in ("products", "table_entries") if k in opts}
     new = with_hardware(robot, {k: v for k, v in labels.items() if k in given}, **opts) if opts else robot
     check_architecture_options(new, set(opts), labels)
     return with_fit(new, **fit) if fit else new
@@ -470,6 +483,9 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--products", metavar="MODE",
                    help="override fit.products: exact (default: every product as wide as it needs, split "
                         "into DSP-sized limbs in hardware) or dsp (operands narrowed to one --dsp block each)")
+    b.add_argument("--table-entries", metavar="N",
+                   help="override fit.table_entries: coefficient-table entries per servo, 16 (default) to 4096; from "
+                        "64 cells of computed features (e.g. rho2) too: fewer products, longer tables")
     b.add_argument("--board", metavar="BOARD",
                    help="also build the robot controller (host link, IK, servo controller) and its bitstream for "
                         "this board: a name (icebreaker, ulx3s-25f, ulx3s-85f) or a board file (.toml)")

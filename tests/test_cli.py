@@ -101,6 +101,10 @@ def test_eval_with_plan(capsys, built, small_toml):
      "ikseries: error: give either a robot description file or --preset, not both\n"),
     (["build", "--cocotb", "modelsim"],
      "ikseries: error: --cocotb must be auto, none or a list from icarus,verilator, not 'modelsim'\n"),
+    (["build", "--table-entries", "8"],
+     "ikseries: error: --table-entries must be an integer from 16 to 4096, not '8'\n"),
+    (["build", "--table-entries", "many"],
+     "ikseries: error: --table-entries must be an integer from 16 to 4096, not 'many'\n"),
 ])
 def test_bad_arguments_give_one_line_errors(capsys, argv, message):
     code, out, err = run(capsys, *argv)
