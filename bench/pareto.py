@@ -18,8 +18,10 @@ For the cylinder-leg robot, the IK cores alone (no PWM), as flat-port stream top
                tests); its
                accuracy column is that plan's own;
 ``pipelinedt``, ``modulo1dt``, ``modulo4dt``  on the ECP5 only: ``pipelined``, ``modulo1d`` and
-               ``modulo4d`` of plans fitted with ``fit.table_entries = LONG_TABLES`` (1024: cells
-               of computed features such as rho2, fewer products, longer coefficient tables);
+               ``modulo4d`` of plans fitted with ``fit.table_entries = 1024`` (cells of computed
+               features such as rho2: fewer products, longer coefficient tables);
+``modulo16t``  on the iCE40 only: one target per 16 cycles, the plan fitted with
+               ``fit.table_entries = 256`` (what the part's block RAMs hold);
 ``cordic``     ``CordicLegSolver``, sized with ``size_cordic(margin_pu=0.075)`` (about 1.5 min)
                unless ``--cordic-design JSON`` gives the design; fully pipelined;
 ``cordic_iter`` the same design iterative: each CORDIC and the square root on one set of
@@ -87,10 +89,10 @@ ECP5_PART = PARTS[PNR_DEVICES[ECP5].part].part
 ECP5_PRIMITIVES = ", ".join(p.name for p in family_primitives("ecp5"))
 MODULO_II = (4, 8, 12)
 MODULO_DSP_II = (1, 4, 7, 16)   # ECP5 only: DSP-sized plan, DSP primitives with their own registers
-#: the "t" designs: the same cores of plans fitted with fit.table_entries = LONG_TABLES (cells of
-#: computed features, fewer products), ECP5 only
-LONG_TABLES = 1024
-LONG_DESIGNS = ("pipelinedt", "modulo1dt", "modulo4dt")
+#: the "t" designs: cores of plans fitted with long coefficient tables (cells of computed
+#: features, fewer products): fit.table_entries per device family, as many as its block RAMs hold
+LONG_TABLES = {"ecp5": 1024, "ice40": 256}
+LONG_DESIGNS = ("pipelinedt", "modulo1dt", "modulo4dt", "modulo16t")
 DESIGNS = ("pipelined", *(f"modulo{ii}" for ii in MODULO_II), *(f"modulo{ii}d" for ii in MODULO_DSP_II),
            *LONG_DESIGNS, "folded1", "folded2", "cordic", "cordic_iter", "hexapod")
 CORDIC_DESIGNS = ("cordic", "cordic_iter")
@@ -162,23 +164,35 @@ def dsp_specs(plan, max_error_pu: float | None, names=DSP_DESIGNS, extra: dict |
 
 
 def long_table_specs(robot, names, fitted) -> list[DesignSpec]:
-    """The "t" designs of ``names`` (without the "t": ``pipelined``, ``moduloNd``): the plans
-    of ``robot`` fitted (``fitted(robot, what, **extra)``) with ``fit.table_entries =
-    LONG_TABLES``, on the ECP5 only."""
+    """The "t" designs of ``names``: on the ECP5, ``pipelined``, ``modulo1d`` and ``modulo4d``
+    (``pipelinedt``, ...) of plans fitted (``fitted(robot, what, **extra)``) with
+    ``fit.table_entries = LONG_TABLES["ecp5"]``; on the iCE40, ``modulo16t``: one target per 16
+    cycles on multipliers of its DSP size, of the plan fitted with ``LONG_TABLES["ice40"]``."""
+    from ikseries.hdl.architectures.modulo import Modulo
     from ikseries.robot import with_fit, with_hardware
 
-    long = with_fit(robot, table_entries=LONG_TABLES)
-    note = f"fit.table_entries = {LONG_TABLES} (cells of computed features)"
+    def note(family):
+        return f"fit.table_entries = {LONG_TABLES[family]} (cells of computed features)"
+    ecp5 = with_fit(robot, table_entries=LONG_TABLES["ecp5"])
     specs = []
-    if "pipelined" in names:
-        plan, worst, extra = fitted(long, "long-table plan", table_entries=LONG_TABLES)
-        specs += [dataclasses.replace(sp, devices=(ECP5,)) for sp in polynomial_specs(plan, worst, ("pipelined",), extra)]
-    dsp = [n for n in names if n in DSP_DESIGNS]
+    if "pipelinedt" in names:
+        plan, worst, extra = fitted(ecp5, "ECP5 long-table plan", table_entries=LONG_TABLES["ecp5"])
+        specs += [dataclasses.replace(sp, devices=(ECP5,), description=f"{sp.description}; {note('ecp5')}")
+                  for sp in polynomial_specs(plan, worst, ("pipelined",), extra)]
+    dsp = [n[:-1] for n in names if n[:-1] in DSP_DESIGNS]
     if dsp:
-        plan, worst, extra = fitted(with_fit(with_hardware(long, dsp="ecp5"), products="dsp"), "long-table DSP-sized plan",
-                                    products="dsp ({}x{})".format(*dsp_size("ecp5")), table_entries=LONG_TABLES)
-        specs += dsp_specs(plan, worst, dsp, extra)
-    return [dataclasses.replace(sp, name=sp.name + "t", description=f"{sp.description}; {note}") for sp in specs]
+        plan, worst, extra = fitted(with_fit(with_hardware(ecp5, dsp="ecp5"), products="dsp"),
+                                    "ECP5 long-table DSP-sized plan", products="dsp ({}x{})".format(*dsp_size("ecp5")),
+                                    table_entries=LONG_TABLES["ecp5"])
+        specs += [dataclasses.replace(sp, description=f"{sp.description}; {note('ecp5')}")
+                  for sp in dsp_specs(plan, worst, dsp, extra)]
+    if "modulo16t" in names:
+        plan, worst, extra = fitted(with_fit(robot, table_entries=LONG_TABLES["ice40"]), "iCE40 long-table plan",
+                                    table_entries=LONG_TABLES["ice40"])
+        specs.append(_spec(lambda dev: Modulo(16, _family(dev)), plan, "modulo16",
+                           f"polynomial, modulo-scheduled, one target per 16 cycles; {note('ice40')}", worst, extra,
+                           (ICE40,)))
+    return [dataclasses.replace(sp, name=sp.name + "t") for sp in specs]
 
 
 def folded_specs(plan, max_error_pu: float | None, names, extra: dict) -> list[DesignSpec]:
@@ -529,7 +543,7 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
         plan, worst, extra = fitted(with_fit(with_hardware(robot, dsp="ecp5"), products="dsp"), "DSP-sized plan",
                                     products="dsp ({}x{})".format(*dsp_size("ecp5")))
         specs += dsp_specs(plan, worst, dsp_names, extra)
-    long_names = [d[:-1] for d in designs if d in LONG_DESIGNS]
+    long_names = [d for d in designs if d in LONG_DESIGNS]
     if long_names:
         specs += long_table_specs(robot, long_names, fitted)
     cordic_names = [d for d in designs if d in CORDIC_DESIGNS]
