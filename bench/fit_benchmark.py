@@ -5,11 +5,14 @@ Per preset and servo: variables, total degree, terms, multiplications per evalua
 representable points, certified bound (pu), and the preset's fit time (wall and CPU, certification
 included; the CPU seconds of the certifications alone beside them).
 
-    python bench/fit_benchmark.py [PRESET ...] [--box-scale S] [--jobs N] [--json docs/results/fit_benchmark.json]
+    python bench/fit_benchmark.py [PRESET ...] [--box-scale S] [--table-entries N] [--jobs N]
+                                  [--json docs/results/fit_benchmark.json]
 
 ``--box-scale S`` fits every preset's workspace box scaled S times about its centre (each
 range's half-width times S; an end the geometry refuses, such as r < 0 or theta past +-180 deg,
 stays where it was); the preset is reported as ``NAME-xS`` (the dot an underscore).
+``--table-entries N`` fits with ``fit.table_entries = N`` (from 64: cells of computed features),
+reported beside the name.
 With ``--jobs N`` each preset is fitted a second time with its servos in N processes
 (``fit_robot(jobs=N)``): its wall time beside the one-process fit's, and the two plans compared
 byte for byte (the run fails if they differ).
@@ -36,7 +39,8 @@ from pathlib import Path
 import ikseries.fit.fitter as fitter
 from ikseries.accuracy import measure
 from ikseries.fit.fitter import FitError, fit_robot, output_multipliers
-from ikseries.robot import load_preset, parse_robot, preset_names, preset_text
+from ikseries.robot import load_preset, parse_robot, preset_names, preset_text, with_fit
+from ikseries.robot_parts import MAX_TABLE_ENTRIES, TABLE_ENTRIES
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
@@ -77,9 +81,11 @@ def scaled_robot(name: str, scale: float):
     return parse_robot(data, f"preset {name} scaled {scale:g}")
 
 
-def bench_preset(name: str, scale: float = 1.0, jobs: int = 1) -> dict:
+def bench_preset(name: str, scale: float = 1.0, jobs: int = 1, table_entries: int = TABLE_ENTRIES) -> dict:
     robot = load_preset(name) if scale == 1.0 else scaled_robot(name, scale)
-    name = robot.name
+    if table_entries != TABLE_ENTRIES:
+        robot = with_fit(robot, table_entries=table_entries)
+    name = robot.name + ("" if table_entries == TABLE_ENTRIES else f" (table_entries {table_entries})")
     t0, c0 = time.perf_counter(), time.process_time()
     with certify_seconds() as cert_cpu:
         try:
@@ -135,6 +141,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("presets", nargs="*", help=f"default: all ({', '.join(preset_names())})")
     ap.add_argument("--box-scale", type=float, default=1.0, help="scale every workspace box about its centre")
+    ap.add_argument("--table-entries", type=int, default=TABLE_ENTRIES,
+                    help="fit.table_entries of every fit (from 64: cells of computed features)")
     ap.add_argument("--jobs", type=int, default=1, help="also fit each preset with its servos in N processes")
     ap.add_argument("--json", default=FACTS["default_json"]("fit_benchmark"))
     args = ap.parse_args(argv)
@@ -145,12 +153,14 @@ def main(argv=None):
     bad = [n for n in names if n not in preset_names()]
     if bad:
         sys.exit(f"preset must be one of {preset_names()}, not {bad[0]!r}")
+    if not TABLE_ENTRIES <= args.table_entries <= MAX_TABLE_ENTRIES:
+        sys.exit(f"--table-entries must be from {TABLE_ENTRIES} to {MAX_TABLE_ENTRIES}, not {args.table_entries}")
     if not args.box_scale > 0:
         sys.exit(f"--box-scale must be > 0, not {args.box_scale!r}")
     results = []
     for n in names:
         print(f"fitting {n} ...", flush=True)
-        results.append(bench_preset(n, args.box_scale, args.jobs))
+        results.append(bench_preset(n, args.box_scale, args.jobs, args.table_entries))
     print(table(results))
     out = FACTS["write_result"](args.json, {"results": results}, run)
     print(f"wrote {out}")
