@@ -33,6 +33,11 @@ class ServoPWMBank(wiring.Component):
         Channel ``c`` is servo ``c % per_group`` of group ``c // per_group``.
     reset_widths : list of int, optional
         Width of every channel from reset until its first update (default 0: no pulse).
+    in_order : bool
+        The caller loads every group once, in order 0 .. ``groups - 1``, between two period
+        starts (a :class:`~ikseries.hdl.servo.ServoController` pass does): the stored widths are
+        then a shift register the loads shift into, ``i.payload.group`` is ignored and no group
+        decoder is built (one LUT or two per group). Default False: any group at any time.
 
     Attributes
     ----------
@@ -56,7 +61,7 @@ class ServoPWMBank(wiring.Component):
     """
 
     def __init__(self, period: int, width_bits: int, groups: int, per_group: int,
-                 reset_widths: list[int] | None = None):
+                 reset_widths: list[int] | None = None, in_order: bool = False):
         _pos_int("period", period, 2)
         _pos_int("width_bits", width_bits, 1)
         _pos_int("groups", groups, 1)
@@ -69,6 +74,7 @@ class ServoPWMBank(wiring.Component):
                              f"not {reset_widths!r}")
         self._period, self._width_bits = period, width_bits
         self._groups, self._per_group, self._reset = groups, per_group, reset_widths
+        self._in_order = bool(in_order)
         super().__init__({
             "i": In(stream.Signature(data.StructLayout({
                 "group": range(groups), "widths": data.ArrayLayout(unsigned(width_bits), per_group)}))),
@@ -98,7 +104,7 @@ class ServoPWMBank(wiring.Component):
             m.d.sync += count.eq(0)
         with m.Else():
             m.d.sync += count.eq(count + 1)
-        bits = []
+        bits, pendings = [], []
         for grp in range(g):
             load = self.i.valid & (self.i.payload.group == grp)
             for s in range(k):
@@ -106,13 +112,21 @@ class ServoPWMBank(wiring.Component):
                 pending = Signal(self._width_bits, init=self._reset[c], name=f"pending{c}")
                 active = Signal(self._width_bits, init=self._reset[c], name=f"active{c}")
                 new = self.i.payload.widths[s]
-                with m.If(load):
-                    m.d.sync += pending.eq(new)
+                pendings.append(pending)
+                if not self._in_order:
+                    with m.If(load):
+                        m.d.sync += pending.eq(new)
                 with m.If(last):
                     m.d.sync += active.eq(pending)
                 bit = Signal(name=f"pwm{c}")
                 m.d.sync += bit.eq(count < active)
                 bits.append(bit)
+        if self._in_order:
+            # a load shifts every group down one: after loads 0 .. groups - 1, group g holds
+            # load g (no decoder: one enable for all)
+            with m.If(self.i.valid):
+                m.d.sync += [p.eq(pendings[c + k] if c + k < g * k else self.i.payload.widths[c % k])
+                             for c, p in enumerate(pendings)]
         m.d.comb += self.pwm.eq(Cat(*bits))
         m.d.sync += self.period_start.eq(count == 0)
         return m

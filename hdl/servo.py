@@ -164,7 +164,9 @@ class ServoController(wiring.Component):
         if period < least:
             raise ValueError(f"period must be >= {least} cycles for {channels} channels of "
                              f"{width_bits} bits, not {period!r}")
-        self._bank = ServoPWMBank(period, width_bits, channels, 1, home_at_reset)
+        # a pass loads every channel once, in order, between two period starts (the
+        # microprogram's LOADNEXT ends each channel's path; period >= init + pass cycles)
+        self._bank = ServoPWMBank(period, width_bits, channels, 1, home_at_reset, in_order=True)
         sig = {
             "write": In(stream.Signature(self._engine.write_layout)),
             "target": In(stream.Signature(self._engine.target_layout)),

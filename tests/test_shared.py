@@ -1,6 +1,7 @@
 """Robot core: one folded evaluator shared by several legs, one PWM bank for all servos."""
 import numpy as np
 import pytest
+from amaranth.hdl import Module
 from amaranth.sim import Simulator
 
 from helpers import tiny_plan
@@ -148,6 +149,40 @@ def test_pwm_bank_load_in_last_cycle_waits_a_period_and_reset_widths():
     assert np.array_equal(trace, expected_pwm(45, 10, 2, loads, [3, 0, 0, 7]))
     # the last-cycle load waits a period; the last of two loads wins
     assert trace[11:21, 2].sum() == 0 and trace[21:31, 2].sum() == 2 and trace[21:31, 0].sum() == 6
+
+
+@pytest.mark.parametrize("per_group", [1, 2])
+def test_pwm_bank_loaded_in_order_matches_the_addressed_one(per_group):
+    # every period, loads of groups 0 .. groups - 1 in order at random cycles (the group field
+    # garbage for the in-order bank): both banks give the same pins every cycle
+    groups, period = 3, 12
+    reset = [3, 0, 5, 1, 0, 7][:groups * per_group]
+    rng = np.random.default_rng(per_group)
+    banks = [ServoPWMBank(period, 4, groups, per_group, reset, in_order=o) for o in (False, True)]
+    m = Module()
+    m.submodules.a, m.submodules.b = banks
+    loads = {}
+    for p in range(6):
+        cycles = sorted(rng.choice(period - 1, groups, replace=False))
+        for g, c in enumerate(cycles):
+            loads[p * period + int(c)] = (g, [int(v) for v in rng.integers(0, 16, per_group)])
+    traces = [[], []]
+
+    async def bench(ctx):
+        for c in range(6 * period + 14):
+            for b, bank in enumerate(banks):
+                ctx.set(bank.i.valid, c in loads)
+                if c in loads:
+                    g, w = loads[c]
+                    ctx.set(bank.i.payload, {"group": g if b == 0 else (g + 1) % groups, "widths": w})
+                traces[b].append(ctx.get(bank.pwm))
+            await ctx.tick()
+
+    sim = Simulator(m)
+    sim.add_clock(1e-6)
+    sim.add_testbench(bench)
+    sim.run()
+    assert traces[0] == traces[1] and len(set(traces[0])) > 3
 
 
 @pytest.mark.parametrize("kw, msg", [
