@@ -122,7 +122,9 @@ class RobotController(wiring.Component):
         channels = legs * len(self._core.servos)
         self._shape = P.Shape(legs, len(plan.inputs), channels)
         self._link = Link(self._shape, self._divisor)
-        self._servo = ServoController(channels, self._w, period, time_bits=time_bits, home_at_reset=home_at_reset)
+        # the dispatcher NACKs every field out of range before it writes: no second check
+        self._servo = ServoController(channels, self._w, period, time_bits=time_bits, home_at_reset=home_at_reset,
+                                      trusted_writes=True)
         identity = {"version": P.PROTOCOL_VERSION, "clock_hz": int(clock_hz), "pwm_period": period,
                     "legs": legs, "coords": len(plan.inputs), "channels": channels,
                     "manifest": bytes(manifest), "name": name}
