@@ -57,7 +57,7 @@ def main(argv=None):
     ctl = RobotController(plan, a.legs, period, int(a.clock), a.baud)
     core, servo = ctl.core, ctl.servo
     parts = {"link": ctl.link, "dispatcher": ctl.dispatcher, "servo": servo, "core": core,
-             "servo_bank": ServoPWMBank(period, ctl.width_bits, servo.channels, 1),
+             "servo_bank": ServoPWMBank(period, ctl.width_bits, servo.channels, 1, in_order=True),
              "core_bank": ServoPWMBank(period, ctl.width_bits, a.legs, len(core.servos))}
     designs = {"controller": ctl, **parts}
     with tempfile.TemporaryDirectory() as tmp:

@@ -40,7 +40,7 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         wd = a.workdir or Path(tmp)
         ctl = counts(ServoController(a.channels, a.width_bits, a.period, ik_layout=ik), "controller", wd)
-        bank = counts(ServoPWMBank(a.period, a.width_bits, a.channels, 1), "bank", wd)
+        bank = counts(ServoPWMBank(a.period, a.width_bits, a.channels, 1, in_order=True), "bank", wd)
     payload = {"channels": a.channels, "width_bits": a.width_bits, "period": a.period,
                "controller": ctl, "pwm_bank": bank,
                "controller_without_bank": {k: ctl.get(k, 0) - bank.get(k, 0) for k in ctl}}

@@ -122,7 +122,9 @@ class RobotController(wiring.Component):
         channels = legs * len(self._core.servos)
         self._shape = P.Shape(legs, len(plan.inputs), channels)
         self._link = Link(self._shape, self._divisor)
-        self._servo = ServoController(channels, self._w, period, time_bits=time_bits, home_at_reset=home_at_reset)
+        # the dispatcher NACKs every field out of range before it writes: no second check
+        self._servo = ServoController(channels, self._w, period, time_bits=time_bits, home_at_reset=home_at_reset,
+                                      trusted_writes=True)
         identity = {"version": P.PROTOCOL_VERSION, "clock_hz": int(clock_hz), "pwm_period": period,
                     "legs": legs, "coords": len(plan.inputs), "channels": channels,
                     "manifest": bytes(manifest), "name": name}
@@ -171,7 +173,7 @@ class RobotController(wiring.Component):
         wiring.connect(m, servo.status, d.status)
         m.d.comb += [link.rx.eq(self.rx), self.tx.eq(link.tx), self.pwm.eq(servo.pwm),
                      link.rd_addr.eq(d.rd_addr), d.rd_data.eq(link.rd_data),
-                     link.counter_addr.eq(d.counter_addr), d.counter_data.eq(link.counter_data),
+                     link.counter_addr.eq(d.counter_addr), d.counter_data.eq(link.counter_data), link.clamped.eq(d.clamped),
                      d.answer_index.eq(link.answer_index),
                      servo.commit.eq(d.commit), servo.keepalive.eq(d.keepalive),
                      d.busy.eq(servo.busy), d.period_start.eq(servo.period_start),

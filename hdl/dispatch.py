@@ -10,6 +10,7 @@ from amaranth.lib.memory import Memory
 from . import protocol as P
 from .answers import answer_bytes, answer_constant
 from .bram import falling_edge_write_port
+from .lfsr import countdown
 from .dispatch_microcode import CODED, CONDS, SOURCES, STROBES, Geometry, assemble, encode, fields, program
 
 __all__ = ["Dispatcher"]
@@ -19,14 +20,6 @@ _C = {c.name: c for c in P.COMMANDS}
 _BUILT = (_C["status"].answer, _C["channel_status"].answer, P.NACK_FIELDS)
 _OPS = {"ra": ("inc", "set", "clear"), "ch": ("inc", "load", "clear"), "lm": ("rot", "mask", "one"),
         "s": ("shift", "load"), "wm": ("ans", "width", "pulse")}
-
-
-def _saturating_increment(m, counter, event):
-    # the increment's carry out says the counter is full: no separate all-ones detector
-    nxt = Signal(len(counter) + 1)
-    m.d.comb += nxt.eq(counter + 1)
-    with m.If(event & ~nxt[-1]):
-        m.d.sync += counter.eq(nxt[:-1])
 
 
 class _Regs:
@@ -51,8 +44,6 @@ class _Regs:
         self.ans_cmd = Signal(8)
         self.rd_idx = Signal(range(d._region))              # answer byte the memory now shows
         self.move_time = Signal(d._time_bits)
-        self.since = Signal(range(d._period + 1))           # cycles since the last period start
-        self.clamped = Signal(P.COUNTER_BITS)
         self.pending, self.started = Signal(), Signal()     # a commit not yet applied; its pass began
 
 
@@ -105,13 +96,17 @@ class Dispatcher(wiring.Component):
     ----------
     request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index
         To the link's ports of the same names.
+    clamped
+        To the link's ``clamped``: a pulse (registered) per leg target that was saturated; the
+        link counts it in its counter memory (word ``CLAMPED_WORD``).
     ik_i, ik_o
         To the core's ``i`` and ``o``.
     write, target, commit, read, status, keepalive, busy, period_start
         To the servo controller's ports of the same names.
 
-    Reset state: idle, no answer pending, move time 0, ``clamped`` 0 (the status answer's uptime
-    is the link's: words ``UPTIME_WORD`` and the next of its counter memory).
+    Reset state: idle, no answer pending, move time 0 (the status answer's counters are the
+    link's: its error counters, the uptime in words ``UPTIME_WORD`` and the next, and
+    ``clamped`` in word ``CLAMPED_WORD`` of its counter memory).
 
     Latency
     -------
@@ -161,7 +156,7 @@ class Dispatcher(wiring.Component):
         ls, cs, ss = link.signature.members, core.signature.members, servo.signature.members
         super().__init__({
             **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counter_addr",
-                                         "counter_data", "answer", "answer_data", "answer_index")},
+                                         "counter_data", "answer", "answer_data", "answer_index", "clamped")},
             "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(),
             **{n: ss[n].flip() for n in ("write", "target", "commit", "read", "status",
                                          "keepalive", "busy", "period_start")},
@@ -237,9 +232,10 @@ class Dispatcher(wiring.Component):
     # -- conditions and the next address
     def _sequencer(self, m, r, u, rp):
         c = self._channels
-        # registered a cycle late (since has moved on by one, or restarted: then it errs closed)
+        # the window: fewer than period - stage_cycles - 1 cycles since the last period start;
+        # registered a cycle late (the count has moved on by one, or restarted: then it errs closed)
         early = Signal()
-        m.d.sync += early.eq(r.since < self._period - self._stage_cycles - 1)
+        m.d.sync += early.eq(countdown(m, self.period_start, self._period - self._stage_cycles - 1, "since"))
         window = ~self.busy & early
         base = {"0": Const(0, 1), "B": r.b_, "BL": r.bl,
                 "reqok": self.request.valid & ~r.sending & ~self.answer.valid,
@@ -273,8 +269,7 @@ class Dispatcher(wiring.Component):
         flag = Mux(u["bsel"] | r.bl, st.enabled, st.moving)
         stb = Cat(st.target, Const(0, 32 - len(st.target)), st.current, Const(0, 32 - len(st.current)))
         src = {"IMM": imm, "RD": self.rd_data, "F0": r.f[:8], "SEXT": r.f[31].replicate(8),
-               "CNT": Mux(imm[3], cd[8:16], cd[:8]),
-               "CL": r.clamped.word_select(imm[0], 8), "S": r.s, "FLAG": flag, "CMD": r.cmd, "CH": r.ch,
+               "CNT": Mux(imm[4], cd[8:16], cd[:8]), "S": r.s, "FLAG": flag, "CMD": r.cmd,
                "STB": stb.word_select(imm[:3], 8)}
         x = Signal(8)
         with m.Switch(u["src"]):
@@ -339,7 +334,8 @@ class Dispatcher(wiring.Component):
             m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.b.eq(0), r.nack.eq(0), r.bl.eq(0)]
             with m.If(~r.sending & ~self.answer.valid):
                 m.d.sync += r.ident.eq(0)
-        _saturating_increment(m, r.clamped, e["CLI"] & r.out)
+        # a leg target saturated: counted in the link's counter memory (registered: one pulse)
+        m.d.sync += self.clamped.eq(e["CLI"] & r.out)
 
     def _region_addr(self, region: int, offset):
         return Cat(offset[:(self._region - 1).bit_length()], Const(region, 2))
@@ -352,14 +348,16 @@ class Dispatcher(wiring.Component):
                 with m.Case(j):
                     m.d.comb += widths.eq(self.ik_o.payload.widths[name])
         with m.If(wm["ans"]):
-            m.d.comb += [wr.en.eq(1), wr.addr.eq(self._region_addr(1, r.b)), wr.data.eq(x)]
             m.d.sync += r.b.eq(r.b + 1)
         with m.If(go & u["BSET"]):
             m.d.sync += r.b.eq(u["imm"])
-        with m.If(wm["width"]):
-            m.d.comb += [wr.en.eq(1), wr.addr.eq(r.ch), wr.data.eq(widths)]
-        with m.If(wm["pulse"]):
-            m.d.comb += [wr.en.eq(1), wr.addr.eq(r.ch), wr.data.eq(r.f[:self._w])]
+        # the address and data follow the ROM's wm field alone (codes 1 ans, 2 width, 3 pulse; a
+        # pulse's low byte comes as X = F0): they matter only with the enable, so neither waits
+        # for fire; an answer byte's bits above 8 are never read
+        op = u["wm"]
+        m.d.comb += [wr.en.eq(wm["ans"] | wm["width"] | wm["pulse"]),
+                     wr.addr.eq(Mux(op[1], r.ch, self._region_addr(1, r.b))),
+                     wr.data.eq(Mux(op == 2, widths, Cat(x, r.f[8:self._w])))]
         # the read port serves the answer being sent or else the staging of widths; a byte is
         # valid once the memory shows the one the link names (the index just moved: not yet)
         idx = self.answer_index
@@ -374,7 +372,6 @@ class Dispatcher(wiring.Component):
 
     def _ports(self, m, r, u, s, e, rd):
         imm = u["imm"]
-        m.d.sync += r.since.eq(Mux(self.period_start, 0, Mux(r.since == self._period, r.since, r.since + 1)))
         # a commit is applied by the pass of the next period start (staged in the window before it)
         with m.If(self.period_start & r.pending):
             m.d.sync += r.started.eq(1)
@@ -384,7 +381,7 @@ class Dispatcher(wiring.Component):
             m.d.sync += [r.pending.eq(1), r.started.eq(0)]
         # registered: the request's acceptance depends on the field checks
         m.d.sync += [self.keepalive.eq(self.request.valid & self.request.ready), self.commit.eq(e["COMMIT"])]
-        m.d.comb += [self.request.ready.eq(e["ACC"]), self.counter_addr.eq(imm[:3]), self.rd_addr.eq(r.ra),
+        m.d.comb += [self.request.ready.eq(e["ACC"]), self.counter_addr.eq(imm[:4]), self.rd_addr.eq(r.ra),
                      self.answer.payload.length.eq(r.ans_len), self.answer.payload.command.eq(r.ans_cmd),
                      self.ik_i.valid.eq(s["IKV"]), self.ik_i.payload.leg.eq(r.leg), self.ik_o.ready.eq(s["IKR"]),
                      self.write.valid.eq(s["WRV"]), self.write.payload.channel.eq(r.ch),

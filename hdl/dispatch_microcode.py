@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 
 from . import protocol as P
 from .answers import answer_bytes, scalar_offsets
-from .link import UPTIME_WORD
+from .link import CLAMPED_WORD, UPTIME_WORD
 from .servo_fields import ChannelField, FailsafeAction
 
 __all__ = ["CONDS", "SOURCES", "STROBES", "BITS", "CODED", "Ins", "Assembled", "Geometry", "command_index", "program",
@@ -36,7 +36,7 @@ ROM_DEPTH = ROM_DEPTHS[0]
 CONDS = ("0", "B", "BL", "reqok", "ik_ready", "ik_valid", "wr_ready", "tg_ready", "rd_ready", "st_valid",
          "ans_free", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
 #: the byte sources of ``X`` (``ZERO`` is the default)
-SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "CL", "S", "FLAG", "CMD", "CH", "STB")
+SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "S", "FLAG", "CMD", "STB")
 #: one ROM bit each (the stream strobes, decoded by nothing)
 BITS = ("ACC", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV")
 #: at most one of these an instruction: a 4-bit code (0: none)
@@ -209,22 +209,24 @@ def _status(g):
     they are read shortly before the answer goes out."""
     masks = answer_bytes(_C["status"].answer[:-2])
     out = [_ins(sp={"ACC", "BSET"}, imm=masks, ch="clear", at=_entry(0, "status"))] + _flag_bytes(g)
-    # the uptime's two words, then the receiver's counters: a word is read the cycle after its
-    # address, so each byte's instruction addresses the next word
+    # the uptime's two words, the receiver's counters, clamped, all in the link's counter memory
+    # (immediate bits 0-3 the word, bit 4 the byte): a word is read the cycle after its address,
+    # so each byte's instruction addresses the next word
     up, n = UPTIME_WORD, len(P.RECEIVER_COUNTERS)
-    order = [up, up + 1, *range(n)]
+    order = [up, up + 1, *range(n), CLAMPED_WORD]
     out += [_ins(label="STC", sp={"BSET"}, imm=0), _ins(imm=order[0])]
     for i, a in enumerate(order):
-        out += [_ins(wm="ans", src="CNT", imm=a), _ins(wm="ans", src="CNT", imm=8 | order[(i + 1) % len(order)])]
-    out += [_ins(wm="ans", src="CL", imm=0), _ins(wm="ans", src="CL", imm=1), _header("STHDR", 26)]
+        out += [_ins(wm="ans", src="CNT", imm=a), _ins(wm="ans", src="CNT", imm=16 | order[(i + 1) % len(order)])]
+    out.append(_header("STHDR", 26))
     return out
 
 
 def _channel_status(g):
+    # F still holds the checked channel field (zero-extended): the answer's channel byte is F0
     # read once the last commit has been applied by a pass: the answer shows every earlier move
     return [_ins(sp={"ACC"}, at=_entry(1, "channel_status")), _wait("CSA", "applied"),
             _wait("CSR", "rd_ready", sp={"RDV"}),
-            _wait("CSW", "st_valid"), _ins(wm="ans", src="CH"),
+            _wait("CSW", "st_valid"), _ins(wm="ans", src="F0"),
             *[_ins(wm="ans", src="STB", imm=k) for k in (0, 1, 2, 4, 5, 6)],
             _ins(wm="ans", src="FLAG", bsel=0), _ins(wm="ans", src="FLAG", bsel=1, sp={"STR"}),
             _header("CSHDR", 9)]
@@ -347,7 +349,7 @@ def _moves(g):
 def _stage(g):
     """Wait for the staging window; stage the legs' (or set_pulse's one) widths; commit. A
     width is read a cycle before it is offered (the buffer's read port follows the channel)."""
-    out = [_ins(sp={"ACC"}, wm="pulse", at=_entry(2, "set_pulse")), _wait("SPW", "window"),
+    out = [_ins(sp={"ACC"}, wm="pulse", src="F0", at=_entry(2, "set_pulse")), _wait("SPW", "window"),
            _wait("SPT", "tg_ready", sp={"TGV"}, nxt="COMMIT")]
     out += [_wait("STAGE", "window"), _ins(label="SL", cond="~LM0", to="SSKIP")]
     for j in range(g.servos):

@@ -12,7 +12,8 @@ from amaranth.lib.wiring import In, Out
 from . import protocol as P
 from .uart import UARTRx, UARTTx
 
-__all__ = ["SerialCRC", "FrameReceiver", "FrameTransmitter", "Link", "frame_layout", "UPTIME_WORD"]
+__all__ = ["SerialCRC", "FrameReceiver", "FrameTransmitter", "Link", "frame_layout", "UPTIME_WORD",
+           "CLAMPED_WORD"]
 
 
 class SerialCRC(wiring.Component):
@@ -99,50 +100,60 @@ def _write_domain(m):
 
 #: word of the uptime's low half in the counter memory (its high half is the next word)
 UPTIME_WORD = len(P.RECEIVER_COUNTERS)
+#: word of the controller's ``clamped`` count (the dispatcher's event), after the uptime
+CLAMPED_WORD = UPTIME_WORD + 2
+#: the counter whose scan slot ``clamped`` shares, a round each: both come at most once per
+#: frame (a bad CRC) or per leg target (a clamp), far more than 16 cycles apart
+_SHARED_WORD = P.RECEIVER_COUNTERS.index("crc")
 
 
-def _counter_engine(m, events, period, counter_bits, write_domain):
-    """Saturating counters of ``events`` (one-cycle pulses) in a block RAM, one shared incrementer,
-    and the uptime: pulses of ``period`` in the next two words, low half first (the low word
-    wraps into the high one; the pair saturates).
+def _counter_engine(m, events, period, clamped, counter_bits, write_domain):
+    """Saturating counters of ``events`` (one-cycle pulses) and of ``clamped`` in a block RAM, one
+    shared incrementer, and the uptime: pulses of ``period`` in words ``UPTIME_WORD`` and the
+    next, low half first (the low word wraps into the high one; the pair saturates).
 
-    A scan reads one word a cycle (every word each 8 cycles) and, if its event is pending, writes
-    it back incremented half a cycle after the next edge (on ``write_domain``, from registers: the
-    read, the incrementer and the write in half a cycle made 28 MHz), so an event may come once per
-    8 cycles and shows on the outside port 10 cycles later at most (a carry into the uptime's high
-    word 1 cycle after its low word: the scan reads it next). Returns the memory's read port
-    for the outside. After a reset the first scan writes zeros (the configured contents are zero
-    too).
+    A scan reads one word a cycle and, if its event is pending, writes it back incremented half a
+    cycle after the next edge (on ``write_domain``, from registers: the read, the incrementer and
+    the write in half a cycle made 28 MHz). Its eight slots serve words 0 .. 7 each round, but
+    slot ``_SHARED_WORD`` serves that word and ``CLAMPED_WORD`` on alternate rounds: a counter's
+    event may come once per 8 cycles and shows on the outside port 10 cycles later at most; the
+    ``crc`` and ``clamped`` events once per 16 cycles, 18 cycles later at most (a carry into the
+    uptime's high word 1 cycle after its low word: the scan reads it next). Returns the memory's
+    read port for the outside. After a reset the first nine slots write zeros (the configured
+    contents are zero too).
     """
-    words = 8
+    words = CLAMPED_WORD + 1
     low, high = UPTIME_WORD, UPTIME_WORD + 1
-    assert len(events) == low and high < words
+    assert len(events) == low and high == 7 and _SHARED_WORD == 0
     # a small memory: Yosys would build it of flip-flops, the very cells this saves
     m.submodules.counters = mem = Memory(shape=counter_bits, depth=words, init=[], attrs={"ram_style": "block"})
     wr, scan_rd, outside = mem.write_port(domain=write_domain), mem.read_port(), mem.read_port()
-    scan, held = Signal(range(words)), Signal(range(words))     # word being read; word read last cycle
+    slot = Signal(4)                            # a round of eight slots and which round
+    held = Signal(range(words))                 # word read last cycle
+    addr = Cat(slot[:3], slot[3] & (slot[:3] == _SHARED_WORD))    # CLAMPED_WORD is 8
     clearing = Signal(init=1)
     pending = Signal(words)
     high_full = Signal()        # the uptime's high word is all ones: its low word saturates too
     total = scan_rd.data + 1
-    m.d.sync += [scan.eq(scan + 1), held.eq(scan)]
-    with m.If(held == words - 1):
+    m.d.sync += [slot.eq(slot + 1), held.eq(addr)]
+    # slots 0 .. 8 after reset write every word once (a second write would lose a counted event)
+    with m.If(held == CLAMPED_WORD):
         m.d.sync += clearing.eq(0)
     hit = pending.bit_select(held, 1)
     over = total[counter_bits]
     # the incremented word's carry out is set only for an all-ones (saturated) word; the
-    # clearing scan writes 1 for a pending event: an event waits at most 8 cycles, reset or not
+    # clearing scan writes 1 for a pending event: an event waits at most 16 cycles, reset or not
     wraps = (held == low) & ~high_full
     carry = ~clearing & hit & over & wraps
     m.d.sync += [wr.addr.eq(held), wr.data.eq(Mux(clearing, hit, total[:counter_bits])),
                  wr.en.eq(clearing | (hit & (~over | wraps)))]
-    m.d.comb += scan_rd.addr.eq(scan)
+    m.d.comb += scan_rd.addr.eq(addr)
     with m.If(clearing):
         m.d.sync += high_full.eq(0)
     with m.Elif((held == high) & hit & (total[:counter_bits] == (1 << counter_bits) - 1)):
         m.d.sync += high_full.eq(1)
     served = Cat(*(held == k for k in range(words)))
-    m.d.sync += pending.eq((pending & ~served) | Cat(*events, period, carry))
+    m.d.sync += pending.eq((pending & ~served) | Cat(*events, period, carry, clamped))
     return outside
 
 
@@ -184,17 +195,21 @@ class FrameReceiver(wiring.Component):
         Payload byte index of the frame on ``o``.
     rd_data : Out(8)
         That byte, one cycle after ``rd_addr`` (a block RAM read). Valid while ``o.valid``.
-    counter_addr : In(range(len(RECEIVER_COUNTERS) + 2))
+    counter_addr : In(range(CLAMPED_WORD + 1))
         Index of an error counter in :data:`~ikseries.hdl.protocol.RECEIVER_COUNTERS`: ``crc``,
         ``framing``, ``overrun``, ``bad_length``, ``unknown_command``, ``dropped`` (a good frame
         completed while ``o`` still held the previous one, untaken by the end of the new one's
-        CRC check); then the uptime's low and high words (:data:`UPTIME_WORD`).
+        CRC check); then the uptime's low and high words (:data:`UPTIME_WORD`), then the
+        ``clamped`` count (:data:`CLAMPED_WORD`).
     period : In(1)
         Pulses counted in the uptime (the controller's PWM period starts; at most one per 8 cycles).
+    clamped : In(1)
+        Pulses counted in word ``CLAMPED_WORD`` (the dispatcher's clamped leg targets; at most one
+        per 16 cycles, like ``crc`` events, whose scan slot it shares).
     counter_data : Out(counter_bits)
         That counter, one cycle after ``counter_addr`` (a block RAM read); saturating, zero from
-        reset, up to 10 cycles behind its event (the uptime, ``2 * counter_bits`` bits in two
-        words, saturates as one).
+        reset, up to 10 cycles behind its event (18 for ``crc`` and ``clamped``; the uptime,
+        ``2 * counter_bits`` bits in two words, saturates as one).
 
     Latency
     -------
@@ -228,7 +243,8 @@ class FrameReceiver(wiring.Component):
             "i": In(stream.Signature(8)), "framing_error": In(1), "overrun": In(1), "tick": In(1),
             "o": Out(stream.Signature(frame_layout(self._max))),
             "rd_addr": In(self._addr_bits), "rd_data": Out(8),
-            "counter_addr": In(range(UPTIME_WORD + 2)), "counter_data": Out(counter_bits), "period": In(1),
+            "counter_addr": In(range(CLAMPED_WORD + 1)), "counter_data": Out(counter_bits), "period": In(1),
+            "clamped": In(1),
         })
 
     @property
@@ -292,7 +308,7 @@ class FrameReceiver(wiring.Component):
         events = {name: Signal(name=f"{name}_event") for name in P.RECEIVER_COUNTERS}
         m.d.comb += [events["framing"].eq(self.framing_error), events["overrun"].eq(self.overrun)]
         counters = _counter_engine(m, [events[name] for name in P.RECEIVER_COUNTERS], self.period,
-                                   self._counter_bits, write)
+                                   self.clamped, self._counter_bits, write)
         m.d.comb += [counters.addr.eq(self.counter_addr), self.counter_data.eq(counters.data)]
         m.d.comb += [rd.addr.eq(Cat(self.rd_addr, rbank)), self.rd_data.eq(rd.data),
                      wr.addr.eq(Cat(index[:self._addr_bits], wbank)), wr.data.eq(byte), check.byte.eq(byte)]
@@ -507,9 +523,9 @@ class Link(wiring.Component):
         Serial input pin (from the host).
     tx : Out(1)
         Serial output pin (to the host), registered; idle high from reset.
-    request, rd_addr, rd_data, counter_addr, counter_data, period
-        The receiver's ``o``, ``rd_addr``, ``rd_data``, ``counter_addr``, ``counter_data`` and
-        ``period``.
+    request, rd_addr, rd_data, counter_addr, counter_data, period, clamped
+        The receiver's ``o``, ``rd_addr``, ``rd_data``, ``counter_addr``, ``counter_data``,
+        ``period`` and ``clamped``.
     answer, answer_data, answer_index
         The transmitter's ``i``, ``data`` and ``index``.
 
@@ -530,8 +546,8 @@ class Link(wiring.Component):
         super().__init__({
             "rx": In(1, init=1), "tx": Out(1, init=1),
             "request": Out(stream.Signature(frame_layout(r.max_payload))), "rd_addr": In(r.addr_bits), "rd_data": Out(8),
-            "counter_addr": In(range(UPTIME_WORD + 2)), "counter_data": Out(counter_bits), "period": In(1),
-            "answer": In(stream.Signature(frame_layout(t.max_payload))), "answer_data": In(stream.Signature(8)),
+            "counter_addr": In(range(CLAMPED_WORD + 1)), "counter_data": Out(counter_bits), "period": In(1),
+            "clamped": In(1), "answer": In(stream.Signature(frame_layout(t.max_payload))), "answer_data": In(stream.Signature(8)),
             "answer_index": Out(range(t.max_payload)),
         })
 
@@ -560,6 +576,6 @@ class Link(wiring.Component):
         m.d.comb += [rx.rx.eq(self.rx), self.tx.eq(tx.tx), r.framing_error.eq(rx.framing_error),
                      r.overrun.eq(rx.overrun), r.tick.eq(rx.idle_tick), r.rd_addr.eq(self.rd_addr),
                      self.rd_data.eq(r.rd_data), r.counter_addr.eq(self.counter_addr),
-                     self.counter_data.eq(r.counter_data), r.period.eq(self.period),
+                     self.counter_data.eq(r.counter_data), r.period.eq(self.period), r.clamped.eq(self.clamped),
                      self.answer_index.eq(t.index)]
         return m

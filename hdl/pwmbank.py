@@ -1,7 +1,7 @@
 """A bank of servo PWM generators sharing one period counter, loaded a group at a time."""
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Signal, unsigned
+from amaranth.hdl import Cat, Const, Module, Signal, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -33,6 +33,11 @@ class ServoPWMBank(wiring.Component):
         Channel ``c`` is servo ``c % per_group`` of group ``c // per_group``.
     reset_widths : list of int, optional
         Width of every channel from reset until its first update (default 0: no pulse).
+    in_order : bool
+        The caller loads every group once, in order 0 .. ``groups - 1``, between two period
+        starts (a :class:`~ikseries.hdl.servo.ServoController` pass does): the stored widths are
+        then a shift register the loads shift into, ``i.payload.group`` is ignored and no group
+        decoder is built (one LUT or two per group). Default False: any group at any time.
 
     Attributes
     ----------
@@ -56,7 +61,7 @@ class ServoPWMBank(wiring.Component):
     """
 
     def __init__(self, period: int, width_bits: int, groups: int, per_group: int,
-                 reset_widths: list[int] | None = None):
+                 reset_widths: list[int] | None = None, in_order: bool = False):
         _pos_int("period", period, 2)
         _pos_int("width_bits", width_bits, 1)
         _pos_int("groups", groups, 1)
@@ -69,6 +74,7 @@ class ServoPWMBank(wiring.Component):
                              f"not {reset_widths!r}")
         self._period, self._width_bits = period, width_bits
         self._groups, self._per_group, self._reset = groups, per_group, reset_widths
+        self._in_order = bool(in_order)
         super().__init__({
             "i": In(stream.Signature(data.StructLayout({
                 "group": range(groups), "widths": data.ArrayLayout(unsigned(width_bits), per_group)}))),
@@ -87,18 +93,27 @@ class ServoPWMBank(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         g, k = self._groups, self._per_group
-        count = Signal(range(self._period))
+        # the period counter runs down: ncount = top - count for the cycle count 0 .. period - 1
+        # of the period, so that ``count < active`` is the carry out of active + ncount, a carry
+        # chain straight from the flip-flops (count < active, with count shared, needs an
+        # inverting LUT per bit of every active width in front of its chain: 18 per channel)
+        n = (self._period - 1).bit_length()
+        top = (1 << n) - 1
+        ncount = Signal(n, init=top)
         # high while count is period - 1, from a register: it enables every active width
         # register, a net of hundreds of loads that a comparator in front would lengthen
         # (period >= 2: count wraps from period - 1 to 0, never period - 1 twice in a row)
         last = Signal(name="last")
-        m.d.sync += last.eq(count == self._period - 2)
+        m.d.sync += last.eq(ncount == top - (self._period - 2))
         m.d.comb += self.i.ready.eq(1)
         with m.If(last):
-            m.d.sync += count.eq(0)
+            m.d.sync += ncount.eq(top)
         with m.Else():
-            m.d.sync += count.eq(count + 1)
-        bits = []
+            m.d.sync += ncount.eq(ncount - 1)
+        # (2 ** wide - 1) - count: ones above the counter's bits
+        wide = max(n, self._width_bits)
+        down = Cat(ncount, Const((1 << (wide - n)) - 1, wide - n)) if wide > n else ncount
+        bits, pendings = [], []
         for grp in range(g):
             load = self.i.valid & (self.i.payload.group == grp)
             for s in range(k):
@@ -106,13 +121,21 @@ class ServoPWMBank(wiring.Component):
                 pending = Signal(self._width_bits, init=self._reset[c], name=f"pending{c}")
                 active = Signal(self._width_bits, init=self._reset[c], name=f"active{c}")
                 new = self.i.payload.widths[s]
-                with m.If(load):
-                    m.d.sync += pending.eq(new)
+                pendings.append(pending)
+                if not self._in_order:
+                    with m.If(load):
+                        m.d.sync += pending.eq(new)
                 with m.If(last):
                     m.d.sync += active.eq(pending)
                 bit = Signal(name=f"pwm{c}")
-                m.d.sync += bit.eq(count < active)
+                m.d.sync += bit.eq((active + down)[wide])     # count < active
                 bits.append(bit)
+        if self._in_order:
+            # a load shifts every group down one: after loads 0 .. groups - 1, group g holds
+            # load g (no decoder: one enable for all)
+            with m.If(self.i.valid):
+                m.d.sync += [p.eq(pendings[c + k] if c + k < g * k else self.i.payload.widths[c % k])
+                             for c, p in enumerate(pendings)]
         m.d.comb += self.pwm.eq(Cat(*bits))
-        m.d.sync += self.period_start.eq(count == 0)
+        m.d.sync += self.period_start.eq(ncount == top)
         return m

@@ -83,6 +83,11 @@ class ServoController(wiring.Component):
     ik_legs : int, optional
         Legs on ``ik`` (default ``channels // servos``); leg ``l`` servo ``j`` is channel
         ``l * servos + j``.
+    trusted_writes : bool
+        Every ``write`` value is in its field's range (its sender checked it, as the
+        :class:`~ikseries.hdl.dispatch.Dispatcher` does: it NACKs the others), so the range
+        check is left out (about 12 iCE40 LUTs) and a write never pulses ``bad_write``.
+        Default False: checked.
 
     Attributes
     ----------
@@ -133,7 +138,8 @@ class ServoController(wiring.Component):
     """
 
     def __init__(self, channels: int, width_bits: int, period: int, *, time_bits: int = 16,
-                 home_at_reset: list[int] | None = None, ik_layout=None, ik_legs: int | None = None):
+                 home_at_reset: list[int] | None = None, ik_layout=None, ik_legs: int | None = None,
+                 trusted_writes: bool = False):
         _int("channels", channels, 1)
         _int("width_bits", width_bits, 2)
         _int("period", period, 2)
@@ -158,13 +164,15 @@ class ServoController(wiring.Component):
         self._channels, self._w, self._tb, self._period = channels, width_bits, time_bits, period
         self._home = home_at_reset
         self._engine = ServoEngine(channels, width_bits, time_bits, home_at_reset,
-                                   max(len(self._servos), 1))
+                                   max(len(self._servos), 1), trusted_writes)
         # the first pass follows the memory initialisation within the first period
         least = self._engine.init_cycles + self._engine.pass_cycles + 2
         if period < least:
             raise ValueError(f"period must be >= {least} cycles for {channels} channels of "
                              f"{width_bits} bits, not {period!r}")
-        self._bank = ServoPWMBank(period, width_bits, channels, 1, home_at_reset)
+        # a pass loads every channel once, in order, between two period starts (the
+        # microprogram's LOADNEXT ends each channel's path; period >= init + pass cycles)
+        self._bank = ServoPWMBank(period, width_bits, channels, 1, home_at_reset, in_order=True)
         sig = {
             "write": In(stream.Signature(self._engine.write_layout)),
             "target": In(stream.Signature(self._engine.target_layout)),

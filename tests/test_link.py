@@ -12,7 +12,7 @@ from amaranth.lib import crc as amaranth_crc
 from amaranth.sim import Simulator
 
 from ikseries.hdl import protocol as P
-from ikseries.hdl.link import UPTIME_WORD, FrameReceiver, FrameTransmitter, Link, SerialCRC
+from ikseries.hdl.link import CLAMPED_WORD, UPTIME_WORD, FrameReceiver, FrameTransmitter, Link, SerialCRC
 from ikseries.hdl.uart import BAUD_TOLERANCE, MIN_DIVISOR, UARTRx, UARTTx, uart_divisor
 from ikseries.host.protocol import (Decoder, Message, crc, decode_request, encode, encode_answer, field_bounds,
                                     frame, request_parser)
@@ -479,6 +479,37 @@ def test_receiver_uptime_carries_into_its_high_word_and_saturates_as_one(pulses)
     sim.add_testbench(bench)
     sim.run()
     assert seen[0] + 8 * seen[1] == min(pulses, 63), seen
+
+
+@pytest.mark.parametrize("bits, pulses", [(16, 40), (3, 12)])
+def test_receiver_counts_clamped_in_the_crc_slot_every_other_round(bits, pulses):
+    # clamped every 16 cycles at every phase, with a framing error every 8 cycles and a
+    # period every 8: none is lost, the clamped count saturates like the others
+    dut = FrameReceiver(HEXAPOD, bits)
+    seen, framing = [], []
+    sim = Simulator(dut)
+    sim.add_clock(1e-6)
+
+    async def bench(ctx):
+        for k in range(pulses):
+            for c in range(16 + k % 3):
+                framing.append(c in (0, 8))
+                ctx.set(dut.clamped, c == 0)
+                ctx.set(dut.framing_error, c in (0, 8))
+                ctx.set(dut.period, c in (3, 11))
+                await ctx.tick()
+        ctx.set(dut.clamped, 0)
+        ctx.set(dut.framing_error, 0)
+        ctx.set(dut.period, 0)
+        await ctx.tick().repeat(18)
+        for k in (CLAMPED_WORD, 1, 0):
+            ctx.set(dut.counter_addr, k)
+            await ctx.tick()
+            seen.append(ctx.get(dut.counter_data))
+    sim.add_testbench(bench)
+    sim.run()
+    top = (1 << bits) - 1
+    assert seen == [min(pulses, top), min(sum(framing), top), 0]
 
 
 def test_receiver_refuses_a_non_shape():

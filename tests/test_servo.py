@@ -105,6 +105,23 @@ def test_random_commands_match_model_on_the_pins(seed, home):
     assert sum(exp["clamped"]) and sum(exp["bad"]) and any(exp["fired"]) and exp["status"]
 
 
+def test_trusted_writes_of_values_in_range_match_model_on_the_pins():
+    # trusted_writes leaves the range check out: a sender of values in range sees no difference
+    rng = random.Random(3)
+    in_range = {F.ENABLE: range(2), F.FAILSAFE: range(max(A) + 1)}
+
+    def ok(cmd):
+        if cmd[0] != "write":
+            return True
+        _, _, fld, v = cmd
+        return fld in set(F) and (v in in_range[fld] if fld in in_range else fld == F.TRIM or v >= 0)
+    schedule = [[c for c in cmds if ok(c)] for cmds in random_schedule(rng, 70, 4, 2, 2)]
+    dut = ServoController(4, W, 288, time_bits=4, ik_layout=ik_layout(2, 2), ik_legs=2, trusted_writes=True)
+    model = ServoModel(4, W, 4, ik_servos=2, ik_legs=2)
+    widths, exp = check(dut, model, schedule, 70, None)
+    assert any(0 < w < FULL for ws in widths for w in ws) and sum(exp["clamped"])
+
+
 def _enable_all(channels, **params):
     return [("write", c, F.ENABLE, 1) for c in range(channels)] + \
         [("write", c, f, v) for c in range(channels) for f, v in params.items()]

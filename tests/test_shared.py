@@ -1,6 +1,7 @@
 """Robot core: one folded evaluator shared by several legs, one PWM bank for all servos."""
 import numpy as np
 import pytest
+from amaranth.hdl import Module
 from amaranth.sim import Simulator
 
 from helpers import tiny_plan
@@ -123,31 +124,82 @@ def test_hexapod_core_real_plan(plan):
     assert [c for c, _, _ in outs] == [(n + 1) * core.latency for n in range(6)]
 
 
-def test_pwm_bank_load_in_last_cycle_waits_a_period_and_reset_widths():
-    bank = ServoPWMBank(period=10, width_bits=4, groups=2, per_group=2, reset_widths=[3, 0, 0, 7])
-    loads = [(9, 1, [2, 4]), (14, 0, [5, 1]), (15, 0, [6, 2])]
+def bank_trace(bank, loads, n_cycles):
+    """The pins of ``bank`` every cycle (a row of bits per cycle) for ``loads`` [(cycle, group, widths)]."""
     trace = []
 
     async def bench(ctx):
         todo = {c: (g, w) for c, g, w in loads}
-        for c in range(45):
+        for c in range(n_cycles):
+            ctx.set(bank.i.valid, c in todo)
             if c in todo:
-                ctx.set(bank.i.valid, 1)
                 ctx.set(bank.i.payload, {"group": todo[c][0], "widths": todo[c][1]})
-            else:
-                ctx.set(bank.i.valid, 0)
             bits = ctx.get(bank.pwm)
-            trace.append([(bits >> j) & 1 for j in range(4)])
+            trace.append([(bits >> j) & 1 for j in range(bank.channels)])
             await ctx.tick()
 
     sim = Simulator(bank)
     sim.add_clock(1e-6)
     sim.add_testbench(bench)
     sim.run()
-    trace = np.array(trace)
+    return np.array(trace)
+
+
+def test_pwm_bank_load_in_last_cycle_waits_a_period_and_reset_widths():
+    bank = ServoPWMBank(period=10, width_bits=4, groups=2, per_group=2, reset_widths=[3, 0, 0, 7])
+    loads = [(9, 1, [2, 4]), (14, 0, [5, 1]), (15, 0, [6, 2])]
+    trace = bank_trace(bank, loads, 45)
     assert np.array_equal(trace, expected_pwm(45, 10, 2, loads, [3, 0, 0, 7]))
     # the last-cycle load waits a period; the last of two loads wins
     assert trace[11:21, 2].sum() == 0 and trace[21:31, 2].sum() == 2 and trace[21:31, 0].sum() == 6
+
+
+@pytest.mark.parametrize("period, width_bits", [(10, 6), (37, 4), (16, 4), (2, 3)])
+def test_pwm_bank_widths_of_every_size_against_the_period(period, width_bits):
+    # widths wider and narrower than the period counter, up to all ones (constant high)
+    top = (1 << width_bits) - 1
+    rng = np.random.default_rng(period)
+    reset = [top, 0, min(period, top), min(period - 1, top)]
+    bank = ServoPWMBank(period=period, width_bits=width_bits, groups=2, per_group=2, reset_widths=reset)
+    choices = sorted({0, 1, period - 1, period, period + 1, top} - set(range(top + 1, period + 2)))
+    loads = [(int(t), int(t) % 2, [int(v) for v in rng.choice(choices, 2)])
+             for t in sorted(rng.choice(6 * period, 8, replace=False))]
+    n_cycles = 8 * period
+    assert np.array_equal(bank_trace(bank, loads, n_cycles), expected_pwm(n_cycles, period, 2, loads, reset))
+
+
+@pytest.mark.parametrize("per_group", [1, 2])
+def test_pwm_bank_loaded_in_order_matches_the_addressed_one(per_group):
+    # every period, loads of groups 0 .. groups - 1 in order at random cycles (the group field
+    # garbage for the in-order bank): both banks give the same pins every cycle
+    groups, period = 3, 12
+    reset = [3, 0, 5, 1, 0, 7][:groups * per_group]
+    rng = np.random.default_rng(per_group)
+    banks = [ServoPWMBank(period, 4, groups, per_group, reset, in_order=o) for o in (False, True)]
+    m = Module()
+    m.submodules.a, m.submodules.b = banks
+    loads = {}
+    for p in range(6):
+        cycles = sorted(rng.choice(period - 1, groups, replace=False))
+        for g, c in enumerate(cycles):
+            loads[p * period + int(c)] = (g, [int(v) for v in rng.integers(0, 16, per_group)])
+    traces = [[], []]
+
+    async def bench(ctx):
+        for c in range(6 * period + 14):
+            for b, bank in enumerate(banks):
+                ctx.set(bank.i.valid, c in loads)
+                if c in loads:
+                    g, w = loads[c]
+                    ctx.set(bank.i.payload, {"group": g if b == 0 else (g + 1) % groups, "widths": w})
+                traces[b].append(ctx.get(bank.pwm))
+            await ctx.tick()
+
+    sim = Simulator(m)
+    sim.add_clock(1e-6)
+    sim.add_testbench(bench)
+    sim.run()
+    assert traces[0] == traces[1] and len(set(traces[0])) > 3
 
 
 @pytest.mark.parametrize("kw, msg", [
