@@ -613,7 +613,7 @@ class _ErrorFunction:
                              f"not {o.name!r}")
         self.p_fn = _plan_function(plan, o.preround)
         self.f_fn = _reference_function(robot, robot.servos.index(o.name), o.ticks_per_pu)
-        self.keys = feature_cuts(plan.nodes, plan.cone(o.preround))
+        self.keys = feature_cuts(plan.nodes, plan.cone(o.preround), quant)
         self._args = [(_plan_function(plan, a), float(quant[a]), plan.nodes[a].frac - sh,
                        plan.nodes[a].lo >> sh, plan.nodes[a].hi >> sh) for a, sh in self.keys]
 

@@ -183,12 +183,15 @@ def cell_enclosure(rule, n, nodes, a, inputs: dict):
     return rule(n, nodes, a, inputs, dims(inputs))
 
 
-def feature_cuts(nodes, cone) -> tuple:
+def feature_cuts(nodes, cone, rounding=None) -> tuple:
     """``(argument node, shift)`` of every index or mask node of ``cone`` whose argument is no
     :func:`cut_chain` of an input: cells of a computed value (a feature), whose edges are
-    curves across the certifier's cells, not planes it can be aligned to."""
+    curves across the certifier's cells, not planes it can be aligned to; and, given the
+    plan's ``rounding`` bounds, every one whose argument is rounded (a chain through a floor
+    shift too: the hardware's cell may be the ideal one's neighbour, so it needs the cases)."""
     keys = {(nodes[i].args[0], nodes[i].param) for i in cone
-            if nodes[i].op in ("index", "mask") and cut_chain(nodes, nodes[i].args[0]) is None}
+            if nodes[i].op in ("index", "mask") and (cut_chain(nodes, nodes[i].args[0]) is None
+                                                    or (rounding is not None and rounding[nodes[i].args[0]] > 0))}
     return tuple(sorted(keys))
 
 

@@ -110,3 +110,19 @@ def test_the_cases_reach_every_cell_the_rounded_feature_can_take():
     cells = next(iter(force.values()))
     assert rows.tolist() == [0, 0, 1, 2] and cells[:3].tolist() == [3, 4, 3]
     assert wild.tolist() == [False, False, True] and MAX_CASES < 11
+
+
+def test_a_port_cut_through_a_floor_is_split_into_cases_too():
+    """A cut of an input narrowed by a floor shift is a cut chain of that input, but its
+    rounding lets the hardware take the neighbour cell: it is a case split as well."""
+    inputs = [PlanInput("a", "mm", 6, 0, 64, 7, False), PlanInput("b", "mm", 6, -64, 64, 8, True)]
+    b = PlanBuilder(inputs)
+    narrow = b.align(b.input_nodes["a"], 4)                    # floor to 4 fractional bits
+    cell, t = b.cell(narrow, 2)
+    acc = b.add(b.lut(cell, tuple(float(m) for m in range(5)), 4), t)
+    plan = b.build([PlanOutput("y", b.round(acc, 0), acc, "ticks", 1.0)])
+    quant = plan.rounding_bounds()
+    narrow = next(n.args[0] for n in plan.nodes if n.op == "index")
+    assert plan.nodes[narrow].op == "shr" and quant[narrow] > 0
+    assert feature_cuts(plan.nodes, range(len(plan.nodes))) == ()
+    assert feature_cuts(plan.nodes, range(len(plan.nodes)), quant) == ((narrow, 2),)
