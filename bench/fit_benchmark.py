@@ -39,8 +39,8 @@ from pathlib import Path
 import ikseries.fit.fitter as fitter
 from ikseries.accuracy import measure
 from ikseries.fit.fitter import FitError, fit_robot, output_multipliers
-from ikseries.robot import load_preset, parse_robot, preset_names, preset_text, with_fit
-from ikseries.robot_parts import MAX_TABLE_ENTRIES, TABLE_ENTRIES
+from ikseries.robot import RobotError, load_preset, parse_robot, preset_names, preset_text, with_fit
+from ikseries.robot_parts import TABLE_ENTRIES, FitOptions
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
@@ -83,9 +83,10 @@ def scaled_robot(name: str, scale: float):
 
 def bench_preset(name: str, scale: float = 1.0, jobs: int = 1, table_entries: int = TABLE_ENTRIES) -> dict:
     robot = load_preset(name) if scale == 1.0 else scaled_robot(name, scale)
+    name = robot.name
     if table_entries != TABLE_ENTRIES:
         robot = with_fit(robot, table_entries=table_entries)
-    name = robot.name + ("" if table_entries == TABLE_ENTRIES else f" (table_entries {table_entries})")
+        name += f" (table_entries {table_entries})"
     t0, c0 = time.perf_counter(), time.process_time()
     with certify_seconds() as cert_cpu:
         try:
@@ -153,8 +154,10 @@ def main(argv=None):
     bad = [n for n in names if n not in preset_names()]
     if bad:
         sys.exit(f"preset must be one of {preset_names()}, not {bad[0]!r}")
-    if not TABLE_ENTRIES <= args.table_entries <= MAX_TABLE_ENTRIES:
-        sys.exit(f"--table-entries must be from {TABLE_ENTRIES} to {MAX_TABLE_ENTRIES}, not {args.table_entries}")
+    try:                                 # the description's own rule and message
+        FitOptions(table_entries=args.table_entries).validate()
+    except RobotError as e:
+        sys.exit(str(e))
     if not args.box_scale > 0:
         sys.exit(f"--box-scale must be > 0, not {args.box_scale!r}")
     results = []

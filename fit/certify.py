@@ -151,27 +151,33 @@ def _plan_function(plan: Plan, node: int):
     degenerate there: see :mod:`ikseries.fit.cut`); ``force`` maps a feature cut's ``(argument
     node, shift)`` to the cell number its index and mask nodes take in each cell
     (:func:`~ikseries.fit.cut.forced_cell`)."""
-    order = sorted(plan.cone(node))
+    run = _plan_values(plan, (node,))
+    return lambda values, force=None: run(values, force)[0]
+
+
+def _plan_values(plan: Plan, targets: tuple):
+    """:func:`_plan_function` of every node of ``targets`` at once: ``(values, force) ->``
+    their Intervals, in order (their shared cones evaluated once)."""
+    order = sorted(set().union(*(plan.cone(t) for t in targets)))
     last = {}
     for i in order:
         for a in plan.nodes[i].args:
             last[a] = i
-    nodes = plan.nodes
+    nodes, keep = plan.nodes, set(targets)
 
-    def run(values: dict, force: dict | None = None) -> ia.Interval:
+    def run(values: dict, force: dict | None = None) -> tuple:
         vals: dict = {}
         with np.errstate(invalid="ignore"):     # 0 * inf of an unbounded derivative: NaN, no bound
             for i in order:
                 n = nodes[i]
-                key = (n.args[0], n.param) if n.op in ("index", "mask") else None
-                if force is not None and key in force:
-                    vals[i] = forced_cell(n, nodes, vals[n.args[0]], force[key])
+                if force is not None and n.op in ("index", "mask") and (n.args[0], n.param) in force:
+                    vals[i] = forced_cell(n, nodes, vals[n.args[0]], force[n.args[0], n.param])
                 else:
                     vals[i] = OPS[n.op].enclose(n, nodes, [vals[a] for a in n.args], values)
                 for a in set(n.args):
-                    if last.get(a) == i and a != node:
+                    if last.get(a) == i and a not in keep:
                         del vals[a]
-        return vals[node]
+        return tuple(vals[t] for t in targets)
     return run
 
 
@@ -614,8 +620,9 @@ class _ErrorFunction:
         self.p_fn = _plan_function(plan, o.preround)
         self.f_fn = _reference_function(robot, robot.servos.index(o.name), o.ticks_per_pu)
         self.keys = feature_cuts(plan.nodes, plan.cone(o.preround), quant)
-        self._args = [(_plan_function(plan, a), float(quant[a]), plan.nodes[a].frac - sh,
-                       plan.nodes[a].lo >> sh, plan.nodes[a].hi >> sh) for a, sh in self.keys]
+        self._feature_values = _plan_values(plan, tuple(a for a, _ in self.keys))
+        self._args = [(float(quant[a]), plan.nodes[a].frac - sh, plan.nodes[a].lo >> sh, plan.nodes[a].hi >> sh)
+                      for a, sh in self.keys]
 
     def __call__(self, values, force=None):
         f = self.f_fn(values)
@@ -629,15 +636,15 @@ class _ErrorFunction:
         be evaluated and then discarded)."""
         ranges, wild = [], np.zeros(size, dtype=bool)
         with ia.lenient():
-            for fn, eps, k, imin, imax in self._args:
-                v = fn(values)
-                v = v.x if isinstance(v, cn.Centred) else v
-                lo = np.floor(np.ldexp(np.broadcast_to(ia._down(v.lo - eps), (size,)), k))
-                hi = np.floor(np.ldexp(np.broadcast_to(ia._up(v.hi + eps), (size,)), k))
-                bad = ~(np.isfinite(lo) & np.isfinite(hi))
-                lo = np.clip(np.where(bad, imin, lo), imin, imax)
-                ranges.append((lo, np.maximum(lo, np.clip(np.where(bad, imin, hi), imin, imax))))
-                wild |= bad
+            features = self._feature_values(values) if self.keys else ()
+        for v, (eps, k, imin, imax) in zip(features, self._args):
+            v = v.x if isinstance(v, cn.Centred) else v
+            lo = np.floor(np.ldexp(np.broadcast_to(ia._down(v.lo - eps), (size,)), k))
+            hi = np.floor(np.ldexp(np.broadcast_to(ia._up(v.hi + eps), (size,)), k))
+            bad = ~(np.isfinite(lo) & np.isfinite(hi))
+            lo = np.clip(np.where(bad, imin, lo), imin, imax)
+            ranges.append((lo, np.maximum(lo, np.clip(np.where(bad, imin, hi), imin, imax))))
+            wild |= bad
         count = np.prod([hi - lo + 1 for lo, hi in ranges], axis=0)
         wild |= count > (1 if single else MAX_CASES)
         count = np.where(wild, 1, count).astype(np.int64)

@@ -162,14 +162,20 @@ class Cells:
 def _cut_offsets(cut, port, raw, memo: dict) -> list:
     """Per cell of ``cut``, per sample set (fit, check), the offset in the cell of every row
     (NaN off the cell), kept in ``memo``."""
-    key = (cut.port, cut.shift, cut.cells)
+    return _memo_offsets(memo, (cut.port, cut.shift, cut.cells), cut.cells,
+                         [(len(v), lambda cell, v=v: cut.rows(port, v, cell)) for v in raw])
+
+
+def _memo_offsets(memo: dict, key, cells: int, sets) -> list:
+    """``memo[key]``, made on first use: per cell, per sample set, the offset of every row (NaN
+    off the cell); ``sets``: per set its rows and ``rows_of(cell) -> (selected rows, offsets)``."""
     if key not in memo:
         memo[key] = []
-        for cell in range(cut.cells):
+        for cell in range(cells):
             per_set = []
-            for values in raw:
-                sel, off = cut.rows(port, values, cell)
-                full = np.full(len(values), np.nan)
+            for size, rows_of in sets:
+                sel, off = rows_of(cell)
+                full = np.full(size, np.nan)
                 full[sel] = off
                 per_set.append(full)
             memo[key].append(per_set)
@@ -201,18 +207,8 @@ def _widened(cut, values, cell: int, widen: float) -> np.ndarray:
 def _feature_offsets(cut, xs, memo: dict) -> list:
     """:func:`_cut_offsets` of a :class:`~.features.FeatureCut`: from the exact normalised
     feature values of the fit and check rows ``xs`` (column ``cut.var``)."""
-    key = ("feature", cut.var, cut.bits, *map(id, xs))
-    if key not in memo:
-        memo[key] = []
-        for cell in range(cut.cells):
-            per_set = []
-            for x in xs:
-                sel, off = cut.offsets(x[:, cut.var], cell)
-                full = np.full(len(x), np.nan)
-                full[sel] = off
-                per_set.append(full)
-            memo[key].append(per_set)
-    return memo[key]
+    return _memo_offsets(memo, ("feature", cut.var, cut.bits, *map(id, xs)), cut.cells,
+                         [(len(x), lambda cell, x=x: cut.offsets(x[:, cut.var], cell)) for x in xs])
 
 
 def _fit_note(fit: CellsFit) -> str:
