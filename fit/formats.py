@@ -4,6 +4,7 @@ re-optimised on their integer grid."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
@@ -12,7 +13,10 @@ from .lowering import trial_plan
 from .minimax import subset_minimax
 from .structure import ServoFit
 
-__all__ = ["round_and_refit", "requantize", "choose_formats"]
+__all__ = ["round_and_refit", "requantize", "choose_formats", "narrowest_frac", "MAX_FRAC"]
+
+#: the most fractional bits an accumulator may have
+MAX_FRAC = 24
 
 
 def round_and_refit(sf: ServoFit, frac: int):
@@ -81,27 +85,46 @@ def requantize(ctx, fits: list[ServoFit], fv: int, progress) -> list[ServoFit]:
     return out
 
 
+def narrowest_frac(bound, quant: float, top: int = MAX_FRAC) -> int | None:
+    """Fewest accumulator fractional bits in ``[0, top]`` whose ``bound(frac)`` is within
+    ``quant``, or None. The bound falls as ``frac`` grows until the intermediates need more
+    than 63 bits (``bound`` is then infinite, and stays so for every wider ``frac``): the
+    widest finite ``frac`` is found first, then the narrowest one that meets ``quant``."""
+    bound = functools.cache(bound)
+    lo, hi = 0, top
+    if np.isfinite(bound(top)):
+        lo = top
+    elif not np.isfinite(bound(0)):
+        return None
+    while lo < hi:           # the widest frac without overflow
+        mid = (lo + hi + 1) // 2
+        if np.isfinite(bound(mid)):
+            lo = mid
+        else:
+            hi = mid - 1
+    if bound(lo) > quant:
+        return None
+    lo, hi = 0, lo
+    while lo < hi:           # the bound falls as frac grows: bisect
+        mid = (lo + hi) // 2
+        if bound(mid) <= quant:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
 def choose_formats(ctx, fits: list[ServoFit], progress) -> tuple[int, list[ServoFit]]:
     """Narrowest feature precision ``fv`` and per-servo accumulator precision meeting the
     certified quantization budget: returns ``fv`` and the fits with their ``frac`` set."""
     quant = ctx.budget.quantization
-
-    def bound(sf, fv, frac):
-        return _rounding_pu(ctx, dataclasses.replace(sf, frac=frac), fv)
-
     for fv in range(8, 40):
         fracs = []
         for sf in fits:
-            lo, hi = 0, 24
-            if bound(sf, fv, hi) > quant:
+            frac = narrowest_frac(lambda f: _rounding_pu(ctx, dataclasses.replace(sf, frac=f), fv), quant)
+            if frac is None:
                 break
-            while lo < hi:           # the bound falls as frac grows: bisect
-                mid = (lo + hi) // 2
-                if bound(sf, fv, mid) <= quant:
-                    hi = mid
-                else:
-                    lo = mid + 1
-            fracs.append(lo)
+            fracs.append(frac)
         if len(fracs) == len(fits):
             fits = [dataclasses.replace(sf, frac=fr) for sf, fr in zip(fits, fracs)]
             progress(f"  formats: features {fv} fractional bits, accumulators "

@@ -187,6 +187,24 @@ def test_coefficients_are_reoptimised_on_their_grid(fitted):
                               for n, (cpts, ctarget) in zip(naive, data.rows))
 
 
+@pytest.mark.parametrize("overflow_from", [None, 25, 24, 13, 6, 1])
+def test_accumulator_format_is_the_narrowest_within_budget_below_overflow(overflow_from):
+    """A bound that falls with the accumulator's fractional bits until the intermediates need
+    more than 63 bits (infinite from ``overflow_from``): the narrowest frac that meets the
+    budget is found even where the widest one overflows (a large workspace's features need
+    more bits, so the accumulators' top overflows first), and None when none does."""
+    from ikseries.fit.formats import MAX_FRAC, narrowest_frac
+    floor = 0.01
+
+    def bound(frac):
+        return np.inf if overflow_from is not None and frac >= overflow_from else floor + 2.0 ** -frac
+
+    for quant in (0.3, 0.02, 0.011, 0.005):
+        ok = [f for f in range(MAX_FRAC + 1) if bound(f) <= quant]
+        assert narrowest_frac(bound, quant) == (ok[0] if ok else None), quant
+    assert narrowest_frac(lambda f: np.inf, 1.0) is None
+
+
 def test_grid_cells_of_the_fit_are_the_cells_of_the_plan():
     """A grid over z (a variable, made the offset) and r (no variable: its cells only select
     coefficients): at every port value the fitter's cell and z offset (its data rows) are the
