@@ -99,13 +99,14 @@ def _start(a: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     return ref, np.where(mu >= 0, 1.0, -1.0)
 
 
-def _independent(a: np.ndarray) -> np.ndarray:
-    """Indices of a largest set of linearly independent columns of ``a`` (QR with pivoting)."""
+def _independent(a: np.ndarray, most: int) -> np.ndarray:
+    """Indices of a largest set of linearly independent columns of ``a``, at most ``most`` of
+    them (QR with pivoting: the best conditioned first)."""
     _, r, piv = scipy.linalg.qr(a, mode="economic", pivoting=True)
     d = np.abs(np.diag(r))
-    if not len(d) or not d[0] > 0:
+    if most < 1 or not len(d) or not d[0] > 0:
         return np.zeros(0, dtype=np.intp)
-    return np.sort(piv[:int(np.sum(d > _RANK * d[0]))])
+    return np.sort(piv[:min(most, int(np.sum(d > _RANK * d[0])))])
 
 
 class _Exchange:
@@ -227,7 +228,7 @@ def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.n
     first = _start(a)
     if first is None:            # the rows so far do not span the terms: the whole pool decides
         full = basis.matrix(terms) / norm
-        cols = _independent(full)
+        cols = _independent(full, len(full) - 1)
         if len(cols) < n:
             fit = minimax(basis, target, [terms[j] for j in cols], budget, regions, start, settle)
             coef = np.zeros(n)
@@ -241,8 +242,7 @@ def minimax(basis, target: np.ndarray, terms: list, budget: float, regions: np.n
             if first is not None:
                 break
         else:                    # a borderline rank: fit the terms independent over these rows
-            cols = _independent(a)   # (at least the least independent one dropped), from them
-            cols = cols if len(cols) < n else np.sort(scipy.linalg.qr(a, mode="economic", pivoting=True)[2][:n - 1])
+            cols = _independent(a, n - 1)   # (at least the least independent one dropped)
             fit = minimax(basis, target, [terms[j] for j in cols], budget, regions, active, settle)
             coef = np.zeros(n)
             coef[cols] = fit.coef
@@ -297,7 +297,8 @@ def subset_minimax(a: np.ndarray, b: np.ndarray, near: np.ndarray | None = None
 
     ``near``: rows of a related fit's reference (e.g. with one more term); the first reference
     is chosen among them, so that the exchange starts close to the optimum. Columns dependent
-    over the rows get coefficient 0 (an independent subset is fitted).
+    over the rows get coefficient 0 (an independent subset is fitted, at least one column fewer
+    than the rows do not span).
     """
     norm = np.linalg.norm(a, axis=0)
     norm[norm == 0] = 1.0
@@ -310,7 +311,10 @@ def subset_minimax(a: np.ndarray, b: np.ndarray, near: np.ndarray | None = None
     if first is None:
         first = _start(an)
     if first is None:
-        cols = _independent(an)
+        # a reference needs a row more than columns, and spanning rows: at least the least
+        # independent column goes (QR of the rows and of the columns may judge a borderline
+        # rank differently), so the recursion ends
+        cols = _independent(an, min(len(a), a.shape[1]) - 1)
         coef = np.zeros(a.shape[1])
         if len(cols):
             coef[cols], ref = subset_minimax(a[:, cols], b)

@@ -79,6 +79,18 @@ def test_subset_minimax_is_the_lp_optimum_also_from_a_related_reference():
     assert np.abs(a[:, 1:] @ coef2 - rhs).max() == pytest.approx(best2, rel=1e-7)
 
 
+@pytest.mark.parametrize("rows", [1, 3, 6])
+def test_subset_minimax_of_fewer_rows_than_a_reference_needs_fits_fewer_columns(rows):
+    """A sparse cell may leave fewer active rows than terms + 1: the best conditioned columns,
+    one fewer than the rows, are fitted (the rows are then interpolated) and the rest get 0."""
+    x, target, terms = _problem(n_points=rows, degree=3)
+    a = vander(x, terms)
+    coef, ref = subset_minimax(a, target)
+    assert np.count_nonzero(coef) <= rows - 1
+    if rows > 1:
+        assert np.abs(a @ coef - target).max() <= np.abs(target).max()
+
+
 def test_new_rows_are_the_worst_outside_the_active_set_one_per_region():
     err = np.array([5.0, 9.0, 1.0, 7.0, 8.0, 6.0, 9.5])
     regions = np.array([0, 0, 1, 1, 2, 2, 0])
