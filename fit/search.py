@@ -38,6 +38,7 @@ SCREEN_STRIDE = 1                # a grid's screening fit: every this many fit s
 MAX_GRID_CELLS = 16              # cells and table entries (row padding included) of a grid at most
 FEATURE_BITS = (1, 4)            # a feature's cells are 2**-bits wide (4 to 32 cells over [-1, 1))
 MIN_CELL_ROWS = 32               # a feature cell with fewer sample rows is fitted on a window around it,
+SPREAD_RANK = 1e-6                # a cell's quadratics in its cut variables are independent above this
 CELL_WINDOWS = (0.0, 0.125, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 64.0)   # widened by these many cell widths each side
 
 
@@ -122,7 +123,7 @@ class Cells:
                         [_widened(c, x[:, c.var], int(k), widen) for x in (fit_set[0], check_set[0])]
                         for c, po, k in zip(cuts, per_cut, per)]
                 rows = _cell_rows(cuts, offs, (fit_set, check_set))
-                if len(rows.t) >= MIN_CELL_ROWS or all(c.port is not None for c in cuts):
+                if all(c.port is not None for c in cuts) or _spread(rows, cuts):
                     break
             out.rows.append(rows)
         return out
@@ -195,6 +196,21 @@ def _cell_rows(cuts, offs, sets) -> Rows:
         xs.append(xc)
         ts.append(t[keep])
     return Rows(np.concatenate(xs), np.concatenate(ts))
+
+
+def _spread(rows: Rows, cuts) -> bool:
+    """Whether a cell's rows are enough to fit it: at least ``MIN_CELL_ROWS`` of them, and not
+    all on one curve of its cut variables (the quadratics in them independent over the rows).
+    A cell at the workspace's rim may hold only the samples of one face, e.g. on the circle
+    x**2 + y**2 = r_max**2 of a cylinder: a fit there is free across the circle, where the
+    cell still holds targets between the face and the last interior samples."""
+    if len(rows.t) < MIN_CELL_ROWS:
+        return False
+    v = rows.x[:, [c.var for c in cuts if c.var is not None]]
+    cols = [np.ones(len(v))] + [v[:, i] for i in range(v.shape[1])] + \
+        [v[:, i] * v[:, j] for i in range(v.shape[1]) for j in range(i, v.shape[1])]
+    sv = np.linalg.svd(np.column_stack(cols), compute_uv=False)
+    return bool(sv[-1] > SPREAD_RANK * sv[0])
 
 
 def _widened(cut, values, cell: int, widen: float) -> np.ndarray:

@@ -24,6 +24,23 @@ def test_feature_cut_cells_and_offsets():
     assert sel.tolist() == [4, 5] and off.tolist() == pytest.approx([0.992, 1.0])
 
 
+def test_a_cell_holding_one_face_of_samples_only_is_widened():
+    """A cell is fitted on its own rows only if they are enough and not all on one curve of its
+    cut variables: samples of the cylinder's rim face (x**2 + y**2 = r**2) leave a fit free
+    across the rim, where the cell still holds targets."""
+    from ikseries.fit.search import MIN_CELL_ROWS, Rows, _spread
+    rng = np.random.default_rng(1)
+    cuts = (FeatureCut(0, "x", 4), FeatureCut(1, "y", 4))
+    phi = rng.uniform(0.1, 0.2, 200)
+    z = rng.uniform(-1, 1, 200)
+    rim = np.column_stack([np.cos(phi) * 0.9, np.sin(phi) * 0.9, z])
+    inside = np.column_stack([rng.uniform(-1, 1, (200, 2)), z])
+    assert not _spread(Rows(rim, z), cuts)
+    assert _spread(Rows(np.vstack([rim, inside[:20]]), np.r_[z, z[:20]]), cuts)
+    assert not _spread(Rows(inside[:MIN_CELL_ROWS - 1], z[:MIN_CELL_ROWS - 1]), cuts)
+    assert _spread(Rows(inside[:MIN_CELL_ROWS], z[:MIN_CELL_ROWS]), cuts)
+
+
 def test_a_feature_set_cut_in_cells_of_a_feature_and_a_port():
     fs = FeatureSet("radial", ("rho2", "z"), ("any", "even"))
     port = type("P", (), {"name": "z", "lo": 0, "hi": 255})()
