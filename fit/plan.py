@@ -311,6 +311,9 @@ class PlanBuilder:
         if f == frac:
             return a
         if frac > f:
+            n = self.nodes[a]
+            if n.op == "const":     # exact: the same constant with more fractional bits
+                return self._append("const", (), frac, n.param << (frac - f), n.ideal)
             return self._append("shl", (a,), frac, frac - f)
         return self._append("shr", (a,), frac, f - frac)
 
@@ -320,7 +323,31 @@ class PlanBuilder:
         if self.is_zero(b):
             return a
         f = max(self.frac(a), self.frac(b))
-        return self._append("add", (self.align(a, f), self.align(b, f)), f)
+        a, b = self.align(a, f), self.align(b, f)
+        folded = self._fold_constants(a, b)
+        if folded is None:
+            folded = self._fold_constants(b, a)
+        return folded if folded is not None else self._append("add", (a, b), f)
+
+    def _fold_constants(self, a: int, b: int) -> int | None:
+        """``(x + c1) + c2`` as ``x + (c1 + c2)``: one adder (and one pipeline stage) fewer, the
+        same integers; the constants' rounding errors add up at most (ideal values summed)."""
+        n, c2 = self.nodes[a], self.nodes[b]
+        if c2.op != "const" or n.op != "add":
+            return None
+        consts = [k for k in (1, 0) if self.nodes[n.args[k]].op == "const"]
+        if not consts:
+            return None
+        x, c1 = n.args[1 - consts[0]], self.nodes[n.args[consts[0]]]
+        if c1.frac != c2.frac:
+            return None
+        scale = 2.0 ** -c2.frac
+        param = c1.param + c2.param
+        ideal = None
+        if c1.ideal is not None or c2.ideal is not None:
+            ideal = sum(c.ideal if c.ideal is not None else c.param * scale for c in (c1, c2))
+            ideal = None if ideal == param * scale else ideal
+        return self.add(x, self._append("const", (), c2.frac, param, ideal))
 
     def mul(self, a: int, b: int, frac: int | None = None) -> int:
         """Product, truncated (floor) to ``frac`` fractional bits if given (operands first

@@ -110,6 +110,26 @@ def test_rounding_bound_scales_with_a_binary_point_change():
     assert bound[plan.outputs[0].node] == 256 * bound[plan.outputs[1].node]
 
 
+def test_constants_added_in_turn_are_one_adder():
+    """``(x + c1) + c2`` and ``c2 + (c1 + x)`` are built as ``x + (c1 + c2)``: one adder, one
+    stage, the same integers and ideal values; rounded constants keep their ideal sum, and
+    constants summing to 0 leave ``x`` itself."""
+    inputs = [PlanInput("a", "mm", 0, 0, 63, 6, False)]
+    b = PlanBuilder(inputs)
+    a = b.reinterpret(b.input_nodes["a"], 6)
+    x = b.mul(a, a)                                       # 12 fractional bits
+    one = b.add(b.add(x, b.const(0.3, 12)), b.const(-1.7, 12))
+    other = b.add(b.const(1.25, 6), b.add(b.const(0.5, 12), x))   # a constant aligned first
+    assert b.add(b.add(x, b.const(0.75, 12)), b.const(-0.75, 12)) == x
+    plan = b.build([PlanOutput("one", one, one, "ticks", 1.0), PlanOutput("other", other, other, "ticks", 1.0)])
+    assert plan.count("add") == 2 and plan.depth == plan.stages()[x] + 1
+    for o, c in (("one", 0.3 - 1.7), ("other", 1.75)):
+        n = plan.nodes[plan.outputs[[p.name for p in plan.outputs].index(o)].node]
+        k = n.args[1] if plan.nodes[n.args[1]].op == "const" else n.args[0]
+        assert abs((plan.nodes[k].ideal if plan.nodes[k].ideal is not None else plan.nodes[k].param / 4096) - c) < 1e-15
+    check_exhaustively(plan, want=lambda ports: ports["a"].astype(float) ** 2 / 4096 + 0.3 - 1.7)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_piecewise_plan_intervals_and_rounding_bound_hold_exhaustively(seed):
     plan = tiny_piecewise_plan(seed)
