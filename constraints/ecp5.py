@@ -71,6 +71,10 @@ def mult18x18d(m, a, b, product, enable):
 DP16KD_SHAPES = ((18, 1024), (9, 2048), (4, 4096), (2, 8192), (1, 16384))
 #: INITVAL_00 .. INITVAL_3F, 320 bits each: 16 slots of 20 bits, each two 9-bit bytes and 2 unused
 DP16KD_INITVALS, DP16KD_INITVAL_BITS = 64, 320
+#: the fewest words of a table put on DP16KD blocks: where Yosys's own ECP5 mapping of a ROM
+#: switches from LUTs to block RAM (seen with synth_ecp5 on 18-bit ROMs read by a registered
+#: port: 32 and 64 words become LUT4/PFUMX logic, 128, 256 and 512 words one DP16KD)
+DP16KD_MIN_DEPTH = 128
 
 
 def dp16kd_shape(depth: int) -> tuple[int, int]:
@@ -150,4 +154,4 @@ def dp16kd_rom(m, name, addr, data, init, read_enable, output_enable):
 
 
 PRIMITIVES = (Primitive("MULT18X18D", "ecp5", 18, 36, "MULT18X18D.v", mult18x18d),
-              Primitive("DP16KD", "ecp5", 0, 0, "DP16KD.v", dp16kd_rom, role="table"))
+              Primitive("DP16KD", "ecp5", 0, 0, "DP16KD.v", dp16kd_rom, role="table", min_depth=DP16KD_MIN_DEPTH))

@@ -230,6 +230,9 @@ class Primitive:
     role : str
         "multiplier" (the DSP products of ``dsp_registers``) or "table" (the coefficient tables
         of a core with registered tables).
+    min_depth : int
+        A table primitive: the fewest words a table put on it has; shallower tables stay in the
+        fabric, where the family's synthesis maps them to LUTs (0 for a multiplier).
     """
     name: str
     family: str
@@ -238,6 +241,7 @@ class Primitive:
     model: str
     instance: Callable
     role: str = "multiplier"
+    min_depth: int = 0
 
     @property
     def model_path(self) -> Path:

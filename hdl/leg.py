@@ -44,7 +44,7 @@ class LegCore(wiring.Component):
         With ``interval`` or ``multipliers``: the modulo or folded evaluator's products on
         instantiated DSP primitives of that family with their own registers (see
         :class:`ModuloEvaluator`, :class:`FoldedEvaluator`).
-    registered_tables : None or bool, optional
+    registered_tables : None, bool or int, optional
         With ``interval``: the modulo-scheduled evaluator's ``registered_tables`` (None: as
         ``dsp_registers`` implies, see :class:`ModuloEvaluator`).
 
@@ -75,7 +75,7 @@ class LegCore(wiring.Component):
     def __init__(self, plan: Plan, period: int, reset_widths: dict | None = None, *,
                  multipliers: int | None = None, dsp: tuple[int, int] | None = None,
                  interval: int | None = None, dsp_registers: str | None = None,
-                 registered_tables: bool | None = None):
+                 registered_tables: bool | int | None = None):
         self._dsp_registers = dsp_registers
         if registered_tables is not None and interval is None:
             raise ValueError(f"registered_tables must be None without interval (only the modulo-scheduled "
@@ -89,7 +89,7 @@ class LegCore(wiring.Component):
                                  f"sizes its multipliers itself), not {multipliers!r}")
             self._evaluator = ModuloEvaluator(plan, interval, dsp=dsp or dsp_size("ecp5"), dsp_registers=dsp_registers,
                                               registered_tables=registered_tables)
-            registered_tables = self._evaluator.registered_tables     # the twin's, resolved
+            registered_tables = self._evaluator.registered_tables or False     # the twin's, resolved
         elif multipliers is None:
             if dsp is not None:
                 raise ValueError(f"dsp must be None for the pipelined evaluator (multipliers=None), not {dsp!r}")

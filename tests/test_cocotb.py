@@ -247,9 +247,11 @@ def test_modulo_core_on_dsp_primitives_cocotb(simulator, family, small_plan, sma
     from ikseries.sim.runner import primitive_models
     _skip_unless_available(simulator)
     dsp, cell, registered, table = DSP_PRIMITIVES[family]
-    core = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=dsp, dsp_registers=family)
+    # every table registered: the small plan's are shallower than DP16KD_MIN_DEPTH
+    core = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=dsp, dsp_registers=family,
+                   registered_tables=table is not None)
     twin = core.simulation_model()
-    assert core.evaluator.registered_tables == (table is not None) == twin.evaluator.registered_tables
+    assert core.evaluator.registered_tables == twin.evaluator.registered_tables == (1 if table else None)
     assert core.latency == twin.latency and core.initiation_interval == 3
     build_dir = tmp_path_factory.mktemp(f"cocotb_{simulator}_modulo_{family}_dsp")
     res = run(small_plan_file, PWM_PERIOD, simulator, build_dir, core=core, n_random=300)

@@ -160,9 +160,8 @@ def test_registered_tables_take_one_more_cycle_and_stay_bit_exact(ii, backpressu
     plan = tiny_piecewise_plan(1)
     plain, core = ModuloEvaluator(plan, ii), ModuloEvaluator(plan, ii, registered_tables=True)
     luts = [i for i, n in enumerate(plan.nodes) if n.op == "lut"]
-    assert luts and not plain.registered_tables and core.registered_tables
+    assert luts and plain.registered_tables is None and core.registered_tables == 1
     for ev, lat in ((plain, TABLE_LATENCY), (core, REGISTERED_TABLE_LATENCY)):
-        assert ev.schedule.table_latency == lat
         assert all(ev.schedule.ready[i] == ev.schedule.start[i] + lat for i in luts)
     assert core.latency > plain.latency
     res = simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.6 if backpressure else 1.0,
@@ -179,36 +178,50 @@ def test_real_plan_with_registered_tables_random_targets_bit_exact(plan):
 
 
 def test_ecp5_tables_on_dp16kd_with_its_output_register():
-    """With dsp_registers="ecp5" the tables are registered by default, each ROM (the luts of one
-    index) on DP16KD blocks with REGMODE_A "OUTREG" cleared by the domain's reset (the timing
-    is checked by simulation, test_cocotb.py); registered_tables=False keeps the
-    unregistered fabric tables; on the iCE40 (no block RAM primitive) tables stay unregistered."""
+    """With dsp_registers="ecp5" and registered tables each ROM (the luts of one index) is on
+    DP16KD blocks with REGMODE_A "OUTREG" cleared by the domain's reset (the timing is checked
+    by simulation, test_cocotb.py); by default only tables of at least DP16KD_MIN_DEPTH words
+    (where Yosys itself would use block RAM) are, so the tiny plan's stay unregistered fabric
+    tables, as with registered_tables=False; on the iCE40 (no block RAM primitive) tables stay
+    unregistered."""
     from amaranth.back import verilog
-    from ikseries.constraints.ecp5 import dp16kd_shape
+    from ikseries.constraints.ecp5 import DP16KD_MIN_DEPTH, dp16kd_shape
     from ikseries.hdl.evaluator import lut_groups, lut_rom_init
     plan = tiny_piecewise_plan(0)
-    core = ModuloEvaluator(plan, 1, dsp_registers="ecp5")
-    assert core.registered_tables and [p.name for p in core.primitives] == ["MULT18X18D", "DP16KD"]
+    core = ModuloEvaluator(plan, 1, dsp_registers="ecp5", registered_tables=True)
+    assert core.registered_tables == 1 and [p.name for p in core.primitives] == ["MULT18X18D", "DP16KD"]
     text = verilog.convert(core, name="m", emit_src=False)
     blocks = sum(-(-w // dp16kd_shape(len(init))[0])
                  for init, w in (lut_rom_init(plan, i, luts) for i, luts in lut_groups(plan).items()))
     assert text.count("DP16KD #(") == text.count('.REGMODE_A("OUTREG")') == blocks > 0
     assert text.count(".RSTA(rst)") == blocks
+    default = ModuloEvaluator(plan, 1, dsp_registers="ecp5")
+    assert default.registered_tables == DP16KD_MIN_DEPTH > max(len(lut_rom_init(plan, i, luts)[0])
+                                                              for i, luts in lut_groups(plan).items())
     off = ModuloEvaluator(plan, 1, dsp_registers="ecp5", registered_tables=False)
-    assert "DP16KD" not in verilog.convert(off, name="m", emit_src=False)
-    assert off.latency == ModuloEvaluator(plan, 1).latency < core.latency
+    for ev in (default, off):
+        assert "DP16KD" not in verilog.convert(ev, name="m", emit_src=False)
+        assert [p.name for p in ev.primitives] == ["MULT18X18D"]
+        assert ev.latency == ModuloEvaluator(plan, 1).latency < core.latency
+    deep = ModuloEvaluator(plan, 1, registered_tables=4)      # only the tables of >= 4 words
+    lut_lat = {deep.schedule.ready[i] - deep.schedule.start[i] for i, n in enumerate(plan.nodes) if n.op == "lut"}
+    assert lut_lat <= {TABLE_LATENCY, REGISTERED_TABLE_LATENCY}
     ice = ModuloEvaluator(plan, 1, dsp=(16, 16), dsp_registers="ice40")
-    assert not ice.registered_tables and [p.name for p in ice.primitives] == ["SB_MAC16"]
-    with pytest.raises(ValueError, match=r"^registered_tables must be None, True or False, not 'yes'$"):
-        ModuloEvaluator(plan, 1, registered_tables="yes")
+    assert ice.registered_tables is None and [p.name for p in ice.primitives] == ["SB_MAC16"]
+    for bad in ("yes", 0):
+        with pytest.raises(ValueError, match=r"^registered_tables must be None, True, False or an integer >= 1 "
+                                             rf"\(the fewest words of a registered table\), not {bad!r}$"):
+            ModuloEvaluator(plan, 1, registered_tables=bad)
 
 
 def test_leg_core_twin_keeps_registered_tables():
     from ikseries.hdl.leg import LegCore
     plan = tiny_piecewise_plan(0, clamp=(0, 100))
-    core = LegCore(plan, 400, interval=2, dsp=(18, 18), dsp_registers="ecp5")
+    core = LegCore(plan, 400, interval=2, dsp=(18, 18), dsp_registers="ecp5", registered_tables=True)
     twin = core.simulation_model()
-    assert twin.dsp_registers is None and twin.evaluator.registered_tables and twin.latency == core.latency
+    assert twin.dsp_registers is None and twin.evaluator.registered_tables == 1 and twin.latency == core.latency
+    assert LegCore(plan, 400, interval=2, dsp=(18, 18), dsp_registers="ecp5").simulation_model().evaluator \
+        .registered_tables == 128
     assert [p.name for p in core.primitives] == ["MULT18X18D", "DP16KD"] and twin.primitives == ()
     simulate_bit_exact(twin, plan, all_ports(plan), ready_prob=0.7, seed=4)
     with pytest.raises(ValueError, match=r"^registered_tables must be None without interval \(only the "

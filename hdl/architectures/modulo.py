@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from ..leg import LegCore
-from ..modulo import ModuloEvaluator, modulo_schedule, table_primitive
+from ..modulo import ModuloEvaluator, default_registered_depth, modulo_schedule
 from . import Architecture, BuildTarget, Timing
 from .options import check_primitives, dsp_label, dsp_size, positive_int
 
@@ -23,8 +23,8 @@ class Modulo(Architecture):
     primitives : bool
         Products on the DSP family's instantiated primitives with their own registers (needs a
         ``dsp`` family that has them, see :mod:`ikseries.constraints`), and, on a family with a
-        block RAM primitive (the ECP5's DP16KD), the tables on it with its output register: one
-        more cycle per table read (:class:`~ikseries.hdl.modulo.ModuloEvaluator`,
+        block RAM primitive (the ECP5's DP16KD), the tables deep enough for it on it with its
+        output register: one more cycle per such table read (:class:`~ikseries.hdl.modulo.ModuloEvaluator`,
         ``registered_tables``).
     """
 
@@ -41,15 +41,15 @@ class Modulo(Architecture):
         return self.dsp if self.primitives else None
 
     @property
-    def _registered_tables(self) -> bool:
-        return table_primitive(self._registers) is not None
+    def _registered_depth(self) -> int | None:
+        return default_registered_depth(self._registers)
 
     @property
     def _size(self):
         return dsp_size(self.dsp) or dsp_size("ecp5")   # the evaluator's default block
 
     def timing(self, plan) -> Timing:
-        s = modulo_schedule(plan, self.interval, self._size, self._registered_tables)
+        s = modulo_schedule(plan, self.interval, self._size, self._registered_depth)
         return Timing(s.latency, s.initiation_interval, "modulo")
 
     def evaluator(self, plan):
@@ -60,7 +60,7 @@ class Modulo(Architecture):
                        dsp_registers=self._registers)
 
     def multiplier_units(self, plan) -> int:
-        return modulo_schedule(plan, self.interval, self._size, self._registered_tables).units
+        return modulo_schedule(plan, self.interval, self._size, self._registered_depth).units
 
     def describe(self) -> str:
         return f"modulo-scheduled pipeline, one target per {self.interval} cycles ({dsp_label(self.dsp)})"
