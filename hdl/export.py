@@ -223,10 +223,12 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
         prims = getattr(core, "primitives", None) or family_primitives(prim_family, "multiplier")
         cells = [p.name for p in prims]
         tables = [p.name for p in prims if p.role == "table"]
+        depth = getattr(getattr(core, "evaluator", None), "registered_tables", None)    # fewest words on one
         man["primitives"] = {
             "family": prim_family, "cells": cells,
             "note": f"every product on a {fam.label} {cells[0]} with its input and output registers"
-                    + "".join(f", every table on {t} block RAMs with their output register" for t in tables) + "; "
+                    + "".join(f", every table of at least {depth} words on {t} block RAMs with their output "
+                              "register" for t in tables) + "; "
                     f"synthesise for {fam.label} (Yosys {fam.yosys}, vendor tools), simulate with "
                     + ", ".join(f"sim_models/{p.model}" for p in prims)
                     + " (a behavioural model of the configuration used)",
