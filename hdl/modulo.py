@@ -4,21 +4,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Cat, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
-from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from ..constraints.devices import dsp_size, family_primitives
+from ..constraints.devices import dsp_size
 from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan
-from .evaluator import input_layout, lut_groups, lut_rom_init, node_expression, output_layout
+from .evaluator import input_layout, lut_groups, node_expression, output_layout
 from .limbmul import check_dsp, check_dsp_registers
 from .planmemo import per_plan
+from .tables import default_registered_depth, registered_rom, table_primitive, table_registered
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
-           "CLAMP_LATENCY", "TABLE_LATENCY", "REGISTERED_TABLE_LATENCY", "table_primitive", "table_registered",
-           "default_registered_depth"]
+           "CLAMP_LATENCY", "TABLE_LATENCY", "REGISTERED_TABLE_LATENCY"]
 
 #: cycles from reading a multiplication's operands to the first cycle its product can be read:
 #: operand registers at the multiplier inputs, then the product register. Consumers scheduled in
@@ -35,23 +34,6 @@ TABLE_LATENCY = 1
 #: the same with registered tables: the ROM's read, then its output register (on the ECP5 the
 #: block RAM's own, REGMODE "OUTREG": 0.97 ns clock-to-out instead of 5.6 ns)
 REGISTERED_TABLE_LATENCY = 2
-
-
-def table_primitive(dsp_registers: str | None):
-    """The block RAM primitive a core with ``dsp_registers`` puts its registered tables on: the
-    family's primitive of role "table" (:data:`ikseries.constraints.devices.PRIMITIVES`), or
-    None (no family, or one without: the tables are fabric ``Memory``)."""
-    if dsp_registers is None:
-        return None
-    return next(iter(family_primitives(dsp_registers, "table")), None)
-
-
-def default_registered_depth(dsp_registers: str | None) -> int | None:
-    """The fewest words of a registered table in a core with ``dsp_registers`` by default: its
-    block RAM primitive's :attr:`~ikseries.constraints.facts.Primitive.min_depth`, None (no
-    registered table) without one."""
-    prim = table_primitive(dsp_registers)
-    return None if prim is None else prim.min_depth
 
 
 def _kind(n) -> str:
@@ -114,12 +96,6 @@ class ModuloSchedule:
 def _fits(wa: int, wb: int, dsp) -> bool:
     """A wa x wb signed product fits one ``dsp`` block (either orientation; any if no dsp)."""
     return dsp is None or (wa <= dsp[0] and wb <= dsp[1]) or (wa <= dsp[1] and wb <= dsp[0])
-
-
-def table_registered(plan: Plan, i: int, registered_depth: int | None) -> bool:
-    """Table read ``i`` is registered: its table (as deep as its index's range) has at least
-    ``registered_depth`` words (None: no table is)."""
-    return registered_depth is not None and plan.nodes[plan.nodes[i].args[0]].hi + 1 >= registered_depth
 
 
 def _own_latency(plan: Plan, i: int, registered_depth: int | None) -> int:
@@ -322,7 +298,7 @@ class ModuloEvaluator(wiring.Component):
         so a block RAM's slow clock-to-out ends at a register instead of running on through a
         multiplier's operand multiplexer. The luts that share an index are one ROM, their fields
         side by side (:func:`~ikseries.hdl.evaluator.lut_rom_init`). With a ``dsp_registers``
-        family that has a block RAM primitive (:func:`table_primitive`: the ECP5's DP16KD) the
+        family that has a block RAM primitive (:func:`~ikseries.hdl.tables.table_primitive`: the ECP5's DP16KD) the
         ROM is that primitive with its own output register (REGMODE "OUTREG"), else a
         ``Memory`` read port followed by a fabric register: same timing and values, the twin
         the Amaranth simulator runs. Shallower tables, and all of them with False, are one
@@ -497,30 +473,16 @@ class ModuloEvaluator(wiring.Component):
             m.d.sync += reg.eq(v)
 
     def _registered_table(self, m, values: _NodeValues, index: int, luts: list):
-        """The ROM of the ``luts`` read at node ``index``: read at their start phase, then its
-        output register (the primitive's, or a fabric one after a ``Memory`` read port) at
-        the next; each lut's register is its field of that output register."""
-        plan, s = self._plan, self._schedule.start[luts[0]]
+        """The ROM of the ``luts`` read at node ``index`` (:func:`~ikseries.hdl.tables.registered_rom`):
+        read at their start phase, its output register written at the next; each lut's
+        register is its field of that output register."""
+        s = self._schedule.start[luts[0]]
         assert all(self._schedule.start[li] == s for li in luts)   # one operand, one start
-        init, width = lut_rom_init(plan, index, luts)
-        addr = values.read(index, s)
-        data = Signal(width, name=f"lut{index}_data")
-        read, out = values.at_phase(s), values.at_phase(s + 1)
-        if self._table_primitive is not None:
-            self._table_primitive.instance(m, f"lut{index}", addr, data, init, read, out)
-        else:        # the same in the fabric: data is the output register
-            m.submodules[f"lut{index}"] = rom = Memory(shape=unsigned(width), depth=len(init), init=init)
-            port = rom.read_port(domain="sync")
-            m.d.comb += [port.addr.eq(addr), port.en.eq(read)]
-            with m.If(out):
-                m.d.sync += data.eq(port.data)
-        off = 0
-        for li in luts:
-            n = plan.nodes[li]
-            f = data[off:off + n.width]
-            off += n.width
+        fields = registered_rom(m, self._plan, index, luts, values.read(index, s), values.at_phase(s),
+                                values.at_phase(s + 1), self._table_primitive)
+        for li, f in fields.items():
             if values.chains[li]:
-                m.d.comb += values.chains[li][0].eq(f.as_signed() if n.signed else f)
+                m.d.comb += values.chains[li][0].eq(f)
 
     def _multiplier(self, m, values: _NodeValues, u: int, mine: list):
         """Shared multiplier ``u`` for the multiplications ``mine``: operands selected by

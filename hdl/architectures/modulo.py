@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 from ..leg import LegCore
-from ..modulo import ModuloEvaluator, default_registered_depth, modulo_schedule
+from ..modulo import ModuloEvaluator, modulo_schedule
+from ..tables import default_registered_depth
 from . import Architecture, BuildTarget, Timing
 from .options import check_primitives, dsp_label, dsp_size, positive_int
 
