@@ -61,7 +61,11 @@ throughput; the hexapod within the iCE40 part; polynomial against CORDIC).
                            [--designs pipelined,modulo4,modulo8,modulo12,modulo4d,modulo7d,modulo16d,folded1,folded2,cordic,cordic_iter,hexapod]
                            [--jobs 2] [--seeds 1,2,3]
                            [--clock-mhz 100] [--cordic-design JSON] [--out docs/results/pareto.json]
-                           [--work build/bench/pareto]
+                           [--work build/bench/pareto] [--merge]
+
+``--merge`` re-measures only the given designs: the records of every other (design, device) in
+the existing ``--out`` are kept (plots and verdicts are recomputed over all of them), and the
+run records of the runs they came from are listed under ``earlier_runs``.
 """
 from __future__ import annotations
 
@@ -571,6 +575,24 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
     return specs, info
 
 
+def merge_records(out: Path, records: list[dict], seeds: list[int]) -> list[dict]:
+    """Add to ``records`` (in place) those of the JSON ``out`` for every (design, device) not
+    among them; the earlier run records those come from. Refuses other seeds (the table states
+    one seed list for every row) or records of a design this script no longer has."""
+    if not out.is_file():
+        return []
+    old = json.loads(out.read_text())
+    if old.get("seeds") != seeds:
+        sys.exit(f"--seeds must be those of {out} ({old.get('seeds')}) with --merge, not {seeds}")
+    have = {(r["design"], r["device"]) for r in records}
+    kept = [r for r in old["records"] if (r["design"], r["device"]) not in have]
+    unknown = sorted({r["design"] for r in kept} - set(DESIGNS))
+    if unknown:
+        sys.exit(f"{out} holds records of designs this script does not have: {', '.join(unknown)}")
+    records.extend(kept)
+    return [old["run"], *old.get("earlier_runs", [])] if kept else []
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--devices", default=f"{ICE40},{ECP5}", help="comma-separated (aliases: ice40, ecp5)")
@@ -581,6 +603,8 @@ def main(argv=None):
     ap.add_argument("--seeds", default="1,2,3", help="nextpnr placer seeds (comma-separated); the median is reported")
     ap.add_argument("--out", default=FACTS["default_json"]("pareto"))
     ap.add_argument("--work", default="build/bench/pareto", help="place-and-route working directory")
+    ap.add_argument("--merge", action="store_true",
+                    help="keep the other designs' records of the existing --out (re-measure only --designs)")
     args = ap.parse_args(argv)
     run = FACTS["run_facts"]("pareto", argv)
     # latency / initiation interval come from components that are built and never elaborated
@@ -613,6 +637,8 @@ def main(argv=None):
             per = r["legs"] * r["initiation_interval"]
             r["refresh_hz_at_fmax"] = round(r["fmax_mhz"] * 1e6 / per, 1)
             r["refresh_hz_at_robot_clock"] = round(r["robot_clock_mhz"] * 1e6 / per, 1)
+    earlier = merge_records(out, records, seeds) if args.merge else []
+    devices = [d for d in PNR_DEVICES if d in devices or any(r["device"] == d for r in records)]
     rank = {d: i for i, d in enumerate(DESIGNS)}
     records.sort(key=lambda r: (devices.index(r["device"]), rank[r["design"]]))
     plots = {}
@@ -626,7 +652,8 @@ def main(argv=None):
                 "poly_vs_cordic": verdict_poly_vs_cordic(records)}
     result = {**info, "clock_target_mhz": args.clock_mhz, "seeds": seeds, "devices": devices,
               "area_metric": "LUT + FF - harness_ffs (Yosys counts)", "records": records, "plots": plots,
-              "verdicts": verdicts, "seconds": round(time.perf_counter() - t0, 1)}
+              "verdicts": verdicts, "seconds": round(time.perf_counter() - t0, 1),
+              **({"earlier_runs": earlier} if earlier else {})}
     FACTS["write_result"](out, result, run)
     print(table(records))
     for d, p in plots.items():

@@ -77,6 +77,8 @@ def section(name: str, data: dict) -> list[str]:
     try:
         body = render(data)
         facts = run_lines(data["run"])
+        for earlier in data.get("earlier_runs", []):    # a merged result: the runs of its other rows
+            facts += ["Rows not re-measured by that command come from:", "", *run_lines(earlier)]
     except (KeyError, TypeError, ValueError) as e:
         raise ResultsError(f"{name}.json: cannot render its section ({type(e).__name__}: {e}); "
                            f"rerun bench/{name}.py") from None

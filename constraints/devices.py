@@ -34,7 +34,7 @@ from .facts import CATEGORIES, Family, Nextpnr, Part, PnrDevice, Primitive
 
 __all__ = ["CATEGORIES", "FAMILY_MODULES", "FAMILIES", "PARTS", "PNR_DEVICES", "PRIMITIVES", "FIT_DEVICES",
            "Family", "Nextpnr", "Part", "PnrDevice", "Primitive", "family", "part", "pnr_device", "primitive",
-           "dsp_size", "reference_part", "family_primitives", "pnr_families", "lookup"]
+           "dsp_size", "reference_part", "family_primitives", "multiplier_families", "pnr_families", "lookup"]
 
 #: the family modules, each defining FAMILY, PARTS, PNR_DEVICES and PRIMITIVES
 FAMILY_MODULES = (ice40, ecp5, xc7)
@@ -89,10 +89,16 @@ def reference_part(name: str) -> Part:
     return next(p for p in PARTS.values() if p.family == name)
 
 
-def family_primitives(name: str) -> tuple[Primitive, ...]:
-    """The vendor primitives of family ``name`` the exported Verilog may instantiate."""
+def family_primitives(name: str, role: str | None = None) -> tuple[Primitive, ...]:
+    """The vendor primitives of family ``name`` the exported Verilog may instantiate (those of
+    :attr:`Primitive.role` ``role``, or all)."""
     family(name)
-    return tuple(p for p in PRIMITIVES.values() if p.family == name)
+    return tuple(p for p in PRIMITIVES.values() if p.family == name and role in (None, p.role))
+
+
+def multiplier_families() -> tuple[str, ...]:
+    """The families with a DSP multiplier primitive (the ``dsp_registers`` choices)."""
+    return tuple(dict.fromkeys(p.family for p in PRIMITIVES.values() if p.role == "multiplier"))
 
 
 def pnr_families() -> tuple[Family, ...]:

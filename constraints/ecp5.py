@@ -1,4 +1,4 @@
-"""Lattice ECP5: the family, the LFE5U-25F, its CABGA381 package and the MULT18X18D primitive.
+"""Lattice ECP5: the family, the LFE5U-25F, its CABGA381 package, the MULT18X18D and DP16KD primitives.
 
 Capacities from the ECP5 family data sheet (Lattice FPGA-DS-02012): the LFE5U-25F has 24288
 LUT4 (one FF each), 28 18 x 18 multipliers (MULT18X18D; ALU54B/ALU24B are counted with them
@@ -67,4 +67,91 @@ def mult18x18d(m, a, b, product, enable):
         **{f"o_P{k}": out[k] for k in range(36)})
 
 
-PRIMITIVES = (Primitive("MULT18X18D", "ecp5", 18, 36, "MULT18X18D.v", mult18x18d),)
+#: DP16KD read port configurations (data bits, words), widest first: one 18 kbit EBR
+DP16KD_SHAPES = ((18, 1024), (9, 2048), (4, 4096), (2, 8192), (1, 16384))
+#: INITVAL_00 .. INITVAL_3F, 320 bits each: 16 slots of 20 bits, each two 9-bit bytes and 2 unused
+DP16KD_INITVALS, DP16KD_INITVAL_BITS = 64, 320
+#: the fewest words of a table put on DP16KD blocks: where Yosys's own ECP5 mapping of a ROM
+#: switches from LUTs to block RAM (seen with synth_ecp5 on 18-bit ROMs read by a registered
+#: port: 32 and 64 words become LUT4/PFUMX logic, 128, 256 and 512 words one DP16KD)
+DP16KD_MIN_DEPTH = 128
+
+
+def dp16kd_shape(depth: int) -> tuple[int, int]:
+    """The DP16KD configuration (data bits, words) for a table of ``depth`` words: the widest
+    one that holds them (the fewest blocks side by side)."""
+    if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= DP16KD_SHAPES[-1][1]:
+        raise ValueError(f"depth must be an integer in [1, {DP16KD_SHAPES[-1][1]}] (one DP16KD deep), "
+                         f"not {depth!r}")
+    return next(s for s in DP16KD_SHAPES if s[1] >= depth)
+
+
+def dp16kd_bit(width: int, address: int, bit: int) -> int:
+    """Position, in INITVAL_00 .. INITVAL_3F read as one number (INITVAL_00 the low bits), of
+    bit ``bit`` of word ``address`` of a DP16KD read ``width`` bits wide.
+
+    The block is 2048 bytes of 9 bits, two per 20-bit slot (bits 0-8 and 9-17). 9- and 18-bit
+    words fill whole bytes; 1-, 2- and 4-bit words fill the low 8 bits of each byte, low
+    address first (the 9th is parity). Yosys's ECP5 memory mapping writes the same layout
+    (checked in tests/test_ebr.py)."""
+    per_byte = 9 if width >= 9 else 8
+    q = address * width + bit
+    byte, within = divmod(q, per_byte)
+    return (byte // 2) * 20 + (byte % 2) * 9 + within
+
+
+def dp16kd_initvals(words, width: int) -> tuple[int, ...]:
+    """INITVAL_00 .. INITVAL_3F of a DP16KD read ``width`` bits wide holding ``words``
+    (non-negative, each < 2**width; unused words and bits 0)."""
+    depth = dict(DP16KD_SHAPES).get(width)
+    if depth is None:
+        raise ValueError(f"width must be one of {', '.join(str(w) for w, _ in DP16KD_SHAPES)}, not {width!r}")
+    if len(words) > depth or any(not 0 <= w < 1 << width for w in words):
+        raise ValueError(f"words must be at most {depth} integers in [0, 2**{width}), not {len(words)} words "
+                         f"in [{min(words)}, {max(words)}]")
+    total = 0
+    for a, w in enumerate(words):
+        for b in range(width):
+            if w >> b & 1:
+                total |= 1 << dp16kd_bit(width, a, b)
+    mask = (1 << DP16KD_INITVAL_BITS) - 1
+    return tuple(total >> (k * DP16KD_INITVAL_BITS) & mask for k in range(DP16KD_INITVALS))
+
+
+def dp16kd_rom(m, name, addr, data, init, read_enable, output_enable):
+    """A read-only table ``init`` (non-negative words of ``len(data)`` bits) on DP16KD blocks
+    side by side (:func:`dp16kd_shape` of its depth), added to ``m`` as ``<name>_ebr<k>``:
+    port A reads word ``addr`` into the block's data latch at a clock edge of the sync domain
+    where ``read_enable`` is high, and its output register (REGMODE_A "OUTREG") takes the latch
+    at an edge where ``output_enable`` is high, so ``data`` shows the word two enabled edges
+    after ``addr``. The domain's reset clears the output register synchronously (RESETMODE
+    "SYNC"), whatever ``output_enable``, like a fabric register; port B is unused."""
+    from amaranth.hdl import ClockSignal, Const, Instance, ResetSignal, Signal
+    width, depth = dp16kd_shape(len(init))
+    lsb = {18: 4, 9: 3, 4: 2, 2: 1, 1: 0}[width]      # the address bits below are byte enables or 0
+    a = Signal(14 - lsb)
+    m.d.comb += a.eq(addr)
+    zero = Const(0, 1)
+    for k in range(-(-len(data) // width)):
+        bits = data[k * width:(k + 1) * width]
+        words = [(w >> (k * width)) & ((1 << len(bits)) - 1) for w in init]
+        out = Signal(18, name=f"{name}_ebr{k}_do")
+        m.d.comb += bits.eq(out[:len(bits)])
+        initvals = {f"p_INITVAL_{j:02X}": Const(v, DP16KD_INITVAL_BITS)
+                    for j, v in enumerate(dp16kd_initvals(words, width))}
+        m.submodules[f"{name}_ebr{k}"] = Instance(
+            "DP16KD", **initvals, p_DATA_WIDTH_A=width, p_DATA_WIDTH_B=width, p_REGMODE_A="OUTREG",
+            p_REGMODE_B="NOREG", p_RESETMODE="SYNC", p_ASYNC_RESET_RELEASE="SYNC", p_CSDECODE_A="0b000",
+            p_CSDECODE_B="0b000", p_WRITEMODE_A="NORMAL", p_WRITEMODE_B="NORMAL", p_GSR="DISABLED",
+            p_INIT_DATA="STATIC",
+            i_CLKA=ClockSignal(), i_CEA=read_enable, i_OCEA=output_enable, i_RSTA=ResetSignal(), i_WEA=zero,
+            **{f"i_ADA{j}": a[j - lsb] if j >= lsb else zero for j in range(14)},
+            **{f"i_DIA{j}": zero for j in range(18)}, **{f"i_CSA{j}": zero for j in range(3)},
+            i_CLKB=zero, i_CEB=zero, i_OCEB=zero, i_RSTB=zero, i_WEB=zero,
+            **{f"i_ADB{j}": zero for j in range(14)}, **{f"i_DIB{j}": zero for j in range(18)},
+            **{f"i_CSB{j}": zero for j in range(3)},
+            **{f"o_DOA{j}": out[j] for j in range(18)})
+
+
+PRIMITIVES = (Primitive("MULT18X18D", "ecp5", 18, 36, "MULT18X18D.v", mult18x18d),
+              Primitive("DP16KD", "ecp5", 0, 0, "DP16KD.v", dp16kd_rom, role="table", min_depth=DP16KD_MIN_DEPTH))

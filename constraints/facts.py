@@ -210,18 +210,29 @@ class Primitive:
     family : str
         Its :class:`Family` name.
     operand_bits : int
-        Signed width of each multiplier operand port.
+        Signed width of each multiplier operand port (0 for a table).
     product_bits : int
-        Width of the product port.
+        Width of the product port (0 for a table).
     model : str
         File name of the behavioural model in ``ikseries/sim/models/`` (package data).
     instance : callable
-        ``instance(m, a, b, product, enable)`` -> the Amaranth ``Instance`` of one registered
-        multiplication ``product = a * b`` in the sync domain (operand and product registers
-        inside the primitive, clock enable ``enable``, cleared by the domain's reset: at every
-        clock edge the values of fabric registers reset synchronously), its ports connected to
-        the operands and ``product`` in ``m``'s comb domain; ValueError (one line,
-        :func:`check_operands`) for an operand wider than :attr:`operand_bits`.
+        A multiplier (``role`` "multiplier"): ``instance(m, a, b, product, enable)`` -> the
+        Amaranth ``Instance`` of one registered multiplication ``product = a * b`` in the sync
+        domain (operand and product registers inside the primitive, clock enable ``enable``,
+        cleared by the domain's reset: at every clock edge the values of fabric registers reset
+        synchronously), its ports connected to the operands and ``product`` in ``m``'s comb
+        domain; ValueError (one line, :func:`check_operands`) for an operand wider than
+        :attr:`operand_bits`. A table (``role`` "table"): ``instance(m, name, addr, data, init,
+        read_enable, output_enable)`` adds to ``m`` the blocks of a read-only table whose word
+        ``addr`` is on ``data`` two enabled clock edges later (a read enabled by
+        ``read_enable``, then the block's output register enabled by ``output_enable``,
+        cleared by the domain's reset).
+    role : str
+        "multiplier" (the DSP products of ``dsp_registers``) or "table" (the coefficient tables
+        of a core with registered tables).
+    min_depth : int
+        A table primitive: the fewest words a table put on it has; shallower tables stay in the
+        fabric, where the family's synthesis maps them to LUTs (0 for a multiplier).
     """
     name: str
     family: str
@@ -229,6 +240,8 @@ class Primitive:
     product_bits: int
     model: str
     instance: Callable
+    role: str = "multiplier"
+    min_depth: int = 0
 
     @property
     def model_path(self) -> Path:

@@ -9,7 +9,8 @@ from amaranth.lib.wiring import In, Out
 from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan
 
-__all__ = ["PlanEvaluator", "input_layout", "lut_groups", "lut_rom_init", "node_expression", "output_layout"]
+__all__ = ["PlanEvaluator", "input_layout", "lut_fields", "lut_groups", "lut_rom_init", "node_expression",
+           "output_layout"]
 
 
 def lut_groups(plan: Plan) -> dict[int, list[int]]:
@@ -38,6 +39,18 @@ def lut_rom_init(plan: Plan, index: int, luts: list[int]) -> tuple[list[int], in
             init[j] |= (n.param[j] & mask) << off
         off += n.width
     return init, off
+
+
+def lut_fields(plan: Plan, luts: list[int], data) -> dict:
+    """Each lut's value in ``data``, a word of the ROM :func:`lut_rom_init` lays out for
+    ``luts``: its field, sign-restored for a signed node."""
+    fields, off = {}, 0
+    for li in luts:
+        n = plan.nodes[li]
+        f = data[off:off + n.width]
+        fields[li] = f.as_signed() if n.signed else f
+        off += n.width
+    return fields
 
 
 def input_layout(plan: Plan) -> data.StructLayout:
@@ -188,11 +201,5 @@ class PlanEvaluator(wiring.Component):
         m.submodules[f"lut{index}"] = rom
         port = rom.read_port(domain="sync")
         m.d.comb += [port.addr.eq(addr), port.en.eq(en)]
-        fields, off = {}, 0
-        for li in luts:
-            n = plan.nodes[li]
-            f = port.data[off:off + n.width]
-            fields[li] = f.as_signed() if n.signed else f
-            off += n.width
-        return fields
+        return lut_fields(plan, luts, port.data)
 

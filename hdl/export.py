@@ -219,11 +219,16 @@ def manifest(robot, plan: Plan, core: LegCore | RobotCore, name: str, architectu
     }
     prim_family = getattr(core, "dsp_registers", None)
     if prim_family is not None:
-        fam, prims = device_family(prim_family), family_primitives(prim_family)
+        fam = device_family(prim_family)
+        prims = getattr(core, "primitives", None) or family_primitives(prim_family, "multiplier")
         cells = [p.name for p in prims]
+        tables = [p.name for p in prims if p.role == "table"]
+        depth = getattr(getattr(core, "evaluator", None), "registered_tables", None)    # fewest words on one
         man["primitives"] = {
             "family": prim_family, "cells": cells,
-            "note": f"every product on a {fam.label} {', '.join(cells)} with its input and output registers; "
+            "note": f"every product on a {fam.label} {cells[0]} with its input and output registers"
+                    + "".join(f", every table of at least {depth} words on {t} block RAMs with their output "
+                              "register" for t in tables) + "; "
                     f"synthesise for {fam.label} (Yosys {fam.yosys}, vendor tools), simulate with "
                     + ", ".join(f"sim_models/{p.model}" for p in prims)
                     + " (a behavioural model of the configuration used)",

@@ -5,7 +5,7 @@ from amaranth.hdl import Module
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ..constraints.devices import dsp_size
+from ..constraints.devices import dsp_size, family_primitives
 from ..fit.plan import Plan
 from .evaluator import PlanEvaluator, input_layout, output_layout
 from .folded import FoldedEvaluator
@@ -44,6 +44,9 @@ class LegCore(wiring.Component):
         With ``interval`` or ``multipliers``: the modulo or folded evaluator's products on
         instantiated DSP primitives of that family with their own registers (see
         :class:`ModuloEvaluator`, :class:`FoldedEvaluator`).
+    registered_tables : None, bool or int, optional
+        With ``interval``: the modulo-scheduled evaluator's ``registered_tables`` (None: as
+        ``dsp_registers`` implies, see :class:`ModuloEvaluator`).
 
     Attributes
     ----------
@@ -71,9 +74,12 @@ class LegCore(wiring.Component):
 
     def __init__(self, plan: Plan, period: int, reset_widths: dict | None = None, *,
                  multipliers: int | None = None, dsp: tuple[int, int] | None = None,
-                 interval: int | None = None, dsp_registers: str | None = None):
-        self._args = (plan, period, reset_widths, dict(multipliers=multipliers, dsp=dsp, interval=interval))
+                 interval: int | None = None, dsp_registers: str | None = None,
+                 registered_tables: bool | int | None = None):
         self._dsp_registers = dsp_registers
+        if registered_tables is not None and interval is None:
+            raise ValueError(f"registered_tables must be None without interval (only the modulo-scheduled "
+                             f"evaluator registers its tables), not {registered_tables!r}")
         if dsp_registers is not None and interval is None and multipliers is None:
             raise ValueError(f"dsp_registers must be None without interval or multipliers (the pipelined "
                              f"evaluator instantiates no DSP primitives), not {dsp_registers!r}")
@@ -81,7 +87,9 @@ class LegCore(wiring.Component):
             if multipliers is not None:
                 raise ValueError(f"multipliers must be None with interval (a modulo-scheduled evaluator "
                                  f"sizes its multipliers itself), not {multipliers!r}")
-            self._evaluator = ModuloEvaluator(plan, interval, dsp=dsp or dsp_size("ecp5"), dsp_registers=dsp_registers)
+            self._evaluator = ModuloEvaluator(plan, interval, dsp=dsp or dsp_size("ecp5"), dsp_registers=dsp_registers,
+                                              registered_tables=registered_tables)
+            registered_tables = self._evaluator.registered_tables or False     # the twin's, resolved
         elif multipliers is None:
             if dsp is not None:
                 raise ValueError(f"dsp must be None for the pipelined evaluator (multipliers=None), not {dsp!r}")
@@ -90,6 +98,8 @@ class LegCore(wiring.Component):
             if not isinstance(multipliers, int) or isinstance(multipliers, bool) or multipliers < 1:
                 raise ValueError(f"multipliers must be None or an integer >= 1, not {multipliers!r}")
             self._evaluator = FoldedEvaluator(plan, multipliers, dsp, dsp_registers)
+        self._args = (plan, period, reset_widths, dict(multipliers=multipliers, dsp=dsp, interval=interval,
+                                                       registered_tables=registered_tables))
         self._servos, reset_widths = servo_channels(plan, reset_widths)
         layout = output_layout(plan)
         self._pwms = {s: ServoPWM(period, layout.members[s].width, reset_widths.get(s, 0))
@@ -120,9 +130,17 @@ class LegCore(wiring.Component):
         """The family ("ice40", "ecp5") when the products run on its instantiated DSP primitives, else None."""
         return self._dsp_registers
 
+    @property
+    def primitives(self) -> tuple:
+        """The vendor primitives the core instantiates (:class:`~ikseries.constraints.facts.Primitive`)."""
+        if isinstance(self._evaluator, ModuloEvaluator):
+            return self._evaluator.primitives
+        return family_primitives(self._dsp_registers, "multiplier") if self._dsp_registers else ()
+
     def simulation_model(self) -> "LegCore":
         """A core the Amaranth simulator can run with the same ports, timing and values: this
-        one, or with ``dsp_registers`` a twin whose DSP registers are fabric flip-flops (the
+        one, or with ``dsp_registers`` a twin whose DSP registers are fabric flip-flops and whose
+        registered tables (if any) are ``Memory`` read ports with a fabric output register (the
         simulator cannot run an ``Instance``; the exported Verilog with the primitives is
         simulated by cocotb with the primitive's model)."""
         if self._dsp_registers is None:

@@ -7,7 +7,7 @@ from amaranth.hdl import Cat, Const, Module, Signal, signed
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ..constraints.devices import PRIMITIVES, Primitive, dsp_size, family_primitives
+from ..constraints.devices import Primitive, dsp_size, family_primitives, multiplier_families
 
 __all__ = ["LimbMultiplier", "check_dsp", "check_dsp_registers", "limb_split"]
 
@@ -29,14 +29,14 @@ def check_dsp(dsp):
 def check_dsp_registers(dsp_registers, dsp) -> Primitive | None:
     """The DSP primitive of family ``dsp_registers`` (None for None); refuses a family without
     one, or a ``dsp`` size that is not the family's."""
-    families = dict.fromkeys(p.family for p in PRIMITIVES.values())
+    families = multiplier_families()
     if dsp_registers is None:
         return None
     if not isinstance(dsp_registers, str) or dsp_registers not in families or dsp != dsp_size(dsp_registers):
         raise ValueError("dsp_registers must be None, or "
                          + " or ".join(f"{f!r} with dsp={dsp_size(f)}" for f in families)
                          + f", not {dsp_registers!r}" + (f" with dsp={dsp}" if dsp_registers in families else ""))
-    return family_primitives(dsp_registers)[0]
+    return family_primitives(dsp_registers, "multiplier")[0]
 
 
 def limb_split(a_width: int, b_width: int, dsp: tuple[int, int] | None):

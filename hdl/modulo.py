@@ -11,12 +11,13 @@ from amaranth.lib.wiring import In, Out
 from ..constraints.devices import dsp_size
 from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan
-from .evaluator import input_layout, node_expression, output_layout
+from .evaluator import input_layout, lut_groups, node_expression, output_layout
 from .limbmul import check_dsp, check_dsp_registers
 from .planmemo import per_plan
+from .tables import default_registered_depth, registered_rom, table_primitive, table_registered
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
-           "CLAMP_LATENCY"]
+           "CLAMP_LATENCY", "TABLE_LATENCY", "REGISTERED_TABLE_LATENCY"]
 
 #: cycles from reading a multiplication's operands to the first cycle its product can be read:
 #: operand registers at the multiplier inputs, then the product register. Consumers scheduled in
@@ -28,6 +29,11 @@ MUL_LATENCY = 2
 WIDE_MUL_LATENCY = 3
 #: cycles of a clamp: its comparisons registered (with the value), then the selection
 CLAMP_LATENCY = 2
+#: cycles of a table read: the ROM's synchronous read is the node's register
+TABLE_LATENCY = 1
+#: the same with registered tables: the ROM's read, then its output register (on the ECP5 the
+#: block RAM's own, REGMODE "OUTREG": 0.97 ns clock-to-out instead of 5.6 ns)
+REGISTERED_TABLE_LATENCY = 2
 
 
 def _kind(n) -> str:
@@ -60,6 +66,7 @@ class ModuloSchedule:
     swap: tuple = ()      # per node: the multiplier takes the operands in the other order
     operand_widths: tuple = ()  # per multiplier: signed widths (a, b) of its operands
     unit_latency: tuple = ()    # per multiplier: MUL_LATENCY, or WIDE_MUL_LATENCY if split in limbs
+    registered_depth: int | None = None   # tables of at least this many words are registered
 
     def held_from(self, plan: Plan) -> list[int]:
         """Per node, the first cycle its own register holds it: ``ready``, except for a
@@ -91,7 +98,17 @@ def _fits(wa: int, wb: int, dsp) -> bool:
     return dsp is None or (wa <= dsp[0] and wb <= dsp[1]) or (wa <= dsp[1] and wb <= dsp[0])
 
 
-def _heights(plan: Plan, wide: set) -> list[int]:
+def _own_latency(plan: Plan, i: int, registered_depth: int | None) -> int:
+    """Cycles from reading the operands of node ``i``, not a multiplication, to its value."""
+    n = plan.nodes[i]
+    if _kind(n) == "wiring" or _input_clamp(plan, i):
+        return 0
+    if _kind(n) == "table":
+        return REGISTERED_TABLE_LATENCY if table_registered(plan, i, registered_depth) else TABLE_LATENCY
+    return CLAMP_LATENCY if n.op == "clamp" else 1
+
+
+def _heights(plan: Plan, wide: set, registered_depth: int | None) -> list[int]:
     """Per node, cycles from reading its operands to the outputs: the scheduling priority
     (``wide``: the multiplications split in limbs)."""
     nodes = plan.nodes
@@ -103,7 +120,7 @@ def _heights(plan: Plan, wide: set) -> list[int]:
     for i in reversed(range(len(nodes))):
         kind = _kind(nodes[i])
         own = (WIDE_MUL_LATENCY if i in wide else MUL_LATENCY) if kind == "product" else \
-            0 if kind == "wiring" or _input_clamp(plan, i) else CLAMP_LATENCY if nodes[i].op == "clamp" else 1
+            _own_latency(plan, i, registered_depth)
         height[i] = own + max((height[u] for u in users[i]), default=0)
     return height
 
@@ -151,7 +168,7 @@ class _SharedMultipliers:
         return u, sw
 
 
-def _settle(plan: Plan, ready: list, start: list):
+def _settle(plan: Plan, ready: list, start: list, registered_depth: int | None):
     """Give every non-multiplication whose operands are scheduled its time (in place)."""
     for i, n in enumerate(plan.nodes):
         if ready[i] is not None or _kind(n) == "product":
@@ -165,12 +182,12 @@ def _settle(plan: Plan, ready: list, start: list):
             if _kind(n) == "wiring":
                 ready[i] = t
             else:
-                start[i], ready[i] = t, t + (CLAMP_LATENCY if n.op == "clamp" else 1)
+                start[i], ready[i] = t, t + _own_latency(plan, i, registered_depth)
 
 
 @per_plan
-def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = dsp_size("ecp5")
-                    ) -> ModuloSchedule:
+def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = dsp_size("ecp5"),
+                    registered_depth: int | None = None) -> ModuloSchedule:
     """List-schedule ``plan`` with its multiplications on shared multipliers, each free once
     per phase (cycle mod ``initiation_interval``).
 
@@ -182,8 +199,10 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     Every cycle the ready multiplications take the free multipliers of their class at that
     phase, the one with the longest path to an output first; of those, the multiplier (and the
     operand order) that adds the fewest new sources to its operand multiplexers (products that
-    share an operand go to one multiplier), then whose widths grow least. Additions, clamps and table reads have their own
-    hardware and run as soon as their operands are ready.
+    share an operand go to one multiplier), then whose widths grow least. Additions, clamps and
+    table reads have their own hardware and run as soon as their operands are ready; a table read
+    takes ``TABLE_LATENCY`` cycles, ``REGISTERED_TABLE_LATENCY`` if its table has at least
+    ``registered_depth`` words (None: no table is registered).
 
     Computed once per plan object and options (:func:`~ikseries.hdl.planmemo.per_plan`): the
     architecture's timing, its multiplier count and the evaluator share one schedule.
@@ -193,13 +212,13 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     muls = [i for i, n in enumerate(nodes) if _kind(n) == "product"]
     wide = {i for i in muls if not _fits(*(nodes[a].signed_width for a in nodes[i].args), dsp)}
     shared = _SharedMultipliers(ii, -(-(len(muls) - len(wide)) // ii), -(-len(wide) // ii), dsp)
-    height = _heights(plan, wide)
+    height = _heights(plan, wide, registered_depth)
     ready: list = [None] * len(nodes)
     start: list = [None] * len(nodes)
     unit: list = [None] * len(nodes)
     swap: list = [False] * len(nodes)
     pending = set(muls)
-    _settle(plan, ready, start)
+    _settle(plan, ready, start, registered_depth)
     cycle = 0
     while pending:
         cands = sorted((i for i in pending if all(ready[a] is not None and ready[a] <= cycle
@@ -212,14 +231,14 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
             u, swap[i] = placed
             start[i], ready[i], unit[i] = cycle, cycle + shared.latency[u], u
             pending.discard(i)
-        _settle(plan, ready, start)
+        _settle(plan, ready, start, registered_depth)
         cycle += 1
         if cycle > 64 * (len(nodes) + ii):   # every multiplication fits some phase: cannot happen
             raise RuntimeError(f"modulo schedule did not converge: {len(pending)} multiplications unplaced")
-    _settle(plan, ready, start)
+    _settle(plan, ready, start, registered_depth)
     latency = max([1] + [ready[o.node] for o in plan.outputs])
     return ModuloSchedule(ii, shared.units, tuple(ready), tuple(start), tuple(unit), latency, tuple(swap),
-                          tuple(shared.widths), tuple(shared.latency))
+                          tuple(shared.widths), tuple(shared.latency), registered_depth)
 
 
 def _limbs(x, width: int, bits: int) -> list:
@@ -273,6 +292,20 @@ class ModuloEvaluator(wiring.Component):
         exported Verilog runs in Icarus and Verilator with the primitive's model
         (:attr:`~ikseries.constraints.facts.Primitive.model_path`; :func:`ikseries.sim.runner.run`
         adds it).
+    registered_tables : None, bool or int
+        An integer N >= 1: each read of a table of at least N words takes
+        ``REGISTERED_TABLE_LATENCY`` cycles, the ROM's synchronous read then an output register,
+        so a block RAM's slow clock-to-out ends at a register instead of running on through a
+        multiplier's operand multiplexer. The luts that share an index are one ROM, their fields
+        side by side (:func:`~ikseries.hdl.evaluator.lut_rom_init`). With a ``dsp_registers``
+        family that has a block RAM primitive (:func:`~ikseries.hdl.tables.table_primitive`: the ECP5's DP16KD) the
+        ROM is that primitive with its own output register (REGMODE "OUTREG"), else a
+        ``Memory`` read port followed by a fabric register: same timing and values, the twin
+        the Amaranth simulator runs. Shallower tables, and all of them with False, are one
+        registered ROM read (``TABLE_LATENCY``; Yosys maps small ones to LUTs). True: every
+        table (N = 1). None (default): N = the block RAM primitive's
+        :attr:`~ikseries.constraints.facts.Primitive.min_depth` when ``dsp_registers`` names a
+        family that has one, else False.
 
     Attributes
     ----------
@@ -283,8 +316,10 @@ class ModuloEvaluator(wiring.Component):
     -------
     ``latency`` cycles from an input transfer to its output transfer while ``o.ready`` is
     high (the schedule's length; a multiplication takes ``MUL_LATENCY`` cycles, one split in
-    limbs ``WIDE_MUL_LATENCY``, a clamp ``CLAMP_LATENCY``, other operations one; the clamp of
-    an input port none: the input register takes the clamped port value).
+    limbs ``WIDE_MUL_LATENCY``, a clamp ``CLAMP_LATENCY``, a table read ``TABLE_LATENCY``, or
+    ``REGISTERED_TABLE_LATENCY`` if its table is registered (``registered_tables``), other
+    operations one; the clamp of an input port none: the input register takes the clamped
+    port value).
 
     Throughput
     ----------
@@ -294,7 +329,7 @@ class ModuloEvaluator(wiring.Component):
     """
 
     def __init__(self, plan: Plan, initiation_interval: int, dsp: tuple[int, int] | None = dsp_size("ecp5"),
-                 dsp_registers: str | None = None):
+                 dsp_registers: str | None = None, registered_tables: bool | int | None = None):
         if not isinstance(plan, Plan):
             raise TypeError(f"plan must be a Plan, not {plan!r}")
         if isinstance(initiation_interval, bool) or not isinstance(initiation_interval, int) \
@@ -302,10 +337,13 @@ class ModuloEvaluator(wiring.Component):
             raise ValueError(f"initiation_interval must be an integer >= 1, not {initiation_interval!r}")
         check_dsp(dsp)
         self._primitive = check_dsp_registers(dsp_registers, dsp)
+        self._table_primitive = table_primitive(dsp_registers)
+        registered_tables = self._registered_depth(registered_tables, dsp_registers)
         self._plan = plan
         self._dsp = dsp
         self._dsp_registers = dsp_registers
-        self._schedule = modulo_schedule(plan, initiation_interval, dsp)
+        self._registered_tables = registered_tables
+        self._schedule = modulo_schedule(plan, initiation_interval, dsp, registered_tables)
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),
             "o": Out(stream.Signature(output_layout(plan))),
@@ -314,6 +352,36 @@ class ModuloEvaluator(wiring.Component):
     @property
     def plan(self) -> Plan:
         return self._plan
+
+    @staticmethod
+    def _registered_depth(registered_tables, dsp_registers) -> int | None:
+        """The fewest words of a registered table (None: none is) for ``registered_tables``."""
+        if registered_tables is None:
+            return default_registered_depth(dsp_registers)
+        if registered_tables is True or registered_tables is False:
+            return 1 if registered_tables else None
+        if not isinstance(registered_tables, int) or registered_tables < 1:
+            raise ValueError(f"registered_tables must be None, True, False or an integer >= 1 (the fewest "
+                             f"words of a registered table), not {registered_tables!r}")
+        return registered_tables
+
+    @property
+    def registered_tables(self) -> int | None:
+        """The fewest words of a registered table; None: no table is registered."""
+        return self._registered_tables
+
+    def _registered_groups(self) -> dict[int, list[int]]:
+        """The lut groups (:func:`~ikseries.hdl.evaluator.lut_groups`) whose tables are registered."""
+        return {index: luts for index, luts in lut_groups(self._plan).items()
+                if table_registered(self._plan, luts[0], self._registered_tables)}
+
+    @property
+    def primitives(self) -> tuple:
+        """The vendor primitives the core instantiates (:class:`~ikseries.constraints.facts.Primitive`)."""
+        if self._dsp_registers is None:
+            return ()
+        table = (self._table_primitive,) if self._table_primitive and self._registered_groups() else ()
+        return (self._primitive, *table)
 
     @property
     def schedule(self) -> ModuloSchedule:
@@ -355,9 +423,13 @@ class ModuloEvaluator(wiring.Component):
             m.d.sync += phase.eq(Mux(phase == sch.initiation_interval - 1, 0, phase + 1))
         m.d.comb += self.i.ready.eq(en & (phase == 0))
         values = _NodeValues(m, plan, sch, en, phase)
+        registered = self._registered_groups()
         for i, n in enumerate(plan.nodes):
-            if _kind(n) not in ("wiring", "constant", "product"):
+            if _kind(n) not in ("wiring", "constant", "product") and not (
+                    _kind(n) == "table" and n.args[0] in registered):
                 self._operation(m, values, i)
+        for index, luts in registered.items():
+            self._registered_table(m, values, index, luts)
         products = {}     # multiplier -> its product register
         for u in range(sch.units):
             mine = [i for i in range(len(plan.nodes)) if sch.unit[i] == u]
@@ -399,6 +471,18 @@ class ModuloEvaluator(wiring.Component):
         v = node_expression(n, ops)
         with m.If(values.at_phase(s)):
             m.d.sync += reg.eq(v)
+
+    def _registered_table(self, m, values: _NodeValues, index: int, luts: list):
+        """The ROM of the ``luts`` read at node ``index`` (:func:`~ikseries.hdl.tables.registered_rom`):
+        read at their start phase, its output register written at the next; each lut's
+        register is its field of that output register."""
+        s = self._schedule.start[luts[0]]
+        assert all(self._schedule.start[li] == s for li in luts)   # one operand, one start
+        fields = registered_rom(m, self._plan, index, luts, values.read(index, s), values.at_phase(s),
+                                values.at_phase(s + 1), self._table_primitive)
+        for li, f in fields.items():
+            if values.chains[li]:
+                m.d.comb += values.chains[li][0].eq(f)
 
     def _multiplier(self, m, values: _NodeValues, u: int, mine: list):
         """Shared multiplier ``u`` for the multiplications ``mine``: operands selected by

@@ -477,8 +477,12 @@ def _parser() -> argparse.ArgumentParser:
                         f"{', '.join(FIT_DEVICES)}; also sets --dsp to the device's family unless --dsp is given")
     b.add_argument("--dsp-primitives", action="store_true",
                    help="override hardware.dsp_primitives: put a modulo, folded or shared core's products on instantiated "
-                        + ", ".join(f"{FAMILIES[p.family].label} {p.name}" for p in PRIMITIVES.values())
-                        + " blocks with their own registers (needs --dsp "
+                        + ", ".join(f"{FAMILIES[p.family].label} {p.name}" for p in PRIMITIVES.values()
+                                    if p.role == "multiplier")
+                        + " blocks with their own registers, and a modulo core's tables of "
+                        + ", ".join(f"{p.min_depth}+ words on {FAMILIES[p.family].label} {p.name}"
+                                    for p in PRIMITIVES.values() if p.role == "table")
+                        + " block RAMs with their output register (one more cycle per table read; needs --dsp "
                         + " or ".join(dict.fromkeys(p.family for p in PRIMITIVES.values())) + ")")
     b.add_argument("--products", metavar="MODE",
                    help="override fit.products: exact (default: every product as wide as it needs, split "

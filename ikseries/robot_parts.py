@@ -464,7 +464,7 @@ class HardwareOptions:
         prim = self.dsp_primitives
         if not isinstance(prim, bool):
             raise RobotError(f"{lab['dsp_primitives']} must be true or false, not {prim!r}")
-        prim_families = {p.family: p for p in PRIMITIVES.values()}
+        prim_families = {p.family: p for p in PRIMITIVES.values() if p.role == "multiplier"}
         if prim and self.dsp not in prim_families:
             raise RobotError(f"{lab['dsp']} must be {' or '.join(prim_families)} when {lab['dsp_primitives']} is "
                              f"true (the DSP primitives instantiated: "

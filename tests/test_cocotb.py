@@ -225,9 +225,9 @@ def test_piecewise_plan_on_icarus(folded, tmp_path_factory):
 
 
 #: per family with a DSP primitive: its DSP size, the primitive and a parameter text every
-#: registered instance carries
-DSP_PRIMITIVES = {"ecp5": ((18, 18), "MULT18X18D", '.REG_OUTPUT_CLK("CLK0")'),
-                  "ice40": ((16, 16), "SB_MAC16", ".PIPELINE_16x16_MULT_REG2(1'h1)")}
+#: registered instance carries, and the family's table primitive (block RAM) if it has one
+DSP_PRIMITIVES = {"ecp5": ((18, 18), "MULT18X18D", '.REG_OUTPUT_CLK("CLK0")', "DP16KD"),
+                  "ice40": ((16, 16), "SB_MAC16", ".PIPELINE_16x16_MULT_REG2(1'h1)", None)}
 
 
 def _exported(build_dir) -> str:
@@ -239,22 +239,28 @@ def _exported(build_dir) -> str:
 def test_modulo_core_on_dsp_primitives_cocotb(simulator, family, small_plan, small_plan_file, tmp_path_factory):
     """The modulo core with its products on instantiated MULT18X18D (ECP5) or SB_MAC16 (iCE40)
     blocks, their own input and output registers (``dsp_registers``; single-block and
-    limb-split products): the exported Verilog runs with the primitive's model and stays
-    bit-exact at the same latency."""
+    limb-split products), on the ECP5 its tables on DP16KD block RAMs with their output
+    register (``registered_tables``): the exported Verilog runs with the primitives' models and
+    stays bit-exact at the latency of the fabric twin the Amaranth simulator runs."""
     from ikseries.hdl.leg import LegCore
     from ikseries.constraints.devices import primitive
     from ikseries.sim.runner import primitive_models
     _skip_unless_available(simulator)
-    dsp, cell, registered = DSP_PRIMITIVES[family]
-    core = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=dsp, dsp_registers=family)
-    plain = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=dsp)
-    assert core.latency == plain.latency and core.initiation_interval == 3
+    dsp, cell, registered, table = DSP_PRIMITIVES[family]
+    # every table registered: the small plan's are shallower than DP16KD_MIN_DEPTH
+    core = LegCore(small_plan, PWM_PERIOD, interval=3, dsp=dsp, dsp_registers=family,
+                   registered_tables=table is not None)
+    twin = core.simulation_model()
+    assert core.evaluator.registered_tables == twin.evaluator.registered_tables == (1 if table else None)
+    assert core.latency == twin.latency and core.initiation_interval == 3
     build_dir = tmp_path_factory.mktemp(f"cocotb_{simulator}_modulo_{family}_dsp")
     res = run(small_plan_file, PWM_PERIOD, simulator, build_dir, core=core, n_random=300)
     verilog = _exported(build_dir)
     # every instance registered; at least one per unit (a limb-split unit has one per limb pair)
     assert verilog.count(registered) == verilog.count(f"{cell} #(") >= max(2, core.evaluator.multipliers)
-    assert primitive_models(verilog) == [primitive(cell).model_path]
+    assert primitive_models(verilog) == [primitive(c).model_path for c in (cell, table) if c]
+    if table:      # every table block with its output register
+        assert verilog.count(f"{table} #(") == verilog.count('.REGMODE_A("OUTREG")') > 0
     print(res.summary())
     assert set(res.tests) == COCOTB_TESTS, res.summary()
     assert res.ok, res.summary()

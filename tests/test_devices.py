@@ -8,7 +8,8 @@ import pytest
 
 from ikseries.constraints import devices
 from ikseries.constraints.devices import (CATEGORIES, FAMILIES, FIT_DEVICES, PARTS, PNR_DEVICES, PRIMITIVES,
-                                          dsp_size, family, family_primitives, part, pnr_device, primitive,
+                                          dsp_size, family, family_primitives, multiplier_families, part,
+                                          pnr_device, primitive,
                                           pnr_families, reference_part)
 
 
@@ -16,7 +17,8 @@ def test_registry_names_in_order():
     assert list(FAMILIES) == ["ice40", "ecp5", "xc7"]
     assert list(PARTS) == ["ice40-up5k", "ecp5-25f", "xc7a35t"]
     assert list(PNR_DEVICES) == ["ice40-up5k-sg48", "ecp5-25f-cabga381"]
-    assert list(PRIMITIVES) == ["SB_MAC16", "MULT18X18D"]
+    assert list(PRIMITIVES) == ["SB_MAC16", "MULT18X18D", "DP16KD"]
+    assert [p.role for p in PRIMITIVES.values()] == ["multiplier", "multiplier", "table"]
     assert FIT_DEVICES == {"ice40-up5k": "ice40", "ecp5-25f": "ecp5", "xc7a35t": "xc7"}
     assert [f.name for f in pnr_families()] == ["ice40", "ecp5"]
 
@@ -28,9 +30,13 @@ def test_lookups_return_the_registered_entries():
     assert primitive("MULT18X18D") is PRIMITIVES["MULT18X18D"]
     assert reference_part("ecp5") is PARTS["ecp5-25f"]
     assert primitive("SB_MAC16") is PRIMITIVES["SB_MAC16"]
-    assert family_primitives("ecp5") == (PRIMITIVES["MULT18X18D"],)
+    assert family_primitives("ecp5") == (PRIMITIVES["MULT18X18D"], PRIMITIVES["DP16KD"])
+    assert family_primitives("ecp5", "multiplier") == (PRIMITIVES["MULT18X18D"],)
+    assert family_primitives("ecp5", "table") == (PRIMITIVES["DP16KD"],)
     assert family_primitives("ice40") == (PRIMITIVES["SB_MAC16"],)
+    assert family_primitives("ice40", "table") == ()
     assert family_primitives("xc7") == ()
+    assert multiplier_families() == ("ice40", "ecp5")
 
 
 @pytest.mark.parametrize("lookup, name, message", [
@@ -38,7 +44,7 @@ def test_lookups_return_the_registered_entries():
     (family, None, "family must be one of ice40, ecp5, xc7, not None"),
     (part, "ice40-hx8k", "part must be one of ice40-up5k, ecp5-25f, xc7a35t, not 'ice40-hx8k'"),
     (pnr_device, "xc7a35t", "device must be one of ice40-up5k-sg48, ecp5-25f-cabga381, not 'xc7a35t'"),
-    (primitive, "DSP48E1", "primitive must be one of SB_MAC16, MULT18X18D, not 'DSP48E1'"),
+    (primitive, "DSP48E1", "primitive must be one of SB_MAC16, MULT18X18D, DP16KD, not 'DSP48E1'"),
     (dsp_size, "none", "family must be one of ice40, ecp5, xc7, not 'none'"),
     (reference_part, ["ecp5"], "family must be one of ice40, ecp5, xc7, not ['ecp5']"),
 ])
@@ -110,6 +116,7 @@ def test_pnr_devices_use_their_part_capacities():
 @pytest.mark.parametrize("name, fam, bits, product", [("MULT18X18D", "ecp5", 18, 36), ("SB_MAC16", "ice40", 16, 32)])
 def test_primitive_model_is_package_data(name, fam, bits, product):
     p = primitive(name)
+    assert p.role == "multiplier"
     assert (p.family, p.operand_bits, p.product_bits) == (fam, bits, product)
     assert (p.operand_bits, p.operand_bits) == dsp_size(fam)
     assert p.model_path.name == f"{name}.v" and p.model_path.parent.name == "models"

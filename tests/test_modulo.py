@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from helpers import all_ports, simulate_bit_exact, tiny_grid_plan, tiny_piecewise_plan, tiny_plan
-from ikseries.hdl.modulo import CLAMP_LATENCY, MUL_LATENCY, WIDE_MUL_LATENCY, ModuloEvaluator, modulo_schedule
+from ikseries.hdl.modulo import (CLAMP_LATENCY, MUL_LATENCY, REGISTERED_TABLE_LATENCY, TABLE_LATENCY,
+                                 WIDE_MUL_LATENCY, ModuloEvaluator, modulo_schedule)
 from ikseries.sim.targets import corner_targets, random_targets
 
 
@@ -149,6 +150,83 @@ def test_leg_core_on_dsp_primitives_has_a_fabric_twin_for_the_amaranth_simulator
     folded = LegCore(plan, 400, multipliers=1, dsp=(16, 16), dsp_registers="ice40")
     assert folded.dsp_registers == folded.evaluator.dsp_registers == "ice40"
     assert folded.simulation_model().evaluator.dsp_registers is None
+
+
+@pytest.mark.parametrize("ii, backpressure", [(1, False), (1, True), (3, True)])
+def test_registered_tables_take_one_more_cycle_and_stay_bit_exact(ii, backpressure):
+    """With registered tables every table read takes REGISTERED_TABLE_LATENCY cycles in the
+    schedule (pure data), the fabric twin (Memory read port + output register) has that
+    timing, and the outputs stay bit-exact, back to back and under backpressure."""
+    plan = tiny_piecewise_plan(1)
+    plain, core = ModuloEvaluator(plan, ii), ModuloEvaluator(plan, ii, registered_tables=True)
+    luts = [i for i, n in enumerate(plan.nodes) if n.op == "lut"]
+    assert luts and plain.registered_tables is None and core.registered_tables == 1
+    for ev, lat in ((plain, TABLE_LATENCY), (core, REGISTERED_TABLE_LATENCY)):
+        assert all(ev.schedule.ready[i] == ev.schedule.start[i] + lat for i in luts)
+    assert core.latency > plain.latency
+    res = simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.6 if backpressure else 1.0,
+                             valid_prob=0.7 if backpressure else 1.0, seed=ii)
+    if not backpressure:
+        assert np.all(res.latencies == core.latency) and np.all(np.diff(res.input_cycles) == ii)
+
+
+def test_real_plan_with_registered_tables_random_targets_bit_exact(plan):
+    core = ModuloEvaluator(plan, 1, registered_tables=True)
+    res = simulate_bit_exact(core, plan, random_targets(plan, 300, np.random.default_rng(6)),
+                             ready_prob=0.8, seed=6)
+    assert np.all(res.latencies >= core.latency)
+
+
+def test_ecp5_tables_on_dp16kd_with_its_output_register():
+    """With dsp_registers="ecp5" and registered tables each ROM (the luts of one index) is on
+    DP16KD blocks with REGMODE_A "OUTREG" cleared by the domain's reset (the timing is checked
+    by simulation, test_cocotb.py); by default only tables of at least DP16KD_MIN_DEPTH words
+    (where Yosys itself would use block RAM) are, so the tiny plan's stay unregistered fabric
+    tables, as with registered_tables=False; on the iCE40 (no block RAM primitive) tables stay
+    unregistered."""
+    from amaranth.back import verilog
+    from ikseries.constraints.ecp5 import DP16KD_MIN_DEPTH, dp16kd_shape
+    from ikseries.hdl.evaluator import lut_groups, lut_rom_init
+    plan = tiny_piecewise_plan(0)
+    core = ModuloEvaluator(plan, 1, dsp_registers="ecp5", registered_tables=True)
+    assert core.registered_tables == 1 and [p.name for p in core.primitives] == ["MULT18X18D", "DP16KD"]
+    text = verilog.convert(core, name="m", emit_src=False)
+    blocks = sum(-(-w // dp16kd_shape(len(init))[0])
+                 for init, w in (lut_rom_init(plan, i, luts) for i, luts in lut_groups(plan).items()))
+    assert text.count("DP16KD #(") == text.count('.REGMODE_A("OUTREG")') == blocks > 0
+    assert text.count(".RSTA(rst)") == blocks
+    default = ModuloEvaluator(plan, 1, dsp_registers="ecp5")
+    assert default.registered_tables == DP16KD_MIN_DEPTH > max(len(lut_rom_init(plan, i, luts)[0])
+                                                              for i, luts in lut_groups(plan).items())
+    off = ModuloEvaluator(plan, 1, dsp_registers="ecp5", registered_tables=False)
+    for ev in (default, off):
+        assert "DP16KD" not in verilog.convert(ev, name="m", emit_src=False)
+        assert [p.name for p in ev.primitives] == ["MULT18X18D"]
+        assert ev.latency == ModuloEvaluator(plan, 1).latency < core.latency
+    deep = ModuloEvaluator(plan, 1, registered_tables=4)      # only the tables of >= 4 words
+    lut_lat = {deep.schedule.ready[i] - deep.schedule.start[i] for i, n in enumerate(plan.nodes) if n.op == "lut"}
+    assert lut_lat <= {TABLE_LATENCY, REGISTERED_TABLE_LATENCY}
+    ice = ModuloEvaluator(plan, 1, dsp=(16, 16), dsp_registers="ice40")
+    assert ice.registered_tables is None and [p.name for p in ice.primitives] == ["SB_MAC16"]
+    for bad in ("yes", 0):
+        with pytest.raises(ValueError, match=r"^registered_tables must be None, True, False or an integer >= 1 "
+                                             rf"\(the fewest words of a registered table\), not {bad!r}$"):
+            ModuloEvaluator(plan, 1, registered_tables=bad)
+
+
+def test_leg_core_twin_keeps_registered_tables():
+    from ikseries.hdl.leg import LegCore
+    plan = tiny_piecewise_plan(0, clamp=(0, 100))
+    core = LegCore(plan, 400, interval=2, dsp=(18, 18), dsp_registers="ecp5", registered_tables=True)
+    twin = core.simulation_model()
+    assert twin.dsp_registers is None and twin.evaluator.registered_tables == 1 and twin.latency == core.latency
+    assert LegCore(plan, 400, interval=2, dsp=(18, 18), dsp_registers="ecp5").simulation_model().evaluator \
+        .registered_tables == 128
+    assert [p.name for p in core.primitives] == ["MULT18X18D", "DP16KD"] and twin.primitives == ()
+    simulate_bit_exact(twin, plan, all_ports(plan), ready_prob=0.7, seed=4)
+    with pytest.raises(ValueError, match=r"^registered_tables must be None without interval \(only the "
+                                         r"modulo-scheduled evaluator registers its tables\), not True$"):
+        LegCore(plan, 400, registered_tables=True)
 
 
 def test_schedule_puts_products_that_share_an_operand_on_one_multiplier():

@@ -212,3 +212,21 @@ def test_median_records_take_the_median_seed():
     assert (two["fmax_mhz"], two["seed"]) == (40.0, 2)          # the slower of two
     one_placed = bench.median_records([[rec(None, "error")], [rec(45.0)]], [1, 2])[0]
     assert (one_placed["fmax_mhz"], one_placed["seed"]) == (45.0, 2)
+
+
+def test_merge_keeps_the_other_designs_records(tmp_path):
+    """--merge: the re-measured (design, device) records replace the old ones, every other
+    record of the existing JSON stays, and the run that measured them is listed; other seeds
+    are refused."""
+    bench = _bench()
+    out = tmp_path / "pareto.json"
+    old = [{"design": "modulo1dt", "device": "x", "fmax_mhz": 134.0},
+           {"design": "cordic", "device": "x", "fmax_mhz": 100.0},
+           {"design": "cordic", "device": "y", "fmax_mhz": 50.0}]
+    out.write_text(json.dumps({"run": {"command": "old"}, "seeds": [1, 2, 3], "records": old}))
+    new = [{"design": "modulo1dt", "device": "x", "fmax_mhz": 212.0}]
+    assert bench.merge_records(out, new, [1, 2, 3]) == [{"command": "old"}]
+    assert new == [{"design": "modulo1dt", "device": "x", "fmax_mhz": 212.0}, *old[1:]]
+    with pytest.raises(SystemExit, match=r"^--seeds must be those of .* \(\[1, 2, 3\]\) with --merge, not \[1\]$"):
+        bench.merge_records(out, [], [1])
+    assert bench.merge_records(tmp_path / "none.json", new, [1]) == []

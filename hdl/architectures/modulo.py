@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from ..leg import LegCore
 from ..modulo import ModuloEvaluator, modulo_schedule
+from ..tables import default_registered_depth
 from . import Architecture, BuildTarget, Timing
 from .options import check_primitives, dsp_label, dsp_size, positive_int
 
@@ -22,7 +23,10 @@ class Modulo(Architecture):
         products; the evaluator's default 18 x 18).
     primitives : bool
         Products on the DSP family's instantiated primitives with their own registers (needs a
-        ``dsp`` family that has them, see :mod:`ikseries.constraints`).
+        ``dsp`` family that has them, see :mod:`ikseries.constraints`), and, on a family with a
+        block RAM primitive (the ECP5's DP16KD), the tables deep enough for it on it with its
+        output register: one more cycle per such table read (:class:`~ikseries.hdl.modulo.ModuloEvaluator`,
+        ``registered_tables``).
     """
 
     name = "modulo"
@@ -33,23 +37,31 @@ class Modulo(Architecture):
         self.dsp, self.primitives = dsp, check_primitives(primitives, dsp)
 
     @property
+    def _registers(self) -> str | None:
+        """The ``dsp_registers`` of the evaluator: the family, with primitives."""
+        return self.dsp if self.primitives else None
+
+    @property
+    def _registered_depth(self) -> int | None:
+        return default_registered_depth(self._registers)
+
+    @property
     def _size(self):
         return dsp_size(self.dsp) or dsp_size("ecp5")   # the evaluator's default block
 
     def timing(self, plan) -> Timing:
-        s = modulo_schedule(plan, self.interval, self._size)
+        s = modulo_schedule(plan, self.interval, self._size, self._registered_depth)
         return Timing(s.latency, s.initiation_interval, "modulo")
 
     def evaluator(self, plan):
-        return ModuloEvaluator(plan, self.interval, dsp=self._size,
-                               dsp_registers=self.dsp if self.primitives else None)
+        return ModuloEvaluator(plan, self.interval, dsp=self._size, dsp_registers=self._registers)
 
     def build(self, plan, target: BuildTarget):
         return LegCore(plan, target.period, interval=self.interval, dsp=dsp_size(self.dsp),
-                       dsp_registers=self.dsp if self.primitives else None)
+                       dsp_registers=self._registers)
 
     def multiplier_units(self, plan) -> int:
-        return modulo_schedule(plan, self.interval, self._size).units
+        return modulo_schedule(plan, self.interval, self._size, self._registered_depth).units
 
     def describe(self) -> str:
         return f"modulo-scheduled pipeline, one target per {self.interval} cycles ({dsp_label(self.dsp)})"

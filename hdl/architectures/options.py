@@ -1,7 +1,7 @@
 """Option checks shared by the polynomial architectures."""
 from __future__ import annotations
 
-from ...constraints.devices import FAMILIES, PRIMITIVES
+from ...constraints.devices import FAMILIES, multiplier_families
 
 __all__ = ["dsp_size", "positive_int", "dsp_label", "primitive_families", "check_primitives"]
 
@@ -30,7 +30,7 @@ def positive_int(value, name: str) -> int:
 
 def primitive_families() -> tuple[str, ...]:
     """Families whose DSP primitives a modulo core can instantiate (with their registers)."""
-    return tuple(dict.fromkeys(p.family for p in PRIMITIVES.values()))
+    return multiplier_families()
 
 
 def check_primitives(primitives, dsp: str | None) -> bool:
