@@ -247,6 +247,7 @@ class PlanBuilder:
         self.inputs = list(inputs)
         self.nodes: list[Node] = []
         self._memo: dict[tuple, int] = {}
+        self._stages: list[int] = []       # of nodes[:len(_stages)], extended on demand
         self.input_nodes = {}
         for i in self.inputs if with_inputs else ():
             raw = self._append("input", (), i.frac, i.name)
@@ -281,11 +282,16 @@ class PlanBuilder:
             yield self
         finally:
             del self.nodes[n:]
+            del self._stages[n:]
             self._memo = memo
 
     def stages(self) -> list[int]:
         """Pipeline stage of every node so far (see :meth:`Plan.stages`)."""
         return extend_stages(self.nodes, [])
+
+    def stage(self, a: int) -> int:
+        """Pipeline stage of node ``a`` (see :meth:`Plan.stages`)."""
+        return extend_stages(self.nodes, self._stages)[a]
 
     # -- helpers ---------------------------------------------------------------
     def const(self, value: float, frac: int) -> int:
@@ -327,7 +333,23 @@ class PlanBuilder:
         folded = self._fold_constants(a, b)
         if folded is None:
             folded = self._fold_constants(b, a)
+        if folded is None:
+            folded = self._latest_last(a, b)
+        if folded is None:
+            folded = self._latest_last(b, a)
         return folded if folded is not None else self._append("add", (a, b), f)
+
+    def _latest_last(self, a: int, b: int) -> int | None:
+        """``(x + y) + b`` as ``(x + b) + y`` when ``y`` is ready last (a product, say): the
+        earlier terms are summed while it is computed, one stage sooner; the same integers,
+        adders and rounding bound (additions are exact)."""
+        n = self.nodes[a]
+        if n.op != "add":
+            return None
+        for x, y in (n.args, n.args[::-1]):
+            if self.stage(y) > max(self.stage(x), self.stage(b)):
+                return self.add(self.add(x, b), y)
+        return None
 
     def _fold_constants(self, a: int, b: int) -> int | None:
         """``(x + c1) + c2`` as ``x + (c1 + c2)``: one adder (and one pipeline stage) fewer, the

@@ -130,6 +130,20 @@ def test_constants_added_in_turn_are_one_adder():
     check_exhaustively(plan, want=lambda ports: ports["a"].astype(float) ** 2 / 4096 + 0.3 - 1.7)
 
 
+def test_a_term_ready_last_is_added_last():
+    """``(a + p) + q``, with the product ``p`` of ``a`` ready after ``a`` and ``q``, is built as
+    ``(a + q) + p``: one stage fewer, as many adders, the same integers and rounding bound."""
+    inputs = [PlanInput("a", "mm", 0, 0, 15, 4, False), PlanInput("b", "mm", 0, -8, 7, 4, True)]
+    b = PlanBuilder(inputs)
+    a, q = b.input_nodes["a"], b.input_nodes["b"]
+    p = b.mul(b.mul(a, a), a)                            # stage 3
+    total = b.add(b.add(a, p), q)
+    plan = b.build([PlanOutput("t", total, total, "ticks", 1.0)])
+    assert plan.count("add") == 2 and plan.depth == plan.stages()[plan.outputs[0].node] == 4
+    assert plan.nodes[plan.outputs[0].node].op == "add"
+    check_exhaustively(plan, want=lambda ports: ports["a"] + ports["a"] ** 3 + ports["b"])
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_piecewise_plan_intervals_and_rounding_bound_hold_exhaustively(seed):
     plan = tiny_piecewise_plan(seed)
