@@ -176,6 +176,6 @@ class RobotController(wiring.Component):
                      link.counter_addr.eq(d.counter_addr), d.counter_data.eq(link.counter_data), link.clamped.eq(d.clamped),
                      d.answer_index.eq(link.answer_index),
                      servo.commit.eq(d.commit), servo.keepalive.eq(d.keepalive),
-                     d.busy.eq(servo.busy), d.period_start.eq(servo.period_start),
+                     d.busy.eq(servo.busy), d.period_start.eq(servo.period_start), d.phase.eq(servo.phase),
                      link.period.eq(servo.period_start)]
         return m

@@ -10,7 +10,6 @@ from amaranth.lib.memory import Memory
 from . import protocol as P
 from .answers import answer_bytes, answer_constant
 from .bram import falling_edge_write_port
-from .lfsr import countdown
 from .dispatch_microcode import CODED, CONDS, SOURCES, STROBES, Geometry, assemble, encode, fields, program
 
 __all__ = ["Dispatcher"]
@@ -20,6 +19,16 @@ _C = {c.name: c for c in P.COMMANDS}
 _BUILT = (_C["status"].answer, _C["channel_status"].answer, P.NACK_FIELDS)
 _OPS = {"ra": ("inc", "set", "clear"), "ch": ("inc", "load", "clear"), "lm": ("rot", "mask", "one"),
         "s": ("shift", "load"), "wm": ("ans", "width", "pulse")}
+
+
+def _at_most(x, k: int):
+    """``x <= k`` for an unsigned signal ``x`` and a constant ``k``, as a chain of ANDs and ORs
+    from the least significant bit up (a LUT per three bits; Yosys makes a comparison with a
+    constant a carry chain of a cell per bit)."""
+    le = 1
+    for i in range(len(x)):
+        le = (~x[i] | le) if k >> i & 1 else (~x[i] & le)
+    return le if k < (1 << len(x)) - 1 else 1
 
 
 class _Regs:
@@ -101,7 +110,7 @@ class Dispatcher(wiring.Component):
         link counts it in its counter memory (word ``CLAMPED_WORD``).
     ik_i, ik_o
         To the core's ``i`` and ``o``.
-    write, target, commit, read, status, keepalive, busy, period_start
+    write, target, commit, read, status, keepalive, busy, period_start, phase
         To the servo controller's ports of the same names.
 
     Reset state: idle, no answer pending, move time 0 (the status answer's counters are the
@@ -159,7 +168,7 @@ class Dispatcher(wiring.Component):
                                          "counter_data", "answer", "answer_data", "answer_index", "clamped")},
             "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(),
             **{n: ss[n].flip() for n in ("write", "target", "commit", "read", "status",
-                                         "keepalive", "busy", "period_start")},
+                                         "keepalive", "busy", "period_start", "phase")},
         })
         self._servo_names = core.servos
 
@@ -232,10 +241,13 @@ class Dispatcher(wiring.Component):
     # -- conditions and the next address
     def _sequencer(self, m, r, u, rp):
         c = self._channels
-        # the window: fewer than period - stage_cycles - 1 cycles since the last period start;
-        # registered a cycle late (the count has moved on by one, or restarted: then it errs closed)
-        early = Signal()
-        m.d.sync += early.eq(countdown(m, self.period_start, self._period - self._stage_cycles - 1, "since"))
+        # the window: fewer than period - stage_cycles - 1 cycles since the last period start,
+        # registered a cycle late (the count has moved on by one, or restarted: then it errs
+        # closed). period_start is high at phase 1, so the cycles 1 .. that many after it are
+        # phases 2 .. period - stage_cycles: a comparison of the PWM bank's counter with
+        # constants (a few LUTs), no counter of the dispatcher's own
+        early, phase = Signal(), self.phase
+        m.d.sync += early.eq(phase[1:].any() & _at_most(phase, self._period - self._stage_cycles))
         window = ~self.busy & early
         base = {"0": Const(0, 1), "B": r.b_, "BL": r.bl,
                 "reqok": self.request.valid & ~r.sending & ~self.answer.valid,

@@ -117,6 +117,9 @@ class ServoController(wiring.Component):
         The servo signals, registered; low for a relaxed channel.
     period_start : Out(1)
         High for one cycle when a PWM period starts; the engine pass starts then.
+    phase : Out(range(2 ** bits))
+        The PWM bank's period counter (:class:`~ikseries.hdl.pwmbank.ServoPWMBank` ``phase``):
+        ``period_start`` is high while it is 1.
     busy : Out(1)
         The engine is initialising or in a pass (the host streams wait).
 
@@ -172,7 +175,7 @@ class ServoController(wiring.Component):
                              f"{width_bits} bits, not {period!r}")
         # a pass loads every channel once, in order, between two period starts (the
         # microprogram's LOADNEXT ends each channel's path; period >= init + pass cycles)
-        self._bank = ServoPWMBank(period, width_bits, channels, 1, home_at_reset, in_order=True)
+        self._bank = ServoPWMBank(period, width_bits, channels, 1, home_at_reset, in_order=True, phase=True)
         sig = {
             "write": In(stream.Signature(self._engine.write_layout)),
             "target": In(stream.Signature(self._engine.target_layout)),
@@ -181,7 +184,7 @@ class ServoController(wiring.Component):
             "status": Out(stream.Signature(self._engine.status_layout)),
             "keepalive": In(1),
             "failsafe": Out(1), "clamped": Out(1), "bad_write": Out(1), "busy": Out(1),
-            "pwm": Out(channels), "period_start": Out(1),
+            "pwm": Out(channels), "period_start": Out(1), "phase": Out((period - 1).bit_length()),
         }
         if ik_layout is not None:
             sig["ik"] = In(stream.Signature(ik_layout))
@@ -228,7 +231,8 @@ class ServoController(wiring.Component):
                      self.bad_write.eq(eng.bad_write), self.busy.eq(eng.busy),
                      bank.i.valid.eq(eng.load.valid), bank.i.payload.group.eq(eng.load.payload.channel),
                      bank.i.payload.widths[0].eq(eng.load.payload.width), eng.load.ready.eq(1),
-                     self.pwm.eq(bank.pwm), self.period_start.eq(bank.period_start)]
+                     self.pwm.eq(bank.pwm), self.period_start.eq(bank.period_start),
+                     self.phase.eq(bank.phase)]
         if self._servos:
             self._wire_ik(m, eng)
         return m
