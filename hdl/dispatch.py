@@ -110,7 +110,7 @@ class Dispatcher(wiring.Component):
         link counts it in its counter memory (word ``CLAMPED_WORD``).
     ik_i, ik_o
         To the core's ``i`` and ``o``.
-    write, target, commit, read, status, keepalive, busy, period_start, phase
+    write, target, commit, read, status, status_shift, keepalive, busy, period_start, phase
         To the servo controller's ports of the same names.
 
     Reset state: idle, no answer pending, move time 0 (the status answer's counters are the
@@ -168,7 +168,7 @@ class Dispatcher(wiring.Component):
                                          "counter_data", "answer", "answer_data", "answer_index", "clamped")},
             "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(),
             **{n: ss[n].flip() for n in ("write", "target", "commit", "read", "status",
-                                         "keepalive", "busy", "period_start", "phase")},
+                                         "keepalive", "busy", "period_start", "phase", "status_shift")},
         })
         self._servo_names = core.servos
 
@@ -279,10 +279,13 @@ class Dispatcher(wiring.Component):
     def _source(self, m, r, u):
         st, imm, cd = self.status.payload, u["imm"], self.counter_data
         flag = Mux(u["bsel"] | r.bl, st.enabled, st.moving)
-        stb = Cat(st.target, Const(0, 32 - len(st.target)), st.current, Const(0, 32 - len(st.current)))
         src = {"IMM": imm, "RD": self.rd_data, "F0": r.f[:8], "SEXT": r.f[31].replicate(8),
                "CNT": Mux(imm[4], cd[8:16], cd[:8]), "S": r.s, "FLAG": flag, "CMD": r.cmd,
-               "STB": stb.word_select(imm[:3], 8)}
+               "STB": Mux(u["bias"], st.current[:8], st.target[:8])}
+        # STB's byte is the low byte of the status's current (bias) or target; after the
+        # current's, the servo controller shifts both a byte down (dispatch_microcode
+        # _channel_status takes them in pairs)
+        m.d.comb += self.status_shift.eq(~r.boot & (u["src"] == SOURCES.index("STB")) & u["bias"])
         x = Signal(8)
         with m.Switch(u["src"]):
             for name, sig in src.items():

@@ -89,6 +89,7 @@ class Ins:
     s: str | None = None
     sz: bool = False                # S shifts in 0 (else the status flag bsel names)
     bsel: int = 0                   # 0: moving, 1: enabled
+    current: bool = False           # STB: the status's current (else target); both shift a byte after it
     wm: str | None = None
     hold: bool = False
     sp: frozenset = field(default_factory=frozenset)
@@ -227,7 +228,10 @@ def _channel_status(g):
     return [_ins(sp={"ACC"}, at=_entry(1, "channel_status")), _wait("CSA", "applied"),
             _wait("CSR", "rd_ready", sp={"RDV"}),
             _wait("CSW", "st_valid"), _ins(wm="ans", src="F0"),
-            *[_ins(wm="ans", src="STB", imm=k) for k in (0, 1, 2, 4, 5, 6)],
+            # target and current bytes in pairs (low bytes first): each pair shifts both a byte
+            # down, each write sets the address of the next (BSET): target at 1-3, current at 4-6
+            *[_ins(wm="ans", src="STB", current=bool(k % 2), sp={"BSET"}, imm=after)
+              for k, after in enumerate((4, 2, 5, 3, 6, 7))],
             _ins(wm="ans", src="FLAG", bsel=0), _ins(wm="ans", src="FLAG", bsel=1, sp={"STR"}),
             _header("CSHDR", 9)]
 
@@ -486,6 +490,11 @@ def encode(asm: Assembled) -> list[int]:
             if s.imm & 3 and s.imm & 3 != (s.sz << 1 | s.bsel):
                 raise ValueError(f"instruction at {a} {s!r}: sz and bsel take immediate bits 1 and 0")
             v["imm"] = s.imm | s.sz << 1 | s.bsel
+        # current (STB's other word) is the bias bit: a byte that goes to no comparison
+        if s.current:
+            if s.src != "STB" or s.alu is not None or s.bias:
+                raise ValueError(f"instruction at {a} {s!r}: current is a choice of STB outside comparisons")
+            v["bias"] = 1
         v.update({k: ops.index(getattr(s, k)) for k, ops in _OPS.items()})
         v.update({k: int(k in s.sp) for k in BITS})
         word, off = 0, 0

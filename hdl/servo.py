@@ -107,6 +107,10 @@ class ServoController(wiring.Component):
         Status request for a channel.
     status : Out(stream.Signature(StructLayout({"target": W, "current": W, "moving": 1, "enabled": 1})))
         The answer (``moving``: current pulse != target or the profile has a nonzero step).
+    status_shift : In(1)
+        Strobe while ``status`` is offered: its ``target`` and ``current`` shift right by 8 bits
+        (zeros in), for a reader that takes them a byte at a time from their low bytes. Tie it
+        low to keep the answer as it is until taken.
     keepalive : In(1)
         Strobe: restarts the failsafe timeout (the link pulses it on every valid frame).
     failsafe : Out(1)
@@ -182,7 +186,7 @@ class ServoController(wiring.Component):
             "commit": In(1),
             "read": In(stream.Signature(range(channels))),
             "status": Out(stream.Signature(self._engine.status_layout)),
-            "keepalive": In(1),
+            "keepalive": In(1), "status_shift": In(1),
             "failsafe": Out(1), "clamped": Out(1), "bad_write": Out(1), "busy": Out(1),
             "pwm": Out(channels), "period_start": Out(1), "phase": Out((period - 1).bit_length()),
         }
@@ -225,7 +229,7 @@ class ServoController(wiring.Component):
         wiring.connect(m, wiring.flipped(self.target), eng.target)
         wiring.connect(m, wiring.flipped(self.read), eng.read)
         wiring.connect(m, eng.status, wiring.flipped(self.status))
-        m.d.comb += [eng.commit.eq(self.commit), eng.keepalive.eq(self.keepalive),
+        m.d.comb += [eng.commit.eq(self.commit), eng.keepalive.eq(self.keepalive), eng.status_shift.eq(self.status_shift),
                      eng.period_start.eq(bank.period_start),
                      self.failsafe.eq(eng.failsafe), self.clamped.eq(eng.clamped),
                      self.bad_write.eq(eng.bad_write), self.busy.eq(eng.busy),
