@@ -21,16 +21,6 @@ _OPS = {"ra": ("inc", "set", "clear"), "ch": ("inc", "load", "clear"), "lm": ("r
         "s": ("shift", "load"), "wm": ("ans", "width", "pulse")}
 
 
-def _at_most(x, k: int):
-    """``x <= k`` for an unsigned signal ``x`` and a constant ``k``, as a chain of ANDs and ORs
-    from the least significant bit up (a LUT per three bits; Yosys makes a comparison with a
-    constant a carry chain of a cell per bit)."""
-    le = 1
-    for i in range(len(x)):
-        le = (~x[i] | le) if k >> i & 1 else (~x[i] & le)
-    return le if k < (1 << len(x)) - 1 else 1
-
-
 class _Regs:
     """The machine's registers."""
 
@@ -243,11 +233,17 @@ class Dispatcher(wiring.Component):
         c = self._channels
         # the window: fewer than period - stage_cycles - 1 cycles since the last period start,
         # registered a cycle late (the count has moved on by one, or restarted: then it errs
-        # closed). period_start is high at phase 1, so the cycles 1 .. that many after it are
-        # phases 2 .. period - stage_cycles: a comparison of the PWM bank's counter with
-        # constants (a few LUTs), no counter of the dispatcher's own
-        early, phase = Signal(), self.phase
-        m.d.sync += early.eq(phase[1:].any() & _at_most(phase, self._period - self._stage_cycles))
+        # closed). period_start is high at phase 1, so those are phases 2 .. period -
+        # stage_cycles, seen at phases 3 .. period - stage_cycles + 1: a flag set by
+        # period_start, cleared by one comparison of the PWM bank's counter with a constant (a
+        # few LUTs, no counter of the dispatcher's own). It opens a cycle early, at phase 2,
+        # where the servo controller is busy with the pass period_start began: the window
+        # opens no sooner
+        early = Signal()
+        with m.If(self.period_start):
+            m.d.sync += early.eq(1)
+        with m.Elif(self.phase == self._period - self._stage_cycles + 1):
+            m.d.sync += early.eq(0)
         window = ~self.busy & early
         base = {"0": Const(0, 1), "B": r.b_, "BL": r.bl,
                 "reqok": self.request.valid & ~r.sending & ~self.answer.valid,
@@ -309,6 +305,11 @@ class Dispatcher(wiring.Component):
             m.d.sync += r.bl.eq(r.b_)
         with m.If(u["shf"] & go):
             m.d.sync += r.f.eq(Cat(r.f[8:], x))
+        # the move time into F for the staging (the target's time is F's low bits, and so is
+        # a write's value: one source for both in the servo controller's memory write); F's
+        # low 24 bits shift in from F itself, so the load takes no cell of its own there
+        with m.If(e["FMT"]):
+            m.d.sync += r.f[:self._time_bits].eq(r.move_time)
         with m.If(u["tg"] & go):
             m.d.sync += r.tg.eq(Cat(r.tg[8:], y))
         ra = self._op(m, u, "ra", go)
@@ -402,7 +403,7 @@ class Dispatcher(wiring.Component):
                      self.write.valid.eq(s["WRV"]), self.write.payload.channel.eq(r.ch),
                      self.write.payload.field.eq(imm[:4]), self.write.payload.value.eq(r.f),
                      self.target.valid.eq(s["TGV"]), self.target.payload.channel.eq(r.ch),
-                     self.target.payload.pulse.eq(rd.data), self.target.payload.time.eq(r.move_time),
+                     self.target.payload.pulse.eq(rd.data), self.target.payload.time.eq(r.f[:self._time_bits]),
                      self.read.valid.eq(s["RDV"]), self.read.payload.eq(r.ch), self.status.ready.eq(e["STR"])]
         m.d.comb += [self.ik_i.payload.target[inp.name].eq(r.tg[16 * k:16 * k + 16])
                      for k, inp in enumerate(self._plan.inputs)]

@@ -40,7 +40,7 @@ SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "S", "FLAG", "CMD", "STB")
 #: one ROM bit each (the stream strobes, decoded by nothing)
 BITS = ("ACC", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV")
 #: at most one of these an instruction: a 4-bit code (0: none)
-CODED = ("IDENT", "NACK", "TAKE", "DISP", "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET")
+CODED = ("IDENT", "NACK", "TAKE", "DISP", "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET", "FMT")
 STROBES = BITS + CODED
 #: strobes whose effects do not wait for a wait's condition (the dispatcher gates only the others)
 _UNHELD = frozenset(STROBES) - {"CLI", "HDR", "TAKE", "RDV", "IKV", "IKR", "TGV", "WRV"}
@@ -346,14 +346,15 @@ def _moves(g):
                          sp={"IKR"} if j == g.servos - 1 else ()))
     out += [_ins(label="LNEXT", lm="rot", cond="leglast", to="MDONE", nxt="LEG"),
             *_skip("SKIP", g.servos, "LNEXT"),
-            _ins(label="MDONE", sp={"ACC"}, ch="clear", nxt="STAGE")]
+            _ins(label="MDONE", sp={"ACC", "FMT"}, ch="clear", nxt="STAGE")]
     return out
 
 
 def _stage(g):
     """Wait for the staging window; stage the legs' (or set_pulse's one) widths; commit. A
-    width is read a cycle before it is offered (the buffer's read port follows the channel)."""
-    out = [_ins(sp={"ACC"}, wm="pulse", src="F0", at=_entry(2, "set_pulse")), _wait("SPW", "window"),
+    width is read a cycle before it is offered (the buffer's read port follows the channel);
+    the move time is F's (FMT, with the request's acceptance: F is not needed after it)."""
+    out = [_ins(sp={"ACC", "FMT"}, wm="pulse", src="F0", at=_entry(2, "set_pulse")), _wait("SPW", "window"),
            _wait("SPT", "tg_ready", sp={"TGV"}, nxt="COMMIT")]
     out += [_wait("STAGE", "window"), _ins(label="SL", cond="~LM0", to="SSKIP")]
     for j in range(g.servos):
