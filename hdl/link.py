@@ -150,7 +150,9 @@ def _counter_engine(m, events, period, clamped, counter_bits, write_domain):
     m.d.comb += scan_rd.addr.eq(addr)
     with m.If(clearing):
         m.d.sync += high_full.eq(0)
-    with m.Elif((held == high) & hit & (total[:counter_bits] == (1 << counter_bits) - 1)):
+    # the incremented word all ones: its read one below (the incrementer's sum then drives
+    # only the write register, and shares its cells)
+    with m.Elif((held == high) & hit & (scan_rd.data == (1 << counter_bits) - 2)):
         m.d.sync += high_full.eq(1)
     served = Cat(*(held == k for k in range(words)))
     m.d.sync += pending.eq((pending & ~served) | Cat(*events, period, carry, clamped))
