@@ -40,7 +40,6 @@ class _Regs:
         self.b = Signal(range(d._region))                   # answer byte being built
         self.nack, self.ident, self.sending = Signal(), Signal(), Signal()
         self.ans_len = Signal(range(d._region + 1))
-        self.ans_cmd = Signal(8)
         self.rd_idx = Signal(range(d._region))              # answer byte the memory now shows
         self.move_time = Signal(d._time_bits)
         self.pending, self.started = Signal(), Signal()     # a commit not yet applied; its pass began
@@ -61,8 +60,9 @@ class Dispatcher(wiring.Component):
     every range check and each target coordinate's saturation is a comparison of the field
     register's bytes with the program's constants by one 8-bit subtract-with-borrow unit;
     answers are built a byte a cycle in block RAM. The streams to the servo controller and the
-    core are driven by the ROM's output register and by registers, the answer header by a
-    register; the conditions a wait ends on are the one combinational path in from them.
+    core are driven by the ROM's output register and by registers, the answer header by
+    registers (its code from the request's and the NACK flag, both held while it is offered);
+    the conditions a wait ends on are the one combinational path in from them.
 
     Moves: each leg of a ``move_leg``/``move_legs`` target goes through the IK core, one leg at
     a time; a coordinate is saturated to the plan input's ``[lo, hi]`` first (``status`` counts
@@ -345,10 +345,11 @@ class Dispatcher(wiring.Component):
             with m.If(e[strobe]):
                 m.d.sync += reg.eq(value)
         # every cycle of the idle wait: the request's command is held while it is offered; the
-        # identity answer's region is kept while it is sent
-        with m.If(e["TAKE"]):
+        # identity answer's region is kept while it is sent. Not while the answer header is
+        # offered (no request is taken then): its code comes from the command and NACK flag
+        with m.If(e["TAKE"] & ~self.answer.valid):
             m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.b.eq(0), r.nack.eq(0), r.bl.eq(0)]
-            with m.If(~r.sending & ~self.answer.valid):
+            with m.If(~r.sending):
                 m.d.sync += r.ident.eq(0)
         # a leg target saturated: counted in the link's counter memory (registered: one pulse)
         m.d.sync += self.clamped.eq(e["CLI"] & r.out)
@@ -398,7 +399,7 @@ class Dispatcher(wiring.Component):
         # registered: the request's acceptance depends on the field checks
         m.d.sync += [self.keepalive.eq(self.request.valid & self.request.ready), self.commit.eq(e["COMMIT"])]
         m.d.comb += [self.request.ready.eq(e["ACC"]), self.counter_addr.eq(imm[:4]), self.rd_addr.eq(r.ra),
-                     self.answer.payload.length.eq(r.ans_len), self.answer.payload.command.eq(r.ans_cmd),
+                     self.answer.payload.length.eq(r.ans_len), self.answer.payload.command.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT)),
                      self.ik_i.valid.eq(s["IKV"]), self.ik_i.payload.leg.eq(r.leg), self.ik_o.ready.eq(s["IKR"]),
                      self.write.valid.eq(s["WRV"]), self.write.payload.channel.eq(r.ch),
                      self.write.payload.field.eq(imm[:4]), self.write.payload.value.eq(r.f),
@@ -407,9 +408,9 @@ class Dispatcher(wiring.Component):
                      self.read.valid.eq(s["RDV"]), self.read.payload.eq(r.ch), self.status.ready.eq(e["STR"])]
         m.d.comb += [self.ik_i.payload.target[inp.name].eq(r.tg[16 * k:16 * k + 16])
                      for k, inp in enumerate(self._plan.inputs)]
-        # the header in a register, offered until the link takes it
+        # the header in registers, offered until the link takes it (the link's transmitter
+        # registers its code: the LUTs of the code's choice pack with its flip-flops)
         with m.If(e["HDR"]):
-            m.d.sync += [self.answer.valid.eq(1), r.ans_len.eq(imm),
-                         r.ans_cmd.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT))]
+            m.d.sync += [self.answer.valid.eq(1), r.ans_len.eq(imm)]
         with m.If(self.answer.valid & self.answer.ready):
             m.d.sync += [self.answer.valid.eq(0), r.sending.eq(r.ans_len != 0)]
