@@ -40,7 +40,6 @@ class _Regs:
         self.b = Signal(range(d._region))                   # answer byte being built
         self.nack, self.ident, self.sending = Signal(), Signal(), Signal()
         self.ans_len = Signal(range(d._region + 1))
-        self.rd_idx = Signal(range(d._region))              # answer byte the memory now shows
         self.move_time = Signal(d._time_bits)
         self.pending, self.started = Signal(), Signal()     # a commit not yet applied; its pass began
 
@@ -93,7 +92,7 @@ class Dispatcher(wiring.Component):
 
     Attributes
     ----------
-    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index
+    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index, answer_moved
         To the link's ports of the same names.
     clamped
         To the link's ``clamped``: a pulse (registered) per leg target that was saturated; the
@@ -155,7 +154,8 @@ class Dispatcher(wiring.Component):
         ls, cs, ss = link.signature.members, core.signature.members, servo.signature.members
         super().__init__({
             **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counter_addr",
-                                         "counter_data", "answer", "answer_data", "answer_index", "clamped")},
+                                         "counter_data", "answer", "answer_data", "answer_index", "answer_moved",
+                                         "clamped")},
             "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(),
             **{n: ss[n].flip() for n in ("write", "target", "commit", "read", "status",
                                          "keepalive", "busy", "period_start", "phase", "status_shift")},
@@ -376,13 +376,14 @@ class Dispatcher(wiring.Component):
                      wr.addr.eq(Mux(op[1], r.ch, self._region_addr(1, r.b))),
                      wr.data.eq(Mux(op == 2, widths, Cat(x, r.f[8:self._w])))]
         # the read port serves the answer being sent or else the staging of widths; a byte is
-        # valid once the memory shows the one the link names (the index just moved: not yet)
+        # valid once the memory shows the one the link names (the index just moved, as the
+        # link's answer_moved says: not yet)
         idx = self.answer_index
         shown = Signal()
-        m.d.sync += [r.rd_idx.eq(idx), shown.eq(r.sending)]
+        m.d.sync += shown.eq(r.sending)
         m.d.comb += [rd.addr.eq(Mux(r.sending, Mux(r.ident, self._region_addr(2, idx), self._region_addr(1, idx)),
                                     r.ch)),
-                     self.answer_data.valid.eq(r.sending & shown & (r.rd_idx == idx)),
+                     self.answer_data.valid.eq(r.sending & shown & ~self.answer_moved),
                      self.answer_data.payload.eq(rd.data[:8])]
         with m.If(self.answer_data.valid & self.answer_data.ready & (idx == r.ans_len - 1)):
             m.d.sync += r.sending.eq(0)
