@@ -12,28 +12,56 @@ given with and without its own bank. Two figures of what the controller adds: be
 core (its servo PWM bank counted as added), and beyond the core with its own bank (what a
 plain IK core on a board has already: the servo pins' PWM; the rest is the UART, link,
 dispatcher and per-channel limiter and calibration).
+
+On the iCE40 the budget is in logic cells, one LUT4, one carry and one flip-flop each: the
+LUT and FF counts alone do not give it (a flip-flop shares a cell only with a LUT that drives
+nothing but its D input; one fed by another flip-flop, a block RAM or a LUT of several loads
+takes a cell of its own, and so does a carry whose LUT inputs differ). So each design's netlist
+is also packed by nextpnr (``--pack-only``, the UP5K SG48): ``LC`` is its ICESTORM_LC count,
+and the beyond-core figures subtract the packed cells the same way.
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import runpy
+import subprocess
 import tempfile
 from pathlib import Path
 
-from ikseries.constraints.devices import FAMILIES
+from ikseries.constraints.devices import FAMILIES, PNR_DEVICES
 from ikseries.fit.fitter import fit_robot
 from ikseries.hdl.controller import RobotController
 from ikseries.hdl.pwmbank import ServoPWMBank
+from ikseries.pnr import nextpnr_command
 from ikseries.robot import load_preset
-from ikseries.synth import component_counts
+from ikseries.synth import synth_counts
 from ikseries.threads import single_threaded_blas
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
 
 
 def minus(a: dict, b: dict) -> dict:
-    return {k: a.get(k, 0) - b.get(k, 0) for k in a}
+    return {k: a.get(k, 0) - b.get(k, 0) for k in a if k in b or k != "LC"}
+
+
+def counts(component, workdir: Path, families) -> dict:
+    """``{family: counts}`` of ``component`` (as :func:`~ikseries.synth.component_counts`), the iCE40's
+    with ``LC``: its netlist packed by nextpnr (``--pack-only``: no placement, so a design with more
+    ports than the package still counts)."""
+    from amaranth.back import verilog
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / "top.v").write_text(verilog.convert(component, name="top", emit_src=False))
+    got = {t: r["counts"] for t, r in synth_counts(workdir / "top.v", "top", families, workdir=workdir,
+                                                   netlist="ice40" in families).items()}
+    if "ice40" in got:
+        tdir = workdir / "ice40"
+        subprocess.run([*nextpnr_command("ice40"), *PNR_DEVICES["ice40-up5k-sg48"].nextpnr_args, "--json",
+                        "netlist.json", "--pack-only", "--report", "pack.json", "-q"],
+                       cwd=tdir, check=True, capture_output=True)
+        got["ice40"]["LC"] = json.loads((tdir / "pack.json").read_text())["utilization"]["ICESTORM_LC"]["used"]
+    return got
 
 
 def main(argv=None):
@@ -62,7 +90,7 @@ def main(argv=None):
     designs = {"controller": ctl, **parts}
     with tempfile.TemporaryDirectory() as tmp:
         wd = a.workdir or Path(tmp)
-        got = {name: component_counts(c, wd / name, a.families) for name, c in designs.items()}
+        got = {name: counts(c, wd / name, a.families) for name, c in designs.items()}
     per_family = {}
     for fam in a.families:
         c = {name: got[name][fam] for name in designs}
@@ -74,10 +102,10 @@ def main(argv=None):
                "period": period, "clock_hz": a.clock, "divisor": ctl.divisor,
                "pass_cycles": servo.pass_cycles, "init_cycles": servo.init_cycles, "families": per_family}
     for fam, c in per_family.items():
-        print(f"\n{fam}: {'design':<22} {'LUT':>6} {'FF':>6} {'carry':>6} {'DSP':>4} {'BRAM':>5}")
+        cols = ((("LC", 6),) if fam == "ice40" else ()) + (("LUT", 6), ("FF", 6), ("carry", 6), ("DSP", 4), ("BRAM", 5))
+        print(f"\n{fam}: {'design':<22} " + " ".join(f"{k:>{w}}" for k, w in cols))
         for name in (*designs, "servo_without_bank", "core_without_bank", "beyond_core", "beyond_core_with_bank"):
-            print(f"{'':{len(fam) + 2}}{name:<22} " + " ".join(f"{c[name].get(k, 0):>{w}}" for k, w in
-                                                             (("LUT", 6), ("FF", 6), ("carry", 6), ("DSP", 4), ("BRAM", 5))))
+            print(f"{'':{len(fam) + 2}}{name:<22} " + " ".join(f"{c[name].get(k, 0):>{w}}" for k, w in cols))
     print(f"wrote {FACTS['write_result'](a.json, payload, run)}")
 
 

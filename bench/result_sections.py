@@ -325,10 +325,13 @@ def controller_cells(res: dict) -> list[str]:
              ("beyond the core with its own PWM bank", "beyond_core_with_bank"))
     lines = [f"{res['legs']} legs, {res['channels']} channels, {res['width_bits']}-bit widths, period "
              f"{res['period']:,} cycles, UART divisor {res['divisor']}; Yosys counts per family (`synth_ice40 "
-             "-dsp`, `synth_ecp5`; the budget: 600 iCE40 logic cells beyond the core).", ""]
+             "-dsp`, `synth_ecp5`; the budget: 600 iCE40 logic cells beyond the core). LC: iCE40 logic cells of "
+             "the netlist packed by nextpnr (`--pack-only`), the budget's unit.", ""]
     for fam, c in res["families"].items():
-        rows = [(name, *(c[key].get(k, 0) if key in c else "–" for k in ("LUT", "FF", "carry", "DSP", "BRAM"))) for name, key in names]
-        lines += [f"**{fam}**", "", *table(("design", "LUT", "FF", "carry", "DSP", "BRAM"), rows), ""]
+        # LC: the iCE40 netlist packed by nextpnr (older records have none)
+        cols = (("LC",) if "LC" in c["controller"] else ()) + ("LUT", "FF", "carry", "DSP", "BRAM")
+        rows = [(name, *(c[key].get(k, "–") if key in c else "–" for k in cols)) for name, key in names]
+        lines += [f"**{fam}**", "", *table(("design", *cols), rows), ""]
     return lines[:-1]
 
 

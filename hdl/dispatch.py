@@ -10,7 +10,6 @@ from amaranth.lib.memory import Memory
 from . import protocol as P
 from .answers import answer_bytes, answer_constant
 from .bram import falling_edge_write_port
-from .lfsr import countdown
 from .dispatch_microcode import CODED, CONDS, SOURCES, STROBES, Geometry, assemble, encode, fields, program
 
 __all__ = ["Dispatcher"]
@@ -41,8 +40,6 @@ class _Regs:
         self.b = Signal(range(d._region))                   # answer byte being built
         self.nack, self.ident, self.sending = Signal(), Signal(), Signal()
         self.ans_len = Signal(range(d._region + 1))
-        self.ans_cmd = Signal(8)
-        self.rd_idx = Signal(range(d._region))              # answer byte the memory now shows
         self.move_time = Signal(d._time_bits)
         self.pending, self.started = Signal(), Signal()     # a commit not yet applied; its pass began
 
@@ -62,8 +59,9 @@ class Dispatcher(wiring.Component):
     every range check and each target coordinate's saturation is a comparison of the field
     register's bytes with the program's constants by one 8-bit subtract-with-borrow unit;
     answers are built a byte a cycle in block RAM. The streams to the servo controller and the
-    core are driven by the ROM's output register and by registers, the answer header by a
-    register; the conditions a wait ends on are the one combinational path in from them.
+    core are driven by the ROM's output register and by registers, the answer header by
+    registers (its code from the request's and the NACK flag, both held while it is offered);
+    the conditions a wait ends on are the one combinational path in from them.
 
     Moves: each leg of a ``move_leg``/``move_legs`` target goes through the IK core, one leg at
     a time; a coordinate is saturated to the plan input's ``[lo, hi]`` first (``status`` counts
@@ -94,14 +92,14 @@ class Dispatcher(wiring.Component):
 
     Attributes
     ----------
-    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index
+    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index, answer_moved
         To the link's ports of the same names.
     clamped
         To the link's ``clamped``: a pulse (registered) per leg target that was saturated; the
         link counts it in its counter memory (word ``CLAMPED_WORD``).
     ik_i, ik_o
         To the core's ``i`` and ``o``.
-    write, target, commit, read, status, keepalive, busy, period_start
+    write, target, commit, read, status, status_shift, keepalive, busy, period_start, phase
         To the servo controller's ports of the same names.
 
     Reset state: idle, no answer pending, move time 0 (the status answer's counters are the
@@ -156,10 +154,11 @@ class Dispatcher(wiring.Component):
         ls, cs, ss = link.signature.members, core.signature.members, servo.signature.members
         super().__init__({
             **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counter_addr",
-                                         "counter_data", "answer", "answer_data", "answer_index", "clamped")},
+                                         "counter_data", "answer", "answer_data", "answer_index", "answer_moved",
+                                         "clamped")},
             "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(),
             **{n: ss[n].flip() for n in ("write", "target", "commit", "read", "status",
-                                         "keepalive", "busy", "period_start")},
+                                         "keepalive", "busy", "period_start", "phase", "status_shift")},
         })
         self._servo_names = core.servos
 
@@ -232,10 +231,19 @@ class Dispatcher(wiring.Component):
     # -- conditions and the next address
     def _sequencer(self, m, r, u, rp):
         c = self._channels
-        # the window: fewer than period - stage_cycles - 1 cycles since the last period start;
-        # registered a cycle late (the count has moved on by one, or restarted: then it errs closed)
+        # the window: fewer than period - stage_cycles - 1 cycles since the last period start,
+        # registered a cycle late (the count has moved on by one, or restarted: then it errs
+        # closed). period_start is high at phase 1, so those are phases 2 .. period -
+        # stage_cycles, seen at phases 3 .. period - stage_cycles + 1: a flag set by
+        # period_start, cleared by one comparison of the PWM bank's counter with a constant (a
+        # few LUTs, no counter of the dispatcher's own). It opens a cycle early, at phase 2,
+        # where the servo controller is busy with the pass period_start began: the window
+        # opens no sooner
         early = Signal()
-        m.d.sync += early.eq(countdown(m, self.period_start, self._period - self._stage_cycles - 1, "since"))
+        with m.If(self.period_start):
+            m.d.sync += early.eq(1)
+        with m.Elif(self.phase == self._period - self._stage_cycles + 1):
+            m.d.sync += early.eq(0)
         window = ~self.busy & early
         base = {"0": Const(0, 1), "B": r.b_, "BL": r.bl,
                 "reqok": self.request.valid & ~r.sending & ~self.answer.valid,
@@ -267,10 +275,13 @@ class Dispatcher(wiring.Component):
     def _source(self, m, r, u):
         st, imm, cd = self.status.payload, u["imm"], self.counter_data
         flag = Mux(u["bsel"] | r.bl, st.enabled, st.moving)
-        stb = Cat(st.target, Const(0, 32 - len(st.target)), st.current, Const(0, 32 - len(st.current)))
         src = {"IMM": imm, "RD": self.rd_data, "F0": r.f[:8], "SEXT": r.f[31].replicate(8),
                "CNT": Mux(imm[4], cd[8:16], cd[:8]), "S": r.s, "FLAG": flag, "CMD": r.cmd,
-               "STB": stb.word_select(imm[:3], 8)}
+               "STB": Mux(u["bias"], st.current[:8], st.target[:8])}
+        # STB's byte is the low byte of the status's current (bias) or target; after the
+        # current's, the servo controller shifts both a byte down (dispatch_microcode
+        # _channel_status takes them in pairs)
+        m.d.comb += self.status_shift.eq(~r.boot & (u["src"] == SOURCES.index("STB")) & u["bias"])
         x = Signal(8)
         with m.Switch(u["src"]):
             for name, sig in src.items():
@@ -294,6 +305,11 @@ class Dispatcher(wiring.Component):
             m.d.sync += r.bl.eq(r.b_)
         with m.If(u["shf"] & go):
             m.d.sync += r.f.eq(Cat(r.f[8:], x))
+        # the move time into F for the staging (the target's time is F's low bits, and so is
+        # a write's value: one source for both in the servo controller's memory write); F's
+        # low 24 bits shift in from F itself, so the load takes no cell of its own there
+        with m.If(e["FMT"]):
+            m.d.sync += r.f[:self._time_bits].eq(r.move_time)
         with m.If(u["tg"] & go):
             m.d.sync += r.tg.eq(Cat(r.tg[8:], y))
         ra = self._op(m, u, "ra", go)
@@ -329,10 +345,11 @@ class Dispatcher(wiring.Component):
             with m.If(e[strobe]):
                 m.d.sync += reg.eq(value)
         # every cycle of the idle wait: the request's command is held while it is offered; the
-        # identity answer's region is kept while it is sent
-        with m.If(e["TAKE"]):
+        # identity answer's region is kept while it is sent. Not while the answer header is
+        # offered (no request is taken then): its code comes from the command and NACK flag
+        with m.If(e["TAKE"] & ~self.answer.valid):
             m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.b.eq(0), r.nack.eq(0), r.bl.eq(0)]
-            with m.If(~r.sending & ~self.answer.valid):
+            with m.If(~r.sending):
                 m.d.sync += r.ident.eq(0)
         # a leg target saturated: counted in the link's counter memory (registered: one pulse)
         m.d.sync += self.clamped.eq(e["CLI"] & r.out)
@@ -359,13 +376,14 @@ class Dispatcher(wiring.Component):
                      wr.addr.eq(Mux(op[1], r.ch, self._region_addr(1, r.b))),
                      wr.data.eq(Mux(op == 2, widths, Cat(x, r.f[8:self._w])))]
         # the read port serves the answer being sent or else the staging of widths; a byte is
-        # valid once the memory shows the one the link names (the index just moved: not yet)
+        # valid once the memory shows the one the link names (the index just moved, as the
+        # link's answer_moved says: not yet)
         idx = self.answer_index
         shown = Signal()
-        m.d.sync += [r.rd_idx.eq(idx), shown.eq(r.sending)]
+        m.d.sync += shown.eq(r.sending)
         m.d.comb += [rd.addr.eq(Mux(r.sending, Mux(r.ident, self._region_addr(2, idx), self._region_addr(1, idx)),
                                     r.ch)),
-                     self.answer_data.valid.eq(r.sending & shown & (r.rd_idx == idx)),
+                     self.answer_data.valid.eq(r.sending & shown & ~self.answer_moved),
                      self.answer_data.payload.eq(rd.data[:8])]
         with m.If(self.answer_data.valid & self.answer_data.ready & (idx == r.ans_len - 1)):
             m.d.sync += r.sending.eq(0)
@@ -382,18 +400,18 @@ class Dispatcher(wiring.Component):
         # registered: the request's acceptance depends on the field checks
         m.d.sync += [self.keepalive.eq(self.request.valid & self.request.ready), self.commit.eq(e["COMMIT"])]
         m.d.comb += [self.request.ready.eq(e["ACC"]), self.counter_addr.eq(imm[:4]), self.rd_addr.eq(r.ra),
-                     self.answer.payload.length.eq(r.ans_len), self.answer.payload.command.eq(r.ans_cmd),
+                     self.answer.payload.length.eq(r.ans_len), self.answer.payload.command.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT)),
                      self.ik_i.valid.eq(s["IKV"]), self.ik_i.payload.leg.eq(r.leg), self.ik_o.ready.eq(s["IKR"]),
                      self.write.valid.eq(s["WRV"]), self.write.payload.channel.eq(r.ch),
                      self.write.payload.field.eq(imm[:4]), self.write.payload.value.eq(r.f),
                      self.target.valid.eq(s["TGV"]), self.target.payload.channel.eq(r.ch),
-                     self.target.payload.pulse.eq(rd.data), self.target.payload.time.eq(r.move_time),
+                     self.target.payload.pulse.eq(rd.data), self.target.payload.time.eq(r.f[:self._time_bits]),
                      self.read.valid.eq(s["RDV"]), self.read.payload.eq(r.ch), self.status.ready.eq(e["STR"])]
         m.d.comb += [self.ik_i.payload.target[inp.name].eq(r.tg[16 * k:16 * k + 16])
                      for k, inp in enumerate(self._plan.inputs)]
-        # the header in a register, offered until the link takes it
+        # the header in registers, offered until the link takes it (the link's transmitter
+        # registers its code: the LUTs of the code's choice pack with its flip-flops)
         with m.If(e["HDR"]):
-            m.d.sync += [self.answer.valid.eq(1), r.ans_len.eq(imm),
-                         r.ans_cmd.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT))]
+            m.d.sync += [self.answer.valid.eq(1), r.ans_len.eq(imm)]
         with m.If(self.answer.valid & self.answer.ready):
             m.d.sync += [self.answer.valid.eq(0), r.sending.eq(r.ans_len != 0)]

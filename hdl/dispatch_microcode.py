@@ -40,7 +40,7 @@ SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "S", "FLAG", "CMD", "STB")
 #: one ROM bit each (the stream strobes, decoded by nothing)
 BITS = ("ACC", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV")
 #: at most one of these an instruction: a 4-bit code (0: none)
-CODED = ("IDENT", "NACK", "TAKE", "DISP", "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET")
+CODED = ("IDENT", "NACK", "TAKE", "DISP", "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET", "FMT")
 STROBES = BITS + CODED
 #: strobes whose effects do not wait for a wait's condition (the dispatcher gates only the others)
 _UNHELD = frozenset(STROBES) - {"CLI", "HDR", "TAKE", "RDV", "IKV", "IKR", "TGV", "WRV"}
@@ -89,6 +89,7 @@ class Ins:
     s: str | None = None
     sz: bool = False                # S shifts in 0 (else the status flag bsel names)
     bsel: int = 0                   # 0: moving, 1: enabled
+    current: bool = False           # STB: the status's current (else target); both shift a byte after it
     wm: str | None = None
     hold: bool = False
     sp: frozenset = field(default_factory=frozenset)
@@ -227,7 +228,10 @@ def _channel_status(g):
     return [_ins(sp={"ACC"}, at=_entry(1, "channel_status")), _wait("CSA", "applied"),
             _wait("CSR", "rd_ready", sp={"RDV"}),
             _wait("CSW", "st_valid"), _ins(wm="ans", src="F0"),
-            *[_ins(wm="ans", src="STB", imm=k) for k in (0, 1, 2, 4, 5, 6)],
+            # target and current bytes in pairs (low bytes first): each pair shifts both a byte
+            # down, each write sets the address of the next (BSET): target at 1-3, current at 4-6
+            *[_ins(wm="ans", src="STB", current=bool(k % 2), sp={"BSET"}, imm=after)
+              for k, after in enumerate((4, 2, 5, 3, 6, 7))],
             _ins(wm="ans", src="FLAG", bsel=0), _ins(wm="ans", src="FLAG", bsel=1, sp={"STR"}),
             _header("CSHDR", 9)]
 
@@ -342,14 +346,15 @@ def _moves(g):
                          sp={"IKR"} if j == g.servos - 1 else ()))
     out += [_ins(label="LNEXT", lm="rot", cond="leglast", to="MDONE", nxt="LEG"),
             *_skip("SKIP", g.servos, "LNEXT"),
-            _ins(label="MDONE", sp={"ACC"}, ch="clear", nxt="STAGE")]
+            _ins(label="MDONE", sp={"ACC", "FMT"}, ch="clear", nxt="STAGE")]
     return out
 
 
 def _stage(g):
     """Wait for the staging window; stage the legs' (or set_pulse's one) widths; commit. A
-    width is read a cycle before it is offered (the buffer's read port follows the channel)."""
-    out = [_ins(sp={"ACC"}, wm="pulse", src="F0", at=_entry(2, "set_pulse")), _wait("SPW", "window"),
+    width is read a cycle before it is offered (the buffer's read port follows the channel);
+    the move time is F's (FMT, with the request's acceptance: F is not needed after it)."""
+    out = [_ins(sp={"ACC", "FMT"}, wm="pulse", src="F0", at=_entry(2, "set_pulse")), _wait("SPW", "window"),
            _wait("SPT", "tg_ready", sp={"TGV"}, nxt="COMMIT")]
     out += [_wait("STAGE", "window"), _ins(label="SL", cond="~LM0", to="SSKIP")]
     for j in range(g.servos):
@@ -486,6 +491,11 @@ def encode(asm: Assembled) -> list[int]:
             if s.imm & 3 and s.imm & 3 != (s.sz << 1 | s.bsel):
                 raise ValueError(f"instruction at {a} {s!r}: sz and bsel take immediate bits 1 and 0")
             v["imm"] = s.imm | s.sz << 1 | s.bsel
+        # current (STB's other word) is the bias bit: a byte that goes to no comparison
+        if s.current:
+            if s.src != "STB" or s.alu is not None or s.bias:
+                raise ValueError(f"instruction at {a} {s!r}: current is a choice of STB outside comparisons")
+            v["bias"] = 1
         v.update({k: ops.index(getattr(s, k)) for k, ops in _OPS.items()})
         v.update({k: int(k in s.sp) for k in BITS})
         word, off = 0, 0

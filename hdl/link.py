@@ -150,7 +150,9 @@ def _counter_engine(m, events, period, clamped, counter_bits, write_domain):
     m.d.comb += scan_rd.addr.eq(addr)
     with m.If(clearing):
         m.d.sync += high_full.eq(0)
-    with m.Elif((held == high) & hit & (total[:counter_bits] == (1 << counter_bits) - 1)):
+    # the incremented word all ones: its read one below (the incrementer's sum then drives
+    # only the write register, and shares its cells)
+    with m.Elif((held == high) & hit & (scan_rd.data == (1 << counter_bits) - 2)):
         m.d.sync += high_full.eq(1)
     served = Cat(*(held == k for k in range(words)))
     m.d.sync += pending.eq((pending & ~served) | Cat(*events, period, carry, clamped))
@@ -419,6 +421,9 @@ class FrameTransmitter(wiring.Component):
         Payload bytes of the answer being sent, byte ``index`` first.
     index : Out(range(max_payload))
         Index of the payload byte wanted on ``data`` (while ``data.ready``).
+    moved : Out(1)
+        High in the cycle after ``index`` was set (registered): a source that shows the byte of
+        an index a cycle later (a block RAM read) has it on ``data`` while this is low.
     o : Out(stream.Signature(8))
         Frame bytes, registered.
 
@@ -442,7 +447,7 @@ class FrameTransmitter(wiring.Component):
         self._max = top
         super().__init__({
             "i": In(stream.Signature(frame_layout(top))), "data": In(stream.Signature(8)),
-            "index": Out(range(top)), "o": Out(stream.Signature(8)),
+            "index": Out(range(top)), "moved": Out(1), "o": Out(stream.Signature(8)),
         })
 
     @property
@@ -468,6 +473,7 @@ class FrameTransmitter(wiring.Component):
 
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
+        m.d.sync += self.moved.eq(0)
         crc_top = gen.crc[-8:]
         crc_states = [f"crc{k}" for k in range(P.CRC.width // 8)]
         with m.FSM():
@@ -485,7 +491,7 @@ class FrameTransmitter(wiring.Component):
             with m.State("cmd"):
                 with m.If(free):
                     send(command)
-                    m.d.sync += sent.eq(0)
+                    m.d.sync += [sent.eq(0), self.moved.eq(1)]
                     m.next = "payload"
             with m.State("payload"):        # until ``sent`` reaches the length (at once for an empty payload)
                 m.d.comb += self.data.ready.eq(free & ~done)
@@ -493,7 +499,7 @@ class FrameTransmitter(wiring.Component):
                     m.next = crc_states[0]
                 with m.Elif(self.data.valid & free):
                     send(self.data.payload)
-                    m.d.sync += sent.eq(sent + 1)
+                    m.d.sync += [sent.eq(sent + 1), self.moved.eq(1)]
             # the CRC takes each CRC byte but the last: that shifts the next one to its top byte
             for k, (name, after) in enumerate(zip(crc_states, crc_states[1:] + ["idle"])):
                 with m.State(name):
@@ -526,8 +532,8 @@ class Link(wiring.Component):
     request, rd_addr, rd_data, counter_addr, counter_data, period, clamped
         The receiver's ``o``, ``rd_addr``, ``rd_data``, ``counter_addr``, ``counter_data``,
         ``period`` and ``clamped``.
-    answer, answer_data, answer_index
-        The transmitter's ``i``, ``data`` and ``index``.
+    answer, answer_data, answer_index, answer_moved
+        The transmitter's ``i``, ``data``, ``index`` and ``moved``.
 
     Latency
     -------
@@ -548,7 +554,7 @@ class Link(wiring.Component):
             "request": Out(stream.Signature(frame_layout(r.max_payload))), "rd_addr": In(r.addr_bits), "rd_data": Out(8),
             "counter_addr": In(range(CLAMPED_WORD + 1)), "counter_data": Out(counter_bits), "period": In(1),
             "clamped": In(1), "answer": In(stream.Signature(frame_layout(t.max_payload))), "answer_data": In(stream.Signature(8)),
-            "answer_index": Out(range(t.max_payload)),
+            "answer_index": Out(range(t.max_payload)), "answer_moved": Out(1),
         })
 
     @property
@@ -577,5 +583,5 @@ class Link(wiring.Component):
                      r.overrun.eq(rx.overrun), r.tick.eq(rx.idle_tick), r.rd_addr.eq(self.rd_addr),
                      self.rd_data.eq(r.rd_data), r.counter_addr.eq(self.counter_addr),
                      self.counter_data.eq(r.counter_data), r.period.eq(self.period), r.clamped.eq(self.clamped),
-                     self.answer_index.eq(t.index)]
+                     self.answer_index.eq(t.index), self.answer_moved.eq(t.moved)]
         return m

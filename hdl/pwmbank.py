@@ -38,6 +38,8 @@ class ServoPWMBank(wiring.Component):
         starts (a :class:`~ikseries.hdl.servo.ServoController` pass does): the stored widths are
         then a shift register the loads shift into, ``i.payload.group`` is ignored and no group
         decoder is built (one LUT or two per group). Default False: any group at any time.
+    phase : bool
+        Give the period counter out on ``phase`` (default False: the port is absent).
 
     Attributes
     ----------
@@ -47,6 +49,11 @@ class ServoPWMBank(wiring.Component):
         The servo signals, registered (glitch-free); bit ``c`` is channel ``c``.
     period_start : Out(1)
         High for one cycle when a period starts.
+    phase : Out(range(2 ** bits))
+        With ``phase=True`` only: the period counter, 0 .. ``period - 1``, then 0 again (``bits``
+        those of ``period - 1``); ``period_start`` and the pins follow it by a cycle
+        (``period_start`` is high while it is 1). Combinational from its flip-flops, for a
+        caller's window in the period without a counter of its own.
 
     Latency
     -------
@@ -61,7 +68,7 @@ class ServoPWMBank(wiring.Component):
     """
 
     def __init__(self, period: int, width_bits: int, groups: int, per_group: int,
-                 reset_widths: list[int] | None = None, in_order: bool = False):
+                 reset_widths: list[int] | None = None, in_order: bool = False, phase: bool = False):
         _pos_int("period", period, 2)
         _pos_int("width_bits", width_bits, 1)
         _pos_int("groups", groups, 1)
@@ -79,7 +86,7 @@ class ServoPWMBank(wiring.Component):
             "i": In(stream.Signature(data.StructLayout({
                 "group": range(groups), "widths": data.ArrayLayout(unsigned(width_bits), per_group)}))),
             "pwm": Out(n),
-            "period_start": Out(1),
+            "period_start": Out(1), **({"phase": Out((period - 1).bit_length())} if phase else {}),
         })
 
     @property
@@ -138,4 +145,6 @@ class ServoPWMBank(wiring.Component):
                              for c, p in enumerate(pendings)]
         m.d.comb += self.pwm.eq(Cat(*bits))
         m.d.sync += self.period_start.eq(ncount == top)
+        if "phase" in self.signature.members:
+            m.d.comb += self.phase.eq(~ncount)
         return m

@@ -107,6 +107,10 @@ class ServoController(wiring.Component):
         Status request for a channel.
     status : Out(stream.Signature(StructLayout({"target": W, "current": W, "moving": 1, "enabled": 1})))
         The answer (``moving``: current pulse != target or the profile has a nonzero step).
+    status_shift : In(1)
+        Strobe while ``status`` is offered: its ``target`` and ``current`` shift right by 8 bits
+        (zeros in), for a reader that takes them a byte at a time from their low bytes. Tie it
+        low to keep the answer as it is until taken.
     keepalive : In(1)
         Strobe: restarts the failsafe timeout (the link pulses it on every valid frame).
     failsafe : Out(1)
@@ -117,6 +121,9 @@ class ServoController(wiring.Component):
         The servo signals, registered; low for a relaxed channel.
     period_start : Out(1)
         High for one cycle when a PWM period starts; the engine pass starts then.
+    phase : Out(range(2 ** bits))
+        The PWM bank's period counter (:class:`~ikseries.hdl.pwmbank.ServoPWMBank` ``phase``):
+        ``period_start`` is high while it is 1.
     busy : Out(1)
         The engine is initialising or in a pass (the host streams wait).
 
@@ -172,16 +179,16 @@ class ServoController(wiring.Component):
                              f"{width_bits} bits, not {period!r}")
         # a pass loads every channel once, in order, between two period starts (the
         # microprogram's LOADNEXT ends each channel's path; period >= init + pass cycles)
-        self._bank = ServoPWMBank(period, width_bits, channels, 1, home_at_reset, in_order=True)
+        self._bank = ServoPWMBank(period, width_bits, channels, 1, home_at_reset, in_order=True, phase=True)
         sig = {
             "write": In(stream.Signature(self._engine.write_layout)),
             "target": In(stream.Signature(self._engine.target_layout)),
             "commit": In(1),
             "read": In(stream.Signature(range(channels))),
             "status": Out(stream.Signature(self._engine.status_layout)),
-            "keepalive": In(1),
+            "keepalive": In(1), "status_shift": In(1),
             "failsafe": Out(1), "clamped": Out(1), "bad_write": Out(1), "busy": Out(1),
-            "pwm": Out(channels), "period_start": Out(1),
+            "pwm": Out(channels), "period_start": Out(1), "phase": Out((period - 1).bit_length()),
         }
         if ik_layout is not None:
             sig["ik"] = In(stream.Signature(ik_layout))
@@ -222,13 +229,14 @@ class ServoController(wiring.Component):
         wiring.connect(m, wiring.flipped(self.target), eng.target)
         wiring.connect(m, wiring.flipped(self.read), eng.read)
         wiring.connect(m, eng.status, wiring.flipped(self.status))
-        m.d.comb += [eng.commit.eq(self.commit), eng.keepalive.eq(self.keepalive),
+        m.d.comb += [eng.commit.eq(self.commit), eng.keepalive.eq(self.keepalive), eng.status_shift.eq(self.status_shift),
                      eng.period_start.eq(bank.period_start),
                      self.failsafe.eq(eng.failsafe), self.clamped.eq(eng.clamped),
                      self.bad_write.eq(eng.bad_write), self.busy.eq(eng.busy),
                      bank.i.valid.eq(eng.load.valid), bank.i.payload.group.eq(eng.load.payload.channel),
                      bank.i.payload.widths[0].eq(eng.load.payload.width), eng.load.ready.eq(1),
-                     self.pwm.eq(bank.pwm), self.period_start.eq(bank.period_start)]
+                     self.pwm.eq(bank.pwm), self.period_start.eq(bank.period_start),
+                     self.phase.eq(bank.phase)]
         if self._servos:
             self._wire_ik(m, eng)
         return m

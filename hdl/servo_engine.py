@@ -134,7 +134,7 @@ class ServoEngine(wiring.Component):
             "status": Out(stream.Signature(self.status_layout)),
             "load": Out(stream.Signature(data.StructLayout({"channel": range(channels),
                                                            "width": width_bits}))),
-            "commit": In(1), "keepalive": In(1), "period_start": In(1),
+            "commit": In(1), "keepalive": In(1), "period_start": In(1), "status_shift": In(1),
             "failsafe": Out(1), "clamped": Out(1), "bad_write": Out(1), "busy": Out(1),
         })
 
@@ -344,6 +344,11 @@ class ServoEngine(wiring.Component):
             m.d.sync += g.ch.eq(g.ch + 1)
         with m.If(s("ACCEPT") & g.rdreq):
             m.d.sync += g.ch.eq(self.read.payload)
+        # a byte-serial reader takes target and current a byte at a time from their low bytes
+        # (a 2-way choice instead of one of 6 bytes); a status read starts only once the
+        # offered one is taken, so its loads never meet a shift
+        with m.If(self.status_shift):
+            m.d.sync += [st.target.eq(st.target >> 8), st.current.eq(st.current >> 8)]
         with m.If(s("ST_T")):
             m.d.sync += st.target.eq(d[:w])
         with m.If(s("ST_C")):
