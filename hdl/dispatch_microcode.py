@@ -273,14 +273,16 @@ def _limits(g):
     # the chain starts with a borrow (sz on the first byte)
     out += [_ins(src="RD" if i < lo_n else "ZERO", shf=True, ra="inc" if i < lo_n - 1 else None, ysel=True,
                  alu="first" if i == 0 else "chain", sz=i == 0) for i in range(4)]
-    out += [_ins(cond="~B", to="NACK"), _ins(sp={"ACC"}),
+    # accepted after the last payload read: once accepted, the next frame may take the bank
+    out += [_ins(cond="~B", to="NACK"),
             _wait("LMIN", "wr_ready", sp={"WRV"}, imm=int(ChannelField.MIN)),
-            *_reload(hi_at, hi_n), _write(ChannelField.MAX)]
+            *_reload(hi_at, hi_n), _ins(sp={"ACC"}), _write(ChannelField.MAX)]
     return out
 
 
 def _masks(g):
-    """enable / relax: the mask checked, F := 1 / 0 (the value written), then a write per set bit."""
+    """enable / relax: the mask checked, F := 1 / 0 (the value written), then a write per set bit,
+    the request accepted after them (the mask's bytes are read as the writes go)."""
     c = g.channels
     k = (1 << c) if c < 32 else None
     out = [_ins(ra="inc", at=_entry(0, name), nxt="MK1") for name in ("enable", "relax")]
@@ -289,12 +291,14 @@ def _masks(g):
     load[0] = replace(load[0], label="MK1")
     out += load + [_ins(cond="~B" if k is not None else "never", to="NACK", sp={"DISP"}, imm=3)]
     for name, value in (("enable", 1), ("relax", 0)):
-        out += [_ins(sp={"ACC"}, ra="clear", ch="clear", src="IMM", imm=value, shf=True, at=_entry(2, name))]
+        out += [_ins(ra="clear", ch="clear", src="IMM", imm=value, shf=True, at=_entry(2, name))]
         out += [_ins(src="IMM", imm=0, shf=True) for _ in range(2)]
         out.append(_ins(src="IMM", imm=0, shf=True, cond="always", to="MB"))
     out += [_ins(label="MB", ra="inc"), _ins(s="load"),
             _ins(label="B0", cond="~S0", to="B2"), _wait("B1", "wr_ready", sp={"WRV"}, imm=int(ChannelField.ENABLE)),
-            _ins(label="B2", s="shift", ch="inc", cond="chlast", to="ACK"), _ins(cond="~chlow0", to="B0", nxt="MB")]
+            _ins(label="B2", s="shift", ch="inc", cond="chlast", to="MACC"), _ins(cond="~chlow0", to="B0", nxt="MB"),
+            # accepted after the last mask byte is read: once accepted, the next frame may take the bank
+            _ins(label="MACC", sp={"ACC"}, nxt="ACK")]
     return out
 
 

@@ -45,3 +45,25 @@ def test_longest_paths_of_a_move():
     assert asm.longest("IDLE", ("LEG", "NACK"), code) == 2 + 5 + 1 + 4 + 1
     # three coordinates, each its load, a rotation, two branches and two target bytes at most
     assert asm.longest("K0", ("OFFER",)) == 12 + 2 * 11
+
+
+@pytest.mark.parametrize("g", [HEXAPOD, Geometry(32, 8, 4, 24, ((-32768, 32767),) * 4, 51)])
+def test_no_payload_byte_is_read_after_the_request_is_accepted(g):
+    """Once a request is accepted (ACC), the link may hand the next good frame's payload to the
+    read port (its bank switches): nothing on any path from an ACC to the idle wait reads the
+    payload (``src`` RD, or S loaded from the read data), e.g. set_limits' max read again for its
+    write or enable's mask bytes beyond the first."""
+    asm = assemble(program(g))
+    idle = asm.labels["IDLE"]
+    accepts = [a for a, w in enumerate(asm.words) if w is not None and "ACC" in w.sp]
+    assert accepts
+    for a in accepts:
+        seen, todo = set(), [a]
+        while todo:
+            b = todo.pop()
+            if b in seen or b == idle:
+                continue
+            seen.add(b)
+            w = asm.words[b]
+            assert w.src != "RD" and w.s != "load", (asm.words[a], w)
+            todo += [c for c in asm.successors(b) if c not in seen]
