@@ -128,10 +128,14 @@ class FeatureCut:
     def table(self, values) -> tuple:
         return tuple(values)
 
+    def position(self, values) -> np.ndarray:
+        """Exact feature ``values`` in cell widths from -1: cell m holds [m, m + 1)."""
+        return (np.asarray(values, dtype=np.float64) + 1.0) * 2.0 ** self.bits
+
     def offsets(self, values, cell: int) -> tuple[np.ndarray, np.ndarray]:
         """Rows of exact feature ``values`` in cell ``cell`` (the edges' own cells: the last
         holds the range's top) and their normalised offsets from the cell."""
-        u = (np.asarray(values, dtype=np.float64) + 1.0) * 2.0 ** self.bits
+        u = self.position(values)
         sel = np.flatnonzero(np.clip(np.floor(u), 0, self.cells - 1) == cell)
         return sel, 2.0 * (u[sel] - cell) - 1.0
 

@@ -287,7 +287,7 @@ class PlanBuilder:
 
     def stages(self) -> list[int]:
         """Pipeline stage of every node so far (see :meth:`Plan.stages`)."""
-        return extend_stages(self.nodes, [])
+        return list(extend_stages(self.nodes, self._stages))
 
     def stage(self, a: int) -> int:
         """Pipeline stage of node ``a`` (see :meth:`Plan.stages`)."""
@@ -330,14 +330,11 @@ class PlanBuilder:
             return a
         f = max(self.frac(a), self.frac(b))
         a, b = self.align(a, f), self.align(b, f)
-        folded = self._fold_constants(a, b)
-        if folded is None:
-            folded = self._fold_constants(b, a)
-        if folded is None:
-            folded = self._latest_last(a, b)
-        if folded is None:
-            folded = self._latest_last(b, a)
-        return folded if folded is not None else self._append("add", (a, b), f)
+        for rule in (self._fold_constants, self._latest_last):    # either operand may be the sum
+            for x, y in ((a, b), (b, a)):
+                if (folded := rule(x, y)) is not None:
+                    return folded
+        return self._append("add", (a, b), f)
 
     def _latest_last(self, a: int, b: int) -> int | None:
         """``(x + y) + b`` as ``(x + b) + y`` when ``y`` is ready last (a product, say): the

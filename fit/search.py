@@ -38,8 +38,8 @@ SCREEN_STRIDE = 1                # a grid's screening fit: every this many fit s
 MAX_GRID_CELLS = 16              # cells and table entries (row padding included) of a grid at most
 FEATURE_BITS = (1, 4)            # a feature's cells are 2**-bits wide (4 to 32 cells over [-1, 1))
 MIN_CELL_ROWS = 32               # a feature cell with fewer sample rows is fitted on a window around it,
-SPREAD_RANK = 1e-6                # a cell's quadratics in its cut variables are independent above this
 CELL_WINDOWS = (0.0, 0.125, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 64.0)   # widened by these many cell widths each side
+SPREAD_RANK = 1e-6               # ... as is one whose quadratics in its cut variables are dependent to this
 
 
 class Rows:
@@ -108,9 +108,9 @@ class Cells:
         replaced by the offset in its cell; ``ports``: PlanInputs by name, ``raw[port]`` = real
         values of a cut port at the fit and check rows; ``memo``: a dict keeping each cut's
         per-cell offsets for the next call on the same samples. A cell of a computed feature
-        holding fewer than ``MIN_CELL_ROWS`` rows (the feature's range need not fill its cells)
-        is fitted on a window around it, widened until it holds them (its polynomial then
-        extends over the window)."""
+        whose rows are too few or all on one curve (:func:`_spread`: the feature's range need
+        not fill its cells) is fitted on a window around it, widened until they are enough (its
+        polynomial then extends over the window)."""
         memo = {} if memo is None else memo
         cuts = fs.cut.cuts
         per_cut = [_feature_offsets(c, (fit_set[0], check_set[0]), memo) if c.port is None
@@ -216,7 +216,7 @@ def _spread(rows: Rows, cuts) -> bool:
 def _widened(cut, values, cell: int, widen: float) -> np.ndarray:
     """Offsets from cell ``cell`` of a feature cut of the rows within ``widen`` cell widths of
     it (NaN elsewhere)."""
-    u = (np.asarray(values, dtype=np.float64) + 1.0) * 2.0 ** cut.bits - cell
+    u = cut.position(values) - cell
     return np.where((u >= -widen) & (u < 1.0 + widen), 2.0 * u - 1.0, np.nan)
 
 
@@ -387,8 +387,8 @@ def _feature_bases(fs: FeatureSet, candidates, ports: dict) -> list:
 
 def _feature_grid_sets(base: FeatureSet, ports: dict, entries: int) -> list:
     """The feature grids tried for ``base`` with at most ``entries`` table entries: each
-    computed variable (no input port) cut into ``FEATURE_CELLS`` cells alone, and on a grid with
-    each other variable (a port in ``FEATURE_CELLS`` cells, or another feature), the most
+    computed variable (no input port) cut into cells of each of ``FEATURE_BITS`` alone, and on a
+    grid with each other variable (a port in as many cells, or another feature), the most
     cells first (the lowest degree)."""
     live = [j for j, a in enumerate(base.allowed) if a != "none"]
     feats = [j for j in live if base.names[j] not in ports]

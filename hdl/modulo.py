@@ -338,12 +338,11 @@ class ModuloEvaluator(wiring.Component):
         check_dsp(dsp)
         self._primitive = check_dsp_registers(dsp_registers, dsp)
         self._table_primitive = table_primitive(dsp_registers)
-        registered_tables = self._registered_depth(registered_tables, dsp_registers)
         self._plan = plan
         self._dsp = dsp
         self._dsp_registers = dsp_registers
-        self._registered_tables = registered_tables
-        self._schedule = modulo_schedule(plan, initiation_interval, dsp, registered_tables)
+        self._schedule = modulo_schedule(plan, initiation_interval, dsp,
+                                         self._registered_depth(registered_tables, dsp_registers))
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),
             "o": Out(stream.Signature(output_layout(plan))),
@@ -358,7 +357,7 @@ class ModuloEvaluator(wiring.Component):
         """The fewest words of a registered table (None: none is) for ``registered_tables``."""
         if registered_tables is None:
             return default_registered_depth(dsp_registers)
-        if registered_tables is True or registered_tables is False:
+        if isinstance(registered_tables, bool):
             return 1 if registered_tables else None
         if not isinstance(registered_tables, int) or registered_tables < 1:
             raise ValueError(f"registered_tables must be None, True, False or an integer >= 1 (the fewest "
@@ -368,12 +367,12 @@ class ModuloEvaluator(wiring.Component):
     @property
     def registered_tables(self) -> int | None:
         """The fewest words of a registered table; None: no table is registered."""
-        return self._registered_tables
+        return self._schedule.registered_depth
 
     def _registered_groups(self) -> dict[int, list[int]]:
         """The lut groups (:func:`~ikseries.hdl.evaluator.lut_groups`) whose tables are registered."""
         return {index: luts for index, luts in lut_groups(self._plan).items()
-                if table_registered(self._plan, luts[0], self._registered_tables)}
+                if table_registered(self._plan, luts[0], self.registered_tables)}
 
     @property
     def primitives(self) -> tuple:
