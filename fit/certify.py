@@ -51,6 +51,8 @@ so it covers every value the hardware can see.
 """
 from __future__ import annotations
 
+from collections import Counter
+
 import time
 from functools import partial
 from dataclasses import asdict, dataclass
@@ -198,12 +200,38 @@ def _reference_function(robot, servo: int, ticks_per_pu: float):
 
 
 # -- output stage -----------------------------------------------------------------------------------
+def _summands(plan: Plan, i: int) -> tuple[Counter, int]:
+    """The terms of the adder tree at node ``i``: its non-constant leaves (with multiplicity)
+    and the integer sum of its constants (an addition's operands share its binary point, so
+    the tree's value is the leaves' sum plus that)."""
+    leaves, const, todo = Counter(), 0, [i]
+    while todo:
+        n = plan.nodes[j := todo.pop()]
+        if n.op == "add":
+            todo.extend(n.args)
+        elif n.op == "const":
+            const += n.param
+        else:
+            leaves[j] += 1
+    return leaves, const
+
+
+def _constant_offset(plan: Plan, i: int, acc: int) -> int | None:
+    """The integer ``c`` with node ``i`` = accumulator ``acc`` + ``c`` when both are sums of
+    the same non-constant terms on one binary point (the rounding constant added earlier in
+    the tree, where it waits for no product), else None."""
+    if plan.nodes[i].op != "add" or plan.nodes[i].frac != plan.nodes[acc].frac:
+        return None
+    (mine, c), (theirs, c_acc) = _summands(plan, i), _summands(plan, acc)
+    return c - c_acc if mine == theirs else None
+
+
 def output_rounding(plan: Plan, k: int) -> tuple[float, tuple[float, float] | None]:
     """Bound on |output integer - accumulator| (before any clamp) and the clamp range, in ticks.
 
     The path from ``outputs[k].node`` down to ``outputs[k].preround`` may be an optional clamp
     over additions of constants and shifts (round half up: ``shr(add(acc, half))`` gives half a
-    tick).
+    tick); the additions may also be one sum of the accumulator's own terms plus constants.
 
     Raises
     ------
@@ -216,27 +244,30 @@ def output_rounding(plan: Plan, k: int) -> tuple[float, tuple[float, float] | No
     if n.op == "clamp":
         rng = (np.ldexp(float(n.param[0]), -n.frac), np.ldexp(float(n.param[1]), -n.frac))
         i = n.args[0]
-    chain = []
+    chain = []     # ("add", real constant) or ("shr", node), from the accumulator up
     while i != o.preround:
         n = plan.nodes[i]
         if n.op in ("shr", "shl"):
-            chain.append(n)
+            chain.append(("shr", n) if n.op == "shr" else ("shl", n))
             i = n.args[0]
+        elif (c := _constant_offset(plan, i, o.preround)) is not None:
+            chain.append(("add", np.ldexp(float(c), -n.frac)))
+            break
         elif n.op == "add" and any(plan.nodes[a].op == "const" for a in n.args):
             j = 1 if plan.nodes[n.args[1]].op == "const" else 0
-            chain.append(n)
+            c = plan.nodes[n.args[j]]
+            chain.append(("add", np.ldexp(float(c.param), -c.frac)))
             i = n.args[1 - j]
         else:
             raise ValueError(f"output {o.name}: the path from node {o.node} to the accumulator "
                              f"{o.preround} must be a clamp over constant additions and shifts, "
                              f"not a {n.op!r} node ({i})")
     lo = hi = 0.0      # range of (value - accumulator value), real
-    for n in reversed(chain):
-        if n.op == "add":
-            c = next(plan.nodes[a] for a in n.args if plan.nodes[a].op == "const")
-            lo, hi = lo + np.ldexp(float(c.param), -c.frac), hi + np.ldexp(float(c.param), -c.frac)
-        elif n.op == "shr":   # floor to frac(n) bits: lowers the value by < 2**-frac(n)
-            lo -= np.ldexp(1.0 - 2.0 ** -n.param, -n.frac)
+    for kind, x in reversed(chain):
+        if kind == "add":
+            lo, hi = lo + x, hi + x
+        elif kind == "shr":   # floor to frac(x) bits: lowers the value by < 2**-frac(x)
+            lo -= np.ldexp(1.0 - 2.0 ** -x.param, -x.frac)
     return max(abs(lo), abs(hi)), rng
 
 

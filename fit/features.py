@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .horner import horner, lower_poly
-from .plan import PlanBuilder
+from .plan import PlanBuilder, signed_bits
 from .polyfit import fit_lawson, total_degree_terms, vander
 from .ports import plan_inputs
 
@@ -370,6 +370,7 @@ class CylindricalStage(_Stage):
         # where the description allows long tables, lines on many cells (fewer products, shallower)
         entries = robot.fit.table_entries
         long = entries >= FEATURE_GRID_ENTRIES
+        self.long = long and table
         self.table = fit_trig_table(port, trig_tol, max_cells=entries if long else TRIG_TABLE_CELLS,
                                     min_degree=1 if long else 2) if table else None
         kx = pow2_scale(r.max)
@@ -416,14 +417,17 @@ class CylindricalStage(_Stage):
         # the servo polynomials would raise to the 8th power. Clamping to the true range
         # (plus the series error, so the clamp never moves a value away from the ideal)
         # keeps every later width tight.
+        # Built for depth, a clamp that saves no bit (long tables' lines overshoot by a few
+        # per cent at most) is left out: it would add pipeline stages on the longest path.
         lim = int(np.ceil((1.0 + max(1.5 * trig_error, 2.0 ** -10)) * 2 ** fc))
-        cos, sin = (b.clamp(v, -lim, lim) for v in (cos, sin))
+        cos, sin = (v if self.long and b.signed_width(v) <= signed_bits(-lim, lim) else b.clamp(v, -lim, lim)
+                    for v in (cos, sin))
+        self._r, self._cos = rn, cos
         self._rcos = b.mul(rn, cos)
         rsin = b.mul(rn, sin)
         kx = self.norms[0].shift
         self._normalised = [b.align(b.reinterpret(p, b.frac(p) + kx), fv) for p in (self._rcos, rsin)]
         self._normalised.append(self.norms[2].build(b, zn, fv))
-        self._r = rn
         return list(self._normalised)
 
     def _rho2_node(self, b: PlanBuilder) -> int:
@@ -431,7 +435,10 @@ class CylindricalStage(_Stage):
         # cones skip the sine series.
         r2 = b.mul(self._r, self._r)
         cf = 0 if float(2 * self.offset).is_integer() else 12
-        twod = b.mul(self._rcos, b.const(2 * self.offset, cf))
+        if self.long:    # built for depth: 2 D R (from the input) times cos, beside R cos
+            twod = b.mul(b.mul(self._r, b.const(2 * self.offset, cf)), self._cos)
+        else:
+            twod = b.mul(self._rcos, b.const(2 * self.offset, cf))
         f = b.frac(twod)
         acc = b.add(b.align(r2, f), twod)
         return b.add(acc, b.const(self.offset ** 2, f))

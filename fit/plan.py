@@ -137,7 +137,14 @@ class Plan:
         return max([1] + [st[o.node] for o in self.outputs])  # inputs are registered: >= 1
 
     def count(self, op: str) -> int:
-        return sum(1 for n in self.nodes if n.op == op)
+        """Nodes of operation ``op`` that hardware evaluates (:meth:`live`)."""
+        return sum(1 for i in self.live() if self.nodes[i].op == op)
+
+    def live(self) -> set[int]:
+        """The nodes the outputs need: hardware evaluates these only. The rest are sums only
+        the certifier reads, an output's accumulator before its rounding constant moved
+        into it (:meth:`PlanBuilder.round`)."""
+        return set().union(*(self.cone(o.node) for o in self.outputs))
 
     def cone(self, node: int) -> set[int]:
         """Indices of the nodes that ``node`` depends on (itself included)."""
@@ -330,7 +337,7 @@ class PlanBuilder:
             return a
         f = max(self.frac(a), self.frac(b))
         a, b = self.align(a, f), self.align(b, f)
-        for rule in (self._fold_constants, self._latest_last):    # either operand may be the sum
+        for rule in (self._fold_constants, self._latest_last, self._before_shift):   # either operand may be the sum
             for x, y in ((a, b), (b, a)):
                 if (folded := rule(x, y)) is not None:
                     return folded
@@ -344,9 +351,26 @@ class PlanBuilder:
         if n.op != "add":
             return None
         for x, y in (n.args, n.args[::-1]):
-            if self.stage(y) > max(self.stage(x), self.stage(b)):
+            if self._later(y, x, self.nodes[b].op == "const") and self.stage(y) > self.stage(b):
                 return self.add(self.add(x, b), y)
         return None
+
+    def _later(self, y: int, x: int, ties: bool) -> bool:
+        """Node ``y`` is ready after ``x``: a later stage, or with ``ties`` the same stage and
+        a product where ``x`` is not (a multiplier takes longer than an adder in every
+        architecture; a constant added to ``x`` there never costs a stage)."""
+        sy, sx = self.stage(y), self.stage(x)
+        return sy > sx or (ties and sy == sx and self._product(y) and not self._product(x))
+
+    def _product(self, a: int) -> bool:
+        """Node ``a`` is a product under shifts and binary point moves."""
+        return self.nodes[self._under(a, ("frac", "shr", "shl"))].op == "mul"
+
+    def _under(self, a: int, ops: tuple[str, ...]) -> int:
+        """The node under ``a``'s chain of single-operand ``ops``."""
+        while self.nodes[a].op in ops:
+            a = self.nodes[a].args[0]
+        return a
 
     def _fold_constants(self, a: int, b: int) -> int | None:
         """``(x + c1) + c2`` as ``x + (c1 + c2)``: one adder (and one pipeline stage) fewer, the
@@ -367,6 +391,23 @@ class PlanBuilder:
             ideal = sum(c.ideal if c.ideal is not None else c.param * scale for c in (c1, c2))
             ideal = None if ideal == param * scale else ideal
         return self.add(x, self._append("const", (), c2.frac, param, ideal))
+
+    def _before_shift(self, a: int, b: int) -> int | None:
+        """A constant added after a binary point move or a floor shift of a sum is added to the
+        sum: ``frac(y) + c`` is ``frac(y + c)`` (the same integers) and ``(y >> s) + c`` is
+        ``(y + c * 2**s) >> s`` (floor((y + c 2**s) / 2**s) = floor(y / 2**s) + c), so the
+        constant joins the sum's own (one adder and pipeline stage fewer, same integers)."""
+        n, c, base = self.nodes[a], self.nodes[b], self._under(a, ("frac", "shr"))
+        if c.op != "const" or base == a or self.nodes[base].op != "add":
+            return None
+        y = n.args[0]
+        fy = self.frac(y)
+        if n.op == "shr":      # the same real constant, on the sum's finer binary point
+            k = self._append("const", (), fy, c.param << n.param, c.ideal)
+            return self.align(self.add(y, k), c.frac)
+        scale = 2.0 ** (c.frac - fy)    # frac: the same integer, the real value rescaled
+        k = self._append("const", (), fy, c.param, None if c.ideal is None else c.ideal * scale)
+        return self.reinterpret(self.add(y, k), c.frac)
 
     def mul(self, a: int, b: int, frac: int | None = None) -> int:
         """Product, truncated (floor) to ``frac`` fractional bits if given (operands first
@@ -423,12 +464,15 @@ class PlanBuilder:
         return self._append("lut", (index,), frac, q, None if exact else tuple(float(v) for v in values))
 
     def round(self, a: int, frac: int) -> int:
-        """Round half up to ``frac`` fractional bits."""
+        """Round half up to ``frac`` fractional bits. The half joins the sum ``a`` where it
+        waits for no product (:meth:`add`'s rules), so ``a`` itself may be left to the
+        certifier alone (:func:`ikseries.fit.certify.output_rounding`): hardware evaluates
+        the outputs' cones only."""
         f = self.frac(a)
         if frac >= f:
             return self.align(a, frac)
         half = self._append("const", (), f, 1 << (f - frac - 1))
-        return self.align(self._append("add", (a, half), f), frac)
+        return self.align(self.add(a, half), frac)
 
     def build(self, outputs: list[PlanOutput], meta: dict | None = None) -> Plan:
         """Keep only the nodes the outputs need and renumber them."""

@@ -36,14 +36,71 @@ TABLE_LATENCY = 1
 REGISTERED_TABLE_LATENCY = 2
 
 
-def _kind(n) -> str:
-    return OPS[n.op].kind
+def _kind(plan: Plan, i: int) -> str:
+    """The op's kind (:data:`~ikseries.fit.ops.OPS`), except that an addition whose operands'
+    bits cannot overlap (:func:`_carry_free`) is wiring here: an OR, no carry chain."""
+    return "wiring" if _carry_free(plan, i) else OPS[plan.nodes[i].op].kind
+
+
+def _low_zeros(plan: Plan, i: int) -> int:
+    """Low bits of node ``i``'s integer that its structure keeps zero (shifted in by a shl)."""
+    n = plan.nodes[i]
+    if n.op == "frac":        # the same integer
+        return _low_zeros(plan, n.args[0])
+    return n.param + _low_zeros(plan, n.args[0]) if n.op == "shl" else 0
+
+
+def _carry_free(plan: Plan, i: int) -> bool:
+    """Node ``i`` adds a non-negative value whose low ``k`` bits are zero to one in [0, 2**k)
+    (a grid's cell address: a row number shifted left plus a column number): their bits do not
+    overlap, so the sum is their OR."""
+    n = plan.nodes[i]
+    if n.op != "add":
+        return False
+    for a, b in (n.args, n.args[::-1]):
+        k, na, nb = _low_zeros(plan, a), plan.nodes[a], plan.nodes[b]
+        if k and na.lo >= 0 and nb.lo >= 0 and nb.hi < 1 << k:
+            return True
+    return False
+
+
+def _wiring_expression(plan: Plan, i: int, ops):
+    """The combinational value of wiring node ``i`` from its operands' values ``ops``."""
+    if _carry_free(plan, i):
+        return ops[0] | ops[1]
+    return node_expression(plan.nodes[i], ops)
 
 
 def _input_clamp(plan: Plan, i: int) -> bool:
     """Node ``i`` clamps an input port: the input register takes the clamped value at once."""
     n = plan.nodes[i]
-    return n.op == "clamp" and _kind(plan.nodes[n.args[0]]) == "port"
+    return n.op == "clamp" and _kind(plan, n.args[0]) == "port"
+
+
+def _clamp_tests(plan: Plan, i: int):
+    """The limits clamp node ``i`` can reach (its operand's interval crosses them), each as
+    ``(limit, test)`` with ``test(x)`` true beyond it, or None if some reachable limit needs a
+    comparator: a limit of 0 below (the sign bit) or ``2**k - 1`` above a value that is not
+    negative there (bits ``k`` and up) are single-LUT tests, so such a clamp takes one cycle."""
+    n = plan.nodes[i]
+    x, (lo, hi) = plan.nodes[n.args[0]], n.param
+    tests = []
+    if x.lo < lo:
+        if lo != 0:
+            return None
+        tests.append((lo, lambda v: v[-1]))       # x.lo < 0: signed
+    if x.hi > hi:
+        k = (hi + 1).bit_length() - 1
+        if hi < 0 or hi + 1 != 1 << k:
+            return None
+        w = x.width
+        tests.append((hi, lambda v: v[k:w - 1 if x.signed else w].any() & ~(v[-1] if x.signed else 0)))
+    return tests
+
+
+def _clamp_latency(plan: Plan, i: int) -> int:
+    """``CLAMP_LATENCY``, or one cycle if every limit the clamp reaches is a bit test."""
+    return 1 if _clamp_tests(plan, i) is not None else CLAMP_LATENCY
 
 
 @dataclass(frozen=True)
@@ -72,7 +129,7 @@ class ModuloSchedule:
         """Per node, the first cycle its own register holds it: ``ready``, except for a
         multiplication, whose product is read from the multiplier in cycle ``ready`` and
         captured at its end."""
-        return [r + 1 if _kind(n) == "product" else r for r, n in zip(self.ready, plan.nodes)]
+        return [r + 1 if _kind(plan, i) == "product" else r for i, r in enumerate(self.ready)]
 
     def last_read(self, plan: Plan) -> list[int]:
         """Per node, the last cycle it is read: by a registered consumer (when that reads its
@@ -86,7 +143,7 @@ class ModuloSchedule:
                 readers[a].append(i)
         for i in reversed(range(len(plan.nodes))):     # readers come after their operands
             for r in readers[i]:
-                if _kind(plan.nodes[r]) == "wiring":
+                if _kind(plan, r) == "wiring":
                     last[i] = max(last[i], last[r])
                 elif self.start[r] is not None:         # not an input clamp (reads the port)
                     last[i] = max(last[i], self.start[r])
@@ -101,11 +158,11 @@ def _fits(wa: int, wb: int, dsp) -> bool:
 def _own_latency(plan: Plan, i: int, registered_depth: int | None) -> int:
     """Cycles from reading the operands of node ``i``, not a multiplication, to its value."""
     n = plan.nodes[i]
-    if _kind(n) == "wiring" or _input_clamp(plan, i):
+    if _kind(plan, i) == "wiring" or _input_clamp(plan, i):
         return 0
-    if _kind(n) == "table":
+    if _kind(plan, i) == "table":
         return REGISTERED_TABLE_LATENCY if table_registered(plan, i, registered_depth) else TABLE_LATENCY
-    return CLAMP_LATENCY if n.op == "clamp" else 1
+    return _clamp_latency(plan, i) if n.op == "clamp" else 1
 
 
 def _heights(plan: Plan, wide: set, registered_depth: int | None) -> list[int]:
@@ -118,7 +175,7 @@ def _heights(plan: Plan, wide: set, registered_depth: int | None) -> list[int]:
             users[a].append(i)
     height = [0] * len(nodes)
     for i in reversed(range(len(nodes))):
-        kind = _kind(nodes[i])
+        kind = _kind(plan, i)
         own = (WIDE_MUL_LATENCY if i in wide else MUL_LATENCY) if kind == "product" else \
             _own_latency(plan, i, registered_depth)
         height[i] = own + max((height[u] for u in users[i]), default=0)
@@ -171,15 +228,15 @@ class _SharedMultipliers:
 def _settle(plan: Plan, ready: list, start: list, registered_depth: int | None):
     """Give every non-multiplication whose operands are scheduled its time (in place)."""
     for i, n in enumerate(plan.nodes):
-        if ready[i] is not None or _kind(n) == "product":
+        if ready[i] is not None or _kind(plan, i) == "product":
             continue
-        if _kind(n) == "constant":
+        if _kind(plan, i) == "constant":
             ready[i] = 0
-        elif _kind(n) == "port" or _input_clamp(plan, i):
+        elif _kind(plan, i) == "port" or _input_clamp(plan, i):
             ready[i] = 1
         elif all(ready[a] is not None for a in n.args):
             t = max(ready[a] for a in n.args)
-            if _kind(n) == "wiring":
+            if _kind(plan, i) == "wiring":
                 ready[i] = t
             else:
                 start[i], ready[i] = t, t + _own_latency(plan, i, registered_depth)
@@ -209,7 +266,7 @@ def modulo_schedule(plan: Plan, initiation_interval: int, dsp: tuple[int, int] |
     """
     ii = initiation_interval
     nodes = plan.nodes
-    muls = [i for i, n in enumerate(nodes) if _kind(n) == "product"]
+    muls = [i for i in range(len(nodes)) if _kind(plan, i) == "product"]
     wide = {i for i in muls if not _fits(*(nodes[a].signed_width for a in nodes[i].args), dsp)}
     shared = _SharedMultipliers(ii, -(-(len(muls) - len(wide)) // ii), -(-len(wide) // ii), dsp)
     height = _heights(plan, wide, registered_depth)
@@ -316,9 +373,11 @@ class ModuloEvaluator(wiring.Component):
     -------
     ``latency`` cycles from an input transfer to its output transfer while ``o.ready`` is
     high (the schedule's length; a multiplication takes ``MUL_LATENCY`` cycles, one split in
-    limbs ``WIDE_MUL_LATENCY``, a clamp ``CLAMP_LATENCY``, a table read ``TABLE_LATENCY``, or
+    limbs ``WIDE_MUL_LATENCY``, a clamp ``CLAMP_LATENCY`` (one cycle if the limits it reaches
+    are bit tests: 0 below, ``2**k - 1`` above), a table read ``TABLE_LATENCY``, or
     ``REGISTERED_TABLE_LATENCY`` if its table is registered (``registered_tables``), other
-    operations one; the clamp of an input port none: the input register takes the clamped
+    operations one, an addition of bit fields that cannot overlap (a grid's cell address) none
+    (an OR, wiring); the clamp of an input port none: the input register takes the clamped
     port value).
 
     Throughput
@@ -423,9 +482,12 @@ class ModuloEvaluator(wiring.Component):
         m.d.comb += self.i.ready.eq(en & (phase == 0))
         values = _NodeValues(m, plan, sch, en, phase)
         registered = self._registered_groups()
+        live = plan.live()
         for i, n in enumerate(plan.nodes):
-            if _kind(n) not in ("wiring", "constant", "product") and not (
-                    _kind(n) == "table" and n.args[0] in registered):
+            if i not in live and _kind(plan, i) != "port":
+                continue     # a sum only the certifier reads
+            if _kind(plan, i) not in ("wiring", "constant", "product") and not (
+                    _kind(plan, i) == "table" and n.args[0] in registered):
                 self._operation(m, values, i)
         for index, luts in registered.items():
             self._registered_table(m, values, index, luts)
@@ -447,17 +509,24 @@ class ModuloEvaluator(wiring.Component):
 
     def _operation(self, m, values: _NodeValues, i: int):
         """The register of node ``i``, neither a multiplication nor wiring nor a constant: an
-        input register (the port, or clamped), a two-stage clamp, or one registered operation
-        at its start phase."""
+        input register (the port, or clamped), a clamp (one stage if its reachable limits are
+        bit tests, else two), or one registered operation at its start phase."""
         n = self._plan.nodes[i]
         reg = values.chains[i][0]      # not a product: read at least in its ready cycle
-        if _kind(n) == "port" or _input_clamp(self._plan, i):
+        if _kind(self._plan, i) == "port" or _input_clamp(self._plan, i):
             port = self.i.payload[(self._plan.nodes[n.args[0]] if n.args else n).param]
             with m.If(self.i.ready):
                 m.d.sync += reg.eq(node_expression(n, [port]) if n.args else port)
             return
         s = self._schedule.start[i]
         ops = [values.read(a, s) for a in n.args]
+        if n.op == "clamp" and (tests := _clamp_tests(self._plan, i)) is not None:
+            v = ops[0]       # the limits it reaches are bit tests: one cycle
+            for limit, test in reversed(tests):
+                v = Mux(test(ops[0]), limit, v)
+            with m.If(values.at_phase(s)):
+                m.d.sync += reg.eq(v)
+            return
         if n.op == "clamp":   # comparisons registered with the value, then the selection
             lo, hi = n.param
             x = Signal.like(ops[0], name=f"n{i}_clamp_x")
@@ -539,8 +608,9 @@ class _NodeValues:
         self.wires: dict = {}
         self.bypass: list = []       # (wire, multiplier): a product read from the product register
         ii = sch.initiation_interval
+        live = plan.live()
         for i, n in enumerate(plan.nodes):
-            if _kind(n) in ("wiring", "constant"):
+            if _kind(plan, i) in ("wiring", "constant") or (i not in live and _kind(plan, i) != "port"):
                 continue
             depth = max(0, (self.last[i] - self.held[i]) // ii + 1)
             self.chains[i] = [Signal(node_shape(n), name=f"n{i}_{n.op}" + (f"_r{j}" if j else ""))
@@ -555,12 +625,12 @@ class _NodeValues:
     def read(self, i, c):
         """Value of node ``i`` of the target being evaluated, during its cycle ``c``."""
         n, sch = self.plan.nodes[i], self.sch
-        if _kind(n) == "constant":
+        if _kind(self.plan, i) == "constant":
             return node_expression(n, [])
-        if _kind(n) == "wiring":
+        if _kind(self.plan, i) == "wiring":
             if (i, c) in self.wires:
                 return self.wires[i, c]
-            v = node_expression(n, [self.read(a, c) for a in n.args])
+            v = _wiring_expression(self.plan, i, [self.read(a, c) for a in n.args])
             w = self.wires[i, c] = Signal(node_shape(n), name=f"n{i}_{n.op}_c{c}")
             self.m.d.comb += w.eq(v)
             return w

@@ -264,8 +264,9 @@ def _lower(plan: Plan):
         return base, (a, b)
 
     operand = {}
+    live = plan.live()
     for i, n in enumerate(nodes):
-        if OPS[n.op].view is None:
+        if i in live and OPS[n.op].view is None:
             operand[i] = [need(x) for x in n.args]
     out_ref = {o.name: need(o.node) for o in plan.outputs}
 

@@ -11,7 +11,7 @@ from ikseries.fit import interval as ia
 from ikseries.fit.certify import (CertificationError, _initial_cells, _plan_function, _table_edges, certify,
                                   output_rounding)
 from ikseries.fit.horner import horner
-from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
+from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput
 from ikseries.robot import load_preset
 from ikseries.sim.golden import evaluate_ideal
 
@@ -244,6 +244,16 @@ def test_output_rounding_follows_the_plan():
     assert output_rounding(_plan(), 0) == (0.5, None)           # the clamp never acts: dropped
     assert output_rounding(_plan(clamp=(0, 1)), 0) == (0.5, (0.0, 1.0))
     assert output_rounding(_plan(floor_only=True), 0) == (1 - 2.0 ** -12, None)
+
+
+def test_output_rounding_refuses_a_sum_of_other_terms():
+    """The output's sum may hold the accumulator's terms plus constants, nothing else."""
+    plan = _plan()
+    o = plan.outputs[0]
+    other = next(i for i, n in enumerate(plan.nodes) if n.op == "mul")
+    bad = Plan(plan.inputs, plan.nodes, [PlanOutput(o.name, o.node, other, o.unit, o.ticks_per_pu)], {})
+    with pytest.raises(ValueError, match="must be a clamp over constant additions and shifts, not a 'add' node"):
+        output_rounding(bad, 0)
 
 
 def test_a_clamp_that_cuts_the_reference_is_counted():

@@ -34,7 +34,7 @@ def test_grid_plan_bit_exact_with_backpressure():
     simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.6, valid_prob=0.7, seed=2)
 
 
-@pytest.mark.parametrize("clamp", [(-100, 100), (0, 100)])
+@pytest.mark.parametrize("clamp", [(-100, 100), (0, 100), (0, 127), (-128, 127)])
 @pytest.mark.parametrize("dsp", [None, (8, 8), (6, 5)])
 def test_schedule_respects_the_multipliers_and_dependencies(dsp, clamp):
     plan = tiny_plan(1, clamp=clamp)
@@ -54,10 +54,37 @@ def test_schedule_respects_the_multipliers_and_dependencies(dsp, clamp):
                 assert all(sch.ready[a] <= sch.start[i] for a in n.args)
             if n.op == "clamp":         # input clamps: in the input register; others two cycles
                 assert (sch.start[i], sch.ready[i]) == (None, 1) if plan.nodes[n.args[0]].op == "input" \
-                    else sch.ready[i] == sch.start[i] + CLAMP_LATENCY
+                    else sch.ready[i] == sch.start[i] + _expected_clamp_cycles(plan, i)
         for (ua, ub), lat in zip(sch.operand_widths, sch.unit_latency):
             fits = dsp is None or (ua <= dsp[0] and ub <= dsp[1]) or (ua <= dsp[1] and ub <= dsp[0])
             assert lat == (MUL_LATENCY if fits else WIDE_MUL_LATENCY)
+
+
+def _expected_clamp_cycles(plan, i):
+    """One cycle when each limit the operand's interval crosses is 0 below or 2**k - 1 above."""
+    x, (lo, hi) = plan.nodes[plan.nodes[i].args[0]], plan.nodes[i].param
+    bit_tests = (x.lo >= lo or lo == 0) and (x.hi <= hi or (hi + 1) & hi == 0)
+    return 1 if bit_tests else CLAMP_LATENCY
+
+
+@pytest.mark.parametrize("clamp", [(0, 127), (0, 100), (-128, 127), (0, 31)])
+def test_one_cycle_clamps_bit_exact(clamp):
+    """Clamps whose reached limits are bit tests take one cycle; every port value, bit-exact."""
+    plan = tiny_plan(3, clamp=clamp)
+    out = next(i for i, n in enumerate(plan.nodes) if n.op == "clamp" and plan.nodes[n.args[0]].op != "input")
+    core = ModuloEvaluator(plan, 2)
+    assert core.schedule.ready[out] - core.schedule.start[out] == _expected_clamp_cycles(plan, out)
+    simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.7, seed=4)
+
+
+def test_grid_address_is_wiring():
+    """The grid's cell address (row shifted left plus column, bits disjoint) takes no cycle."""
+    plan = tiny_grid_plan(0, (2, 2))[0]
+    sch = modulo_schedule(plan, 1)
+    lut = next(i for i, n in enumerate(plan.nodes) if n.op == "lut")
+    address = plan.nodes[lut].args[0]
+    assert plan.nodes[address].op == "add" and sch.start[address] is None
+    assert sch.ready[address] == max(sch.ready[a] for a in plan.nodes[address].args)
 
 
 @pytest.mark.parametrize("dsp", [(8, 8), (6, 5), (4, 4)])

@@ -7,6 +7,7 @@ import pytest
 
 from helpers import all_ports, check_exhaustively, grid_reference, tiny_grid_plan, tiny_piecewise_plan, tiny_plan
 from ikseries.fit.horner import parity_split
+from ikseries.fit.certify import output_rounding
 from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput, bits_for
 from ikseries.sim import golden
 
@@ -142,6 +143,41 @@ def test_a_term_ready_last_is_added_last():
     assert plan.count("add") == 2 and plan.depth == plan.stages()[plan.outputs[0].node] == 4
     assert plan.nodes[plan.outputs[0].node].op == "add"
     check_exhaustively(plan, want=lambda ports: ports["a"] + ports["a"] ** 3 + ports["b"])
+
+
+def test_a_constant_after_a_shift_joins_the_sum_under_it():
+    """``((a**2 + c1) >> s) + c2`` is built as ``(a**2 + (c1 + c2 * 2**s)) >> s``: one adder, the
+    same integers (floor commutes with adding a multiple of 2**s)."""
+    inputs = [PlanInput("a", "mm", 0, -40, 63, 7, True)]
+    b = PlanBuilder(inputs)
+    a = b.input_nodes["a"]
+    y = b.add(b.mul(a, a), b.const(-3.0, 0))
+    z = b.add(b.reinterpret(b.align(y, -4), 2), b.const(0.75, 2))    # (y >> 4) / 4 + 3/4
+    plan = b.build([PlanOutput("z", z, z, "ticks", 1.0)])
+    assert plan.count("add") == 1 and plan.nodes[plan.outputs[0].node].op != "add"
+    ports = all_ports(plan)
+    want = ((np.clip(ports["a"], -40, 63).astype(np.int64) ** 2 - 3) >> 4) + 3   # the port clamped
+    assert np.array_equal(golden.evaluate(plan, ports)[plan.outputs[0].node], want)
+    check_exhaustively(plan)
+
+
+def test_the_rounding_half_joins_a_term_ready_before_the_last_product():
+    """``round(a + p)``, ``p`` a product: the half is added to ``a`` while ``p`` is computed, so
+    the output is one stage after ``p``; the accumulator ``a + p`` stays in the plan for the
+    certifier only (not :meth:`Plan.live`), and the output is its rounding, bit for bit."""
+    inputs = [PlanInput("a", "mm", 0, 0, 15, 4, False), PlanInput("b", "mm", 0, -8, 7, 4, True)]
+    b = PlanBuilder(inputs)
+    a, q = (b.reinterpret(b.input_nodes[k], 2) for k in "ab")
+    p = b.mul(q, q)
+    acc = b.add(b.align(a, 4), p)
+    out = b.round(acc, 0)
+    plan = b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
+    o = plan.outputs[0]
+    assert o.preround not in plan.live() and plan.count("add") == 2
+    assert plan.depth == plan.stages()[o.preround] == 3     # input 1, product 2, sum 3: no 4th
+    iv = golden.evaluate(plan, all_ports(plan))
+    assert np.array_equal(iv[o.node], (np.asarray(iv[o.preround]) + 8) >> 4)
+    assert output_rounding(plan, 0) == (0.5, None)
 
 
 @pytest.mark.parametrize("seed", range(3))
