@@ -95,3 +95,17 @@ def write_result(path, payload: dict, run: dict) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"run": run, **payload}, indent=1) + "\n")
     return out
+
+
+def merge_rows(path, results: list, key: str) -> list:
+    """Put before ``results`` (in place) the rows of the JSON ``path`` (its ``"results"``) whose
+    ``key`` no row of ``results`` has; returns the run records those come from (``"run"`` and
+    ``"earlier_runs"``), empty when none is kept."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    old = json.loads(path.read_text())
+    have = {r[key] for r in results}
+    kept = [r for r in old["results"] if r[key] not in have]
+    results[:0] = kept
+    return [old["run"], *old.get("earlier_runs", [])] if kept else []

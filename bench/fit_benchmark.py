@@ -6,7 +6,7 @@ representable points, certified bound (pu), and the preset's fit time (wall and 
 included; the CPU seconds of the certifications alone beside them).
 
     python bench/fit_benchmark.py [PRESET ...] [--box-scale S] [--table-entries N] [--jobs N]
-                                  [--json docs/results/fit_benchmark.json]
+                                  [--json docs/results/fit_benchmark.json] [--merge]
 
 ``--box-scale S`` fits every preset's workspace box scaled S times about its centre (each
 range's half-width times S; an end the geometry refuses, such as r < 0 or theta past +-180 deg,
@@ -16,6 +16,9 @@ reported beside the name.
 With ``--jobs N`` each preset is fitted a second time with its servos in N processes
 (``fit_robot(jobs=N)``): its wall time beside the one-process fit's, and the two plans compared
 byte for byte (the run fails if they differ).
+``--merge`` keeps the rows of the ``--json`` file for every preset (as reported, box scale and
+table entries included) this run does not fit, before this run's, with the runs they come from:
+e.g. the enlarged cylinder-leg box recorded beside every preset's default box.
 
 Targets for cylinder-leg at +-0.5 pu: <= 100 multiply-adds per servo, certified (issue 3); fit
 plus certification <= 10 s CPU on one core ("a fit ten times faster").
@@ -146,6 +149,8 @@ def main(argv=None):
                     help="fit.table_entries of every fit (from 64: cells of computed features)")
     ap.add_argument("--jobs", type=int, default=1, help="also fit each preset with its servos in N processes")
     ap.add_argument("--json", default=FACTS["default_json"]("fit_benchmark"))
+    ap.add_argument("--merge", action="store_true",
+                    help="keep the --json file's rows of the presets this run does not fit")
     args = ap.parse_args(argv)
     if args.jobs < 1:
         sys.exit(f"--jobs must be a positive integer, not {args.jobs}")
@@ -164,8 +169,10 @@ def main(argv=None):
     for n in names:
         print(f"fitting {n} ...", flush=True)
         results.append(bench_preset(n, args.box_scale, args.jobs, args.table_entries))
+    earlier = FACTS["merge_rows"](args.json, results, "preset") if args.merge else []
     print(table(results))
-    out = FACTS["write_result"](args.json, {"results": results}, run)
+    out = FACTS["write_result"](args.json, {"results": results, **({"earlier_runs": earlier} if earlier else {})},
+                                run)
     print(f"wrote {out}")
 
 

@@ -67,7 +67,7 @@ from .parallel import servo_map
 from .plan import Plan
 
 __all__ = ["CertificationError", "UnboundedCellError", "ServoCertificate", "Certificate", "certify", "output_rounding",
-           "DEFAULT_MAX_CELLS"]
+           "DEFAULT_MAX_CELLS", "MISS_GRID"]
 
 #: Default budget of evaluated cells per servo.
 DEFAULT_MAX_CELLS = 400_000
@@ -99,6 +99,10 @@ class ServoCertificate:
     evaluated: int            # cells evaluated during refinement
     worst: dict               # the cell with the largest bound: lo, hi per input, bound_pu
     seconds: float
+    #: sampled counterexamples: evaluated cells whose centre errs by more than the target, the
+    #: worst of each region of a ``MISS_GRID``-per-input grid over the box, as (lo, hi, error_pu)
+    #: with lo, hi per input in the box's order (the fit samples them on a refit)
+    misses: tuple = ()
 
     @property
     def total_pu(self) -> float:
@@ -548,6 +552,38 @@ class _Cover:
         self.f_lo, self.f_hi = min(self.f_lo, float(b.f_lo[rows].min())), max(self.f_hi, float(b.f_hi[rows].max()))
 
 
+#: cells per input of the grid over the box whose worst sampled counterexample each is kept
+MISS_GRID = 8
+
+
+class _Misses:
+    """Sampled counterexamples of a refinement: per region of a ``MISS_GRID``-per-input grid
+    over the box, the evaluated cell whose centre errs most, if by more than the target."""
+
+    def __init__(self, box_lo, box_hi):
+        self.box_lo, self.width = box_lo, np.where(box_hi > box_lo, box_hi - box_lo, 1.0)
+        self.worst: dict = {}           # region -> (|e(c)|, lo, hi)
+
+    def add(self, b: _Bounds, lo, hi, target) -> None:
+        rows = np.flatnonzero(b.centre > target)
+        if not len(rows):
+            return
+        c = 0.5 * (lo[rows] + hi[rows])
+        cell = np.clip(((c - self.box_lo) / self.width * MISS_GRID).astype(np.int64), 0, MISS_GRID - 1)
+        region = np.ravel_multi_index(cell.T, (MISS_GRID,) * lo.shape[1])
+        order = np.lexsort((-b.centre[rows], region))        # per region, the worst first
+        first = order[np.insert(region[order][1:] != region[order][:-1], 0, True)]
+        for i in first:
+            r, j = int(region[i]), rows[i]
+            if r not in self.worst or b.centre[j] > self.worst[r][0]:
+                self.worst[r] = (float(b.centre[j]), lo[j].copy(), hi[j].copy())
+
+    def cells(self, tpp: float) -> tuple:
+        """(lo, hi, error_pu) per region, the regions in order."""
+        return tuple((tuple(lo.tolist()), tuple(hi.tolist()), e / tpp)
+                     for e, lo, hi in (self.worst[r] for r in sorted(self.worst)))
+
+
 #: a cell whose centre form misses the target, with second derivatives enclosed over an
 #: ancestor fewer than ``FULL_AGE`` splits up, is split at once (an enclosure over the cell
 #: itself would rarely be enough); else it is enclosed over itself first
@@ -585,15 +621,19 @@ def _evaluate(err, names, lo, hi, inherited: _Bounds | None, target, say) -> _Bo
     return out
 
 
-def _refine(err, names, box_lo, box_hi, target, per_axis, max_cells, progress, label, edges=None, cut=None):
-    """Adaptive cover of the box; returns the summary of the final cells."""
+def _refine(err, names, box_lo, box_hi, target, per_axis, budget, progress, label, edges=None, cut=None):
+    """Adaptive cover of the box within ``budget`` = (max_cells, per_start) evaluated cells (at
+    least per_start times the starting cells); returns the summary of the final cells and the
+    sampled counterexamples (:class:`_Misses`)."""
     lo, hi = _initial_cells(box_lo, box_hi, per_axis, edges, cut)
-    inherited, cover = None, _Cover()
+    max_cells = max(budget[0], budget[1] * len(lo))
+    inherited, cover, misses = None, _Cover(), _Misses(box_lo, box_hi)
     evaluated, rnd = 0, 0
     say = _throttled(progress, PROGRESS_SECONDS)
     while len(lo):
         b = _evaluate(err, names, lo, hi, inherited, target, lambda msg: say(f"  {label}: round {rnd + 1}: {msg}"))
         cover.sampled = max(cover.sampled, float(b.centre.max()))
+        misses.add(b, lo, hi, target)
         evaluated += len(lo)
         rnd += 1
         done = b.bound <= target
@@ -613,7 +653,7 @@ def _refine(err, names, box_lo, box_hi, target, per_axis, max_cells, progress, l
         cover.add(b, todo[stuck], lo, hi)         # too narrow to split: final as they are
         inherited = b.subset(todo[~stuck]).twice()
         lo, hi = new_lo, new_hi
-    return cover.best, cover.sampled, cover.cells, evaluated, (cover.f_lo, cover.f_hi)
+    return cover.best, cover.sampled, cover.cells, evaluated, (cover.f_lo, cover.f_hi), misses
 
 
 def _unbounded(err, names, servo: str, best: dict) -> str:
@@ -711,7 +751,7 @@ def _box(robot, plan: Plan) -> tuple[list[str], np.ndarray, np.ndarray]:
 
 
 def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int = DEFAULT_MAX_CELLS,
-            initial: int = 4, progress=lambda msg: None, jobs: int = 1) -> Certificate:
+            initial: int = 4, progress=lambda msg: None, jobs: int = 1, per_start: int = 0) -> Certificate:
     """Certified bound of every servo's error over the continuous workspace box.
 
     Parameters
@@ -727,6 +767,9 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
     max_cells : int
         Budget of evaluated cells per servo; when spent, the bound is still certified, only
         above the target.
+    per_start : int
+        A servo's budget is at least this many times its starting cells (a piecewise plan's
+        table edges can make the starting grid a large part of ``max_cells``).
     initial : int
         Cells per input of the starting grid, which is further cut at the table edges of every
         input a piecewise plan cuts into cells.
@@ -748,6 +791,8 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
     """
     if isinstance(max_cells, bool) or not isinstance(max_cells, int) or max_cells < 1:
         raise ValueError(f"max_cells must be a positive integer, not {max_cells!r}")
+    if isinstance(per_start, bool) or not isinstance(per_start, int) or per_start < 0:
+        raise ValueError(f"per_start must be an integer >= 0, not {per_start!r}")
     if isinstance(initial, bool) or not isinstance(initial, int) or initial < 1:
         raise ValueError(f"initial must be a positive integer, not {initial!r}")
     if target_pu is not None and (isinstance(target_pu, bool) or not isinstance(target_pu, (int, float))
@@ -757,7 +802,8 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
     quant = plan.rounding_bounds()
 
     def one(k, say):
-        c = _certify_output(robot, plan, k, names, box_lo, box_hi, quant, target_pu, max_cells, initial, say)
+        c = _certify_output(robot, plan, k, names, box_lo, box_hi, quant, target_pu, (max_cells, per_start),
+                            initial, say)
         say(Certificate((c,), {}, METHOD).lines()[0])
         return c
     servos = servo_map(one, range(len(plan.outputs)), jobs, progress)
@@ -765,8 +811,9 @@ def certify(robot, plan: Plan, *, target_pu: float | None = None, max_cells: int
     return Certificate(tuple(servos), box, METHOD)
 
 
-def _certify_output(robot, plan, k, names, box_lo, box_hi, quant, target_pu, max_cells, initial, say):
-    """The :class:`ServoCertificate` of output ``k`` (:func:`certify`)."""
+def _certify_output(robot, plan, k, names, box_lo, box_hi, quant, target_pu, budget, initial, say):
+    """The :class:`ServoCertificate` of output ``k`` (:func:`certify`); ``budget``: (max_cells,
+    per_start)."""
     t0 = time.perf_counter()
     o = plan.outputs[k]
     tpp = o.ticks_per_pu
@@ -775,8 +822,8 @@ def _certify_output(robot, plan, k, names, box_lo, box_hi, quant, target_pu, max
     target = robot.fit.tolerance_pu - rounding_pu - out_pu if target_pu is None else float(target_pu)
     err = _error_function(plan, robot, k, quant)
     edges, cut = _table_edges(plan, plan.cone(o.preround), names, box_lo, box_hi)
-    best, sampled, cells, evaluated, (f_lo, f_hi) = _refine(
-        err, names, box_lo, box_hi, target * tpp, [initial] * len(names), max_cells, say, o.name,
+    best, sampled, cells, evaluated, (f_lo, f_hi), misses = _refine(
+        err, names, box_lo, box_hi, target * tpp, [initial] * len(names), budget, say, o.name,
         edges, cut)
     if not np.isfinite(best["bound"]):
         raise UnboundedCellError(_unbounded(err, names, o.name, best))
@@ -786,7 +833,7 @@ def _certify_output(robot, plan, k, names, box_lo, box_hi, quant, target_pu, max
         bool(best["bound"] <= target * tpp), cells, evaluated,
         {"lo": dict(zip(names, best["lo"].tolist())), "hi": dict(zip(names, best["hi"].tolist())),
          "bound_pu": best["bound"] / tpp},
-        time.perf_counter() - t0)
+        time.perf_counter() - t0, misses.cells(tpp))
 
 
 METHOD = ("per cell the least of the plain interval enclosure, the mean-value form |e(c)| + "

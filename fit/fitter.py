@@ -36,6 +36,13 @@ __all__ = ["FitError", "FormatError", "Budget", "FitResult", "ServoFit", "Featur
 CERTIFY_ATTEMPTS = 3   # fits (the first + refits with tighter budgets) before refusing
 FIT_SAMPLES = (30000, 3000)      # random interior points, points per face
 CHECK_SAMPLES = (100000, 10000)  # + points per edge / 4
+#: on a refit, fit points added about each sampled counterexample of the certifier (a cell whose
+#: centre errs by more than its target): this many random ones in a neighbourhood of each of
+#: these widths (fractions of the workspace box per input)
+MISS_POINTS = 32
+MISS_SCALES = (1 / 256, 1 / 64, 1 / 16, 1 / 4)
+#: the certifier's cell budget per servo is at least this many times its starting cells
+CERTIFY_PER_START = 20
 #: shares of the tolerance given to the certified rounding error, tried in turn: the first
 #: always; the others when fit.products = "dsp" leaves no format within the smaller share
 QUANTIZATION_SHARES = (0.10, 0.25, 0.40)
@@ -75,7 +82,8 @@ def workspace_samples(robot, n_random: int, n_face: int, seed: int, edges: bool 
 
 class _Samples:
     """Fit and check points of one robot, their reference pulses and, per variable kind, their
-    exact feature values (computed on first use)."""
+    exact feature values (computed on first use); per servo, the points added to its fit set
+    around the certifier's counterexamples (:meth:`add_misses`)."""
 
     def __init__(self, ctx: FitContext):
         robot = ctx.robot
@@ -83,8 +91,18 @@ class _Samples:
         self.points = (workspace_samples(robot, *FIT_SAMPLES, FIT_SEED),
                        workspace_samples(robot, *CHECK_SAMPLES, FIT_SEED + 1, edges=True))
         self.targets = [robot.pulses_pu(*p) for p in self.points]
-        self.raw = {i.name: (self.points[0][k], self.points[1][k]) for k, i in enumerate(robot.workspace.inputs)}
         self._feats: dict = {}
+        self.extra: dict = {}       # servo -> real points (one array per input) added to its fit set
+
+    def raw(self, k: int) -> dict:
+        """Per input port, its real values at servo ``k``'s fit and check rows."""
+        fit = self._fit_points(k)
+        return {i.name: (fit[j], self.points[1][j]) for j, i in enumerate(self.ctx.robot.workspace.inputs)}
+
+    def _fit_points(self, k: int) -> tuple:
+        if k not in self.extra:
+            return self.points[0]
+        return tuple(np.concatenate([a, b]) for a, b in zip(self.points[0], self.extra[k]))
 
     def sets(self, k: int, candidates) -> dict:
         """(fit set, check set) per variable kind of ``candidates`` for servo ``k``."""
@@ -92,8 +110,33 @@ class _Samples:
             if fs.kind not in self._feats:
                 self._feats[fs.kind] = [feature_values(self.ctx, fs.kind, p) for p in self.points]
         tpp = self.ctx.ticks_per_pu
-        return {fs.kind: tuple((f, t[k] * tpp) for f, t in zip(self._feats[fs.kind], self.targets))
-                for fs in candidates}
+        out = {}
+        for fs in candidates:
+            (f0, f1), (t0, t1) = self._feats[fs.kind], (t[k] for t in self.targets)
+            if k in self.extra:
+                f0 = np.concatenate([f0, feature_values(self.ctx, fs.kind, self.extra[k])])
+                t0 = np.concatenate([t0, self.ctx.robot.pulses_pu(*self.extra[k])[k]])
+            out[fs.kind] = ((f0, t0 * tpp), (f1, t1 * tpp))
+        return out
+
+    def add_misses(self, k: int, misses, seed: int) -> None:
+        """Add to servo ``k``'s fit set ``MISS_POINTS`` random points about each counterexample
+        cell (lo, hi, error) of the certifier at each of ``MISS_SCALES`` (its neighbourhood that
+        fraction of the workspace box wide), within the box."""
+        inputs = self.ctx.robot.workspace.inputs
+        lo = np.array([i.min for i in inputs])
+        hi = np.array([i.max for i in inputs])
+        rng = np.random.default_rng(seed)
+        pts = []
+        for cell_lo, cell_hi, _ in misses:
+            c = 0.5 * (np.array(cell_lo) + np.array(cell_hi))
+            for scale in MISS_SCALES:
+                u = rng.random((MISS_POINTS, len(lo))) - 0.5
+                pts.append(np.clip(c + u * scale * (hi - lo), lo, hi))
+        new = np.concatenate(pts)
+        old = np.stack(self.extra[k], 1) if k in self.extra else new[:0]
+        p = np.concatenate([old, new])
+        self.extra[k] = tuple(p[:, j] for j in range(len(lo)))
 
 
 def lower(ctx: FitContext, fits: list[ServoFit], progress) -> tuple[Plan, list[ServoFit]]:
@@ -143,9 +186,12 @@ def fit_robot(robot, progress=lambda msg: None, *, certified: bool = True,
 
     With ``certified`` (the default) the error over the continuous workspace box is then
     bounded rigorously (:func:`ikseries.fit.certify.certify`) and stored in
-    ``plan.meta["certificate"]``. A servo whose certified total exceeds the tolerance is
-    refitted with a 15 % tighter approximation budget; after ``CERTIFY_ATTEMPTS`` fits the
-    plan is refused (:class:`FitError`).
+    ``plan.meta["certificate"]`` (the certifier's cell budget at least ``CERTIFY_PER_START``
+    times its starting cells). A servo whose certified total exceeds the tolerance is refitted:
+    where the certifier sampled an error above its target (counterexamples: the fit samples
+    missed a region, e.g. a sliver of a feature cell at the workspace's rim), with fit points
+    about them (:meth:`_Samples.add_misses`), else with a 15 % tighter approximation budget;
+    after ``CERTIFY_ATTEMPTS`` fits the plan is refused (:class:`FitError`).
 
     With ``fit.products = "dsp"`` every multiplication's operands fit one DSP block of
     ``hardware.dsp`` (:func:`operand_bits`; narrowed by the plan builder). The extra rounding
@@ -190,7 +236,7 @@ def _fit_servos(ctx: FitContext, samples: _Samples, fits: list, approx: list, pr
         say(f"fitting {name}: candidates " + "; ".join(
             f"{fs.label()} ({', '.join(f'{v} {a}' for v, a in zip(fs.names, fs.allowed))})"
             for fs in candidates[k]))
-        return fit_servo(ctx, name, candidates[k], sets[k], samples.raw, approx[k], say)
+        return fit_servo(ctx, name, candidates[k], sets[k], samples.raw(k), approx[k], say)
     fits = list(fits)
     for k, f in zip(todo, servo_map(one, todo, jobs, progress)):
         fits[k] = f
@@ -199,14 +245,34 @@ def _fit_servos(ctx: FitContext, samples: _Samples, fits: list, approx: list, pr
 
 def _certificate(ctx: FitContext, plan: Plan, progress, jobs: int):
     progress("certifying the error bound over the continuous workspace")
-    cert = certify(ctx.robot, plan, progress=progress, jobs=jobs)
+    cert = certify(ctx.robot, plan, progress=progress, jobs=jobs, per_start=CERTIFY_PER_START)
     for line in cert.lines():
         progress("  " + line)
-    rec = cert.to_json()    # without run times: the plan must be byte-identical on a rerun
-    for c in rec["servos"]:
+    rec = cert.to_json()    # without run times (the plan must be byte-identical on a rerun) and
+    for c in rec["servos"]:  # counterexamples (for a refit)
         c.pop("seconds", None)
+        c.pop("misses", None)
     plan.meta["certificate"] = rec
     return cert
+
+
+def _refit(ctx: FitContext, samples: _Samples, cert, failed: list, approx: list, fits: list, attempt: int,
+           progress) -> None:
+    """Mark the ``failed`` servos for a refit: one whose certification found counterexamples
+    (a sampled error above its target: the fit samples missed a region) gets fit points about
+    them, at the same budget; the others a 15 % tighter approximation budget."""
+    for k in failed:
+        fits[k] = None
+        misses = cert.servos[k].misses
+        if misses:
+            samples.add_misses(k, misses, FIT_SEED + 2 + attempt)
+            progress(f"{ctx.robot.servos[k]}: sampled error {max(m[2] for m in misses):.4f} pu above the "
+                     f"target in {len(misses)} regions: refitting with "
+                     f"{len(misses) * MISS_POINTS * len(MISS_SCALES)} fit points about them")
+        else:
+            approx[k] *= 0.85
+            progress(f"{ctx.robot.servos[k]}: certified bound above the tolerance: refitting with a 15 % "
+                     f"tighter approximation budget")
 
 
 def _fit_attempts(ctx: FitContext, progress, certified: bool, jobs: int) -> FitResult:
@@ -217,7 +283,7 @@ def _fit_attempts(ctx: FitContext, progress, certified: bool, jobs: int) -> FitR
     samples = _Samples(ctx)
     approx = [ctx.budget.approximation * ctx.ticks_per_pu] * len(robot.servos)
     fits: list = [None] * len(robot.servos)
-    for _ in range(CERTIFY_ATTEMPTS):
+    for attempt in range(CERTIFY_ATTEMPTS):
         fits = _fit_servos(ctx, samples, fits, approx, progress, jobs)
         plan, fits = lower(ctx, fits, progress)
         if not certified:
@@ -230,11 +296,7 @@ def _fit_attempts(ctx: FitContext, progress, certified: bool, jobs: int) -> FitR
                   if not (c.converged and c.total_pu <= robot.fit.tolerance_pu)]
         if not failed:
             return FitResult(plan, fits)
-        for k in failed:
-            approx[k] *= 0.85
-            fits[k] = None
-        progress(f"certified bound above the tolerance for {', '.join(robot.servos[k] for k in failed)}: "
-                 "refitting with a 15 % tighter approximation budget")
+        _refit(ctx, samples, cert, failed, approx, fits, attempt, progress)
     try:
         cert.check(robot.fit.tolerance_pu)
     except CertificationError as e:

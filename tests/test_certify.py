@@ -8,8 +8,8 @@ from helpers import toy_robot
 from ikseries.accuracy import measure, verification_points
 from ikseries.fit import centred as cn
 from ikseries.fit import interval as ia
-from ikseries.fit.certify import (CertificationError, _initial_cells, _plan_function, _table_edges, certify,
-                                  output_rounding)
+from ikseries.fit.certify import (MISS_GRID, CertificationError, _initial_cells, _plan_function, _table_edges,
+                                  certify, output_rounding)
 from ikseries.fit.horner import horner
 from ikseries.fit.plan import Plan, PlanBuilder, PlanInput, PlanOutput
 from ikseries.robot import load_preset
@@ -240,6 +240,25 @@ def test_a_plan_with_an_offset_is_refused():
         bad.check(1.0)
 
 
+def test_counterexamples_are_cells_whose_centre_errs_beyond_the_target():
+    """A wrong plan's certificate names sampled counterexamples, each a real error above the
+    target (|P - f| = a - sin a + 0.75 at its centre), at most one per region; a good plan's none."""
+    assert certify(_robot(tolerance=1.0), _plan()).servos[0].misses == ()
+    s = certify(_robot(tolerance=1.0), _plan(offset=0.75)).servos[0]
+    assert s.misses and len(s.misses) <= MISS_GRID ** 2
+    for lo, hi, err in s.misses:
+        a = 0.5 * (lo[0] + hi[0])
+        assert err == pytest.approx(a - np.sin(a) + 0.75, abs=1e-9) and err > s.target_pu
+    assert max(m[2] for m in s.misses) == pytest.approx(s.sampled_pu)
+
+
+def test_a_budget_per_starting_cell():
+    """per_start raises the cell budget to that many times the starting cells (4 x 4 here)."""
+    small = certify(_robot(), _plan(), target_pu=SIN1 / 2, max_cells=200).servos[0]
+    big = certify(_robot(), _plan(), target_pu=SIN1 / 2, max_cells=200, per_start=100).servos[0]
+    assert small.evaluated <= 200 < big.evaluated <= 1600
+
+
 def test_output_rounding_follows_the_plan():
     assert output_rounding(_plan(), 0) == (0.5, None)           # the clamp never acts: dropped
     assert output_rounding(_plan(clamp=(0, 1)), 0) == (0.5, (0.0, 1.0))
@@ -265,6 +284,7 @@ def test_a_clamp_that_cuts_the_reference_is_counted():
     ({"target_pu": 0}, "target_pu must be a number > 0 pu or None, not 0"),
     ({"max_cells": 0}, "max_cells must be a positive integer, not 0"),
     ({"initial": 1.5}, "initial must be a positive integer, not 1.5"),
+    ({"per_start": -1}, "per_start must be an integer >= 0, not -1"),
 ])
 def test_bad_arguments(kwargs, words):
     with pytest.raises(ValueError, match=words):

@@ -153,6 +153,47 @@ def test_a_plan_that_fails_certification_is_refitted_then_refused(small_robot, s
     assert [name for name, _ in refits].count("s1") == 1      # passing servos are kept
 
 
+def test_a_servo_with_counterexamples_is_refitted_with_fit_points_about_them(small_robot, small_fitted,
+                                                                              monkeypatch):
+    """A failing servo whose certificate names sampled counterexamples is refitted at the same
+    budget with ``MISS_POINTS`` fit points per neighbourhood of each, inside the box (its check
+    set and the other servos' samples unchanged); once none are named, its budget tightens."""
+    import ikseries.fit.fitter as fitter
+    real = fitter.certify
+    stored = {sf.name: sf for sf in small_fitted[1]}
+    first = []
+    lo = np.array([i.min for i in small_robot.workspace.inputs])
+    hi = np.array([i.max for i in small_robot.workspace.inputs])
+    miss = (tuple(hi.tolist()), tuple(hi.tolist()), 9.0)        # a corner: neighbourhoods clipped
+
+    def failing(robot, plan, **kw):
+        if not first:
+            first.append(real(robot, plan, **kw))
+        cert = first[0]
+        s = dataclasses.replace(cert.servos[1], approximation_pu=robot.fit.tolerance_pu,
+                                misses=(miss,) if len(first) < 2 else ())   # the first time only
+        first.append(None)
+        return dataclasses.replace(cert, servos=(cert.servos[0], s, *cert.servos[2:]))
+
+    seen = []
+    monkeypatch.setattr(fitter, "certify", failing)
+    monkeypatch.setattr(fitter, "fit_servo", lambda *a: seen.append(a) or stored[a[1]])
+    with pytest.raises(FitError, match=r"^fit refused: servo s2: certified error"):
+        fit_robot(small_robot)
+    s2 = [a for a in seen if a[1] == "s2"]
+    assert len(s2) == fitter.CERTIFY_ATTEMPTS == 3
+    added = fitter.MISS_POINTS * len(fitter.MISS_SCALES)
+    for kind, ((f0, _), (f1, _)) in s2[1][3].items():
+        assert len(f0) == len(s2[0][3][kind][0][0]) + added and len(f1) == len(s2[0][3][kind][1][0])
+    raw = s2[1][4]
+    for j, i in enumerate(small_robot.workspace.inputs):
+        new = raw[i.name][0][-added:]
+        assert np.all((new >= lo[j]) & (new <= hi[j])) and len(np.unique(new)) > 1
+    assert s2[1][5] == s2[0][5] and s2[2][5] == pytest.approx(0.85 * s2[0][5])   # misses: same budget
+    s1 = [a for a in seen if a[1] == "s1"]
+    assert len(s1) == 1
+
+
 def test_tensor_terms_cap_each_variable():
     from ikseries.fit.fitter import FeatureSet
     fs = FeatureSet("cartesian", ("x", "y", "z"), ("any", "odd", "none"), zero_free=1, tensor=True)

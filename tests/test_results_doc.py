@@ -84,3 +84,17 @@ def test_json_missing_a_figure_is_named(tmp_path):
     with pytest.raises(SystemExit, match=r"^fit_benchmark\.json: cannot render its section \(KeyError: 'terms'\); "
                                          r"rerun bench/fit_benchmark\.py$"):
         GENERATOR["main"](["--results", str(tmp_path), "--out", str(tmp_path / "out.md")])
+
+
+def test_fit_benchmark_merge_keeps_the_rows_of_presets_not_refitted(tmp_path):
+    """``bench/fit_benchmark.py --merge``: the file's rows of other presets first, this run's
+    after, and the runs the kept rows come from."""
+    merge_rows = runpy.run_path(str(ROOT / "bench" / "facts.py"))["merge_rows"]
+    path = tmp_path / "fit_benchmark.json"
+    assert merge_rows(path, [{"preset": "a"}], "preset") == []
+    path.write_text(json.dumps({"run": {"command": "first"}, "earlier_runs": [{"command": "zeroth"}],
+                                "results": [{"preset": "a", "v": 1}, {"preset": "b", "v": 1}]}))
+    results = [{"preset": "b", "v": 2}]
+    assert merge_rows(path, results, "preset") == [{"command": "first"}, {"command": "zeroth"}]
+    assert results == [{"preset": "a", "v": 1}, {"preset": "b", "v": 2}]
+    assert merge_rows(path, [{"preset": "a"}, {"preset": "b"}], "preset") == []
