@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Cat, Module, Mux, Signal, signed
+from amaranth.hdl import Array, Cat, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -14,7 +14,7 @@ from ..fit.plan import Plan
 from .evaluator import input_layout, lut_groups, node_expression, output_layout
 from .limbmul import check_dsp, check_dsp_registers
 from .planmemo import per_plan
-from .tables import default_registered_depth, registered_rom, table_primitive, table_registered
+from .tables import default_registered_depth, registered_rom, rotated_table, table_primitive, table_registered
 
 __all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
            "CLAMP_LATENCY", "TABLE_LATENCY", "REGISTERED_TABLE_LATENCY"]
@@ -38,8 +38,60 @@ REGISTERED_TABLE_LATENCY = 2
 
 def _kind(plan: Plan, i: int) -> str:
     """The op's kind (:data:`~ikseries.fit.ops.OPS`), except that an addition whose operands'
-    bits cannot overlap (:func:`_carry_free`) is wiring here: an OR, no carry chain."""
-    return "wiring" if _carry_free(plan, i) else OPS[plan.nodes[i].op].kind
+    bits cannot overlap (:func:`_carry_free`) is wiring here (an OR, no carry chain), and so
+    is the addition of a table's index offset (:func:`_offset_add`: its operand, unchanged)."""
+    if _carry_free(plan, i) or _offset_add(plan, i) is not None:
+        return "wiring"
+    return OPS[plan.nodes[i].op].kind
+
+
+@per_plan
+def _users(plan: Plan) -> tuple:
+    """Per node, the nodes that read it."""
+    users = [[] for _ in plan.nodes]
+    for i, n in enumerate(plan.nodes):
+        for a in n.args:
+            users[a].append(i)
+    return tuple(tuple(u) for u in users)
+
+
+def _offset_add(plan: Plan, i: int) -> tuple[int, int] | None:
+    """``(x, c)`` when node ``i`` is ``x + c``, ``c`` a constant, read (through binary point
+    moves) only by cell numbers ``index(., s)`` that only address tables and by cell offsets
+    ``mask(., s)``, with ``c`` a multiple of each ``2**s``: the offsets are those of ``x`` and
+    each cell number is ``x``'s plus ``c >> s``, which the tables take in their layout
+    (:func:`_index_rotation`), so the hardware reads ``x`` itself (no adder, no cycle)."""
+    n = plan.nodes[i]
+    if n.op != "add" or any(o.node == i for o in plan.outputs):
+        return None
+    consts = [k for k in (0, 1) if plan.nodes[n.args[k]].op == "const"]
+    if len(consts) != 1:
+        return None
+    c, x = plan.nodes[n.args[consts[0]]].param, n.args[1 - consts[0]]
+    users, todo = _users(plan), list(_users(plan)[i])
+    if not todo:
+        return None
+    while todo:
+        u = plan.nodes[j := todo.pop()]
+        if u.op == "frac" and not any(o.node == j for o in plan.outputs):
+            todo.extend(users[j])
+        elif u.op not in ("index", "mask") or c % (1 << u.param) or (
+                u.op == "index" and not all(plan.nodes[v].op == "lut" for v in users[j])):
+            return None
+    return x, c
+
+
+def _index_rotation(plan: Plan, index: int) -> int:
+    """How far the hardware's cell number ``index`` is below the plan's: ``c >> s`` when it
+    reads an offset addition (:func:`_offset_add`) through binary point moves, else 0."""
+    n = plan.nodes[index]
+    if n.op != "index":
+        return 0
+    a = n.args[0]
+    while plan.nodes[a].op == "frac":
+        a = plan.nodes[a].args[0]
+    off = _offset_add(plan, a)
+    return 0 if off is None else off[1] >> n.param
 
 
 def _low_zeros(plan: Plan, i: int) -> int:
@@ -65,9 +117,12 @@ def _carry_free(plan: Plan, i: int) -> bool:
 
 
 def _wiring_expression(plan: Plan, i: int, ops):
-    """The combinational value of wiring node ``i`` from its operands' values ``ops``."""
+    """The combinational value of wiring node ``i`` from its operands' values ``ops`` (a cell
+    number behind an offset addition: its low bits, the tables' address)."""
     if _carry_free(plan, i):
         return ops[0] | ops[1]
+    if (off := _offset_add(plan, i)) is not None:
+        return ops[plan.nodes[i].args.index(off[0])]
     return node_expression(plan.nodes[i], ops)
 
 
@@ -520,6 +575,10 @@ class ModuloEvaluator(wiring.Component):
             return
         s = self._schedule.start[i]
         ops = [values.read(a, s) for a in n.args]
+        if n.op == "lut" and (k := _index_rotation(self._plan, n.args[0])):
+            with m.If(values.at_phase(s)):     # the table laid out for the offset-free cell number
+                m.d.sync += reg.eq(Array(rotated_table(self._plan, n.args[0], list(n.param), k))[ops[0]])
+            return
         if n.op == "clamp" and (tests := _clamp_tests(self._plan, i)) is not None:
             v = ops[0]       # the limits it reaches are bit tests: one cycle
             for limit, test in reversed(tests):
@@ -547,7 +606,7 @@ class ModuloEvaluator(wiring.Component):
         s = self._schedule.start[luts[0]]
         assert all(self._schedule.start[li] == s for li in luts)   # one operand, one start
         fields = registered_rom(m, self._plan, index, luts, values.read(index, s), values.at_phase(s),
-                                values.at_phase(s + 1), self._table_primitive)
+                                values.at_phase(s + 1), self._table_primitive, _index_rotation(self._plan, index))
         for li, f in fields.items():
             if values.chains[li]:
                 m.d.comb += values.chains[li][0].eq(f)

@@ -9,7 +9,7 @@ from ..constraints.devices import family_primitives
 from ..fit.plan import Plan
 from .evaluator import lut_fields, lut_rom_init
 
-__all__ = ["default_registered_depth", "registered_rom", "table_primitive", "table_registered"]
+__all__ = ["default_registered_depth", "registered_rom", "rotated_table", "table_primitive", "table_registered"]
 
 
 def table_primitive(dsp_registers: str | None):
@@ -35,13 +35,27 @@ def table_registered(plan: Plan, i: int, registered_depth: int | None) -> bool:
     return registered_depth is not None and plan.nodes[plan.nodes[i].args[0]].hi + 1 >= registered_depth
 
 
-def registered_rom(m, plan: Plan, index: int, luts: list[int], addr, read, out, primitive) -> dict:
+def rotated_table(plan: Plan, index: int, words: list, rotation: int) -> list:
+    """``words`` (one per value of cell number ``index``) laid out for a cell number
+    ``rotation`` lower, taken modulo the index's ``2**width`` (a negative one wraps): word ``j``
+    at ``(j - rotation) mod 2**width``, 0 where no value lands."""
+    n = plan.nodes[index]
+    size = 1 << n.width
+    out = [0] * size
+    for j in range(n.lo, n.hi + 1):
+        out[(j - rotation) % size] = words[j]
+    return out
+
+
+def registered_rom(m, plan: Plan, index: int, luts: list[int], addr, read, out, primitive,
+                   rotation: int = 0) -> dict:
     """The ROM of the ``luts`` read at node ``index`` (:func:`~ikseries.hdl.evaluator.lut_rom_init`),
     added to ``m``: word ``addr`` read at a clock edge where ``read`` is high, then taken by
     its output register at an edge where ``out`` is high (cleared by the domain's reset). On
     the block RAM ``primitive`` (its own output register), or with None a ``Memory`` read port
     followed by a fabric register, the same timing and values. Each lut's value in the output
-    register (:func:`~ikseries.hdl.evaluator.lut_fields`).
+    register (:func:`~ikseries.hdl.evaluator.lut_fields`). ``rotation``: ``addr`` is the cell
+    number that many below the plan's, wrapped (:func:`rotated_table`).
 
     Latency
     -------
@@ -52,6 +66,8 @@ def registered_rom(m, plan: Plan, index: int, luts: list[int], addr, read, out, 
     One read per clock edge where ``read`` is high.
     """
     init, width = lut_rom_init(plan, index, luts)
+    if rotation:
+        init = rotated_table(plan, index, init, rotation)
     data = Signal(width, name=f"lut{index}_data")
     if primitive is not None:
         primitive.instance(m, f"lut{index}", addr, data, init, read, out)

@@ -87,6 +87,35 @@ def test_grid_address_is_wiring():
     assert sch.ready[address] == max(sch.ready[a] for a in plan.nodes[address].args)
 
 
+def _offset_cell_plan(offset: int):
+    """A signed port v in [-16, 15] plus ``offset``, cut into cells of 4 values: a table per cell
+    number times the offset inside the cell, plus a second table."""
+    from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
+    rng = np.random.default_rng(offset)
+    b = PlanBuilder([PlanInput("v", "mm", 0, -16, 15, 6, True)])
+    u = b.add(b.input_nodes["v"], b.const(float(offset), 0))
+    cell, off = b.cell(u, 2)
+    cells = b.nodes[cell].hi + 1
+    p = b.mul(b.lut(cell, [float(x) for x in rng.integers(-50, 50, cells)], 0), off)
+    out = b.add(p, b.lut(cell, [float(x) for x in rng.integers(-9, 9, cells)], 0))
+    return b.build([PlanOutput("y", out, out, "ticks", 1.0)])
+
+
+@pytest.mark.parametrize("registered", [None, True])
+def test_a_table_index_offset_takes_no_adder(registered):
+    """``v + 16`` cut into cells of 4: the tables are laid out for ``v``'s own cell number (a
+    negative one wraps), so the addition is wiring; every port value bit-exact, registered
+    tables or not. An offset that is no multiple of the cell keeps its adder."""
+    plan = _offset_cell_plan(16)
+    add = min(i for i, n in enumerate(plan.nodes) if n.op == "add")     # v + offset, built first
+    core = ModuloEvaluator(plan, 1, registered_tables=registered)
+    assert core.schedule.start[add] is None
+    simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.7, seed=6)
+    other = _offset_cell_plan(18)
+    add = min(i for i, n in enumerate(other.nodes) if n.op == "add")
+    assert modulo_schedule(other, 1).start[add] is not None
+
+
 @pytest.mark.parametrize("dsp", [(8, 8), (6, 5), (4, 4)])
 def test_products_split_in_limbs_stay_bit_exact(dsp):
     """Small DSP sizes force most products onto limb-split multipliers (every port value)."""
