@@ -60,7 +60,9 @@ def _offset_add(plan: Plan, i: int) -> tuple[int, int] | None:
     moves) only by cell numbers ``index(., s)`` that only address tables and by cell offsets
     ``mask(., s)``, with ``c`` a multiple of each ``2**s``: the offsets are those of ``x`` and
     each cell number is ``x``'s plus ``c >> s``, which the tables take in their layout
-    (:func:`_index_rotation`), so the hardware reads ``x`` itself (no adder, no cycle)."""
+    (:func:`_index_rotation`), so the hardware reads ``x`` itself (no adder, no cycle). Not
+    where ``x`` is a product: its bits, straight from the multiplier, would drive the tables'
+    address logic (on the ECP5-25F such a core took nextpnr's router past 15 minutes)."""
     n = plan.nodes[i]
     if n.op != "add" or any(o.node == i for o in plan.outputs):
         return None
@@ -68,6 +70,11 @@ def _offset_add(plan: Plan, i: int) -> tuple[int, int] | None:
     if len(consts) != 1:
         return None
     c, x = plan.nodes[n.args[consts[0]]].param, n.args[1 - consts[0]]
+    base = x
+    while plan.nodes[base].op in ("frac", "shr", "shl"):
+        base = plan.nodes[base].args[0]
+    if plan.nodes[base].op == "mul":    # a product's bits would drive the tables' address logic
+        return None
     users, todo = _users(plan), list(_users(plan)[i])
     if not todo:
         return None

@@ -101,3 +101,20 @@ def test_a_feature_grid_plan_is_deterministic(feature_fit):
     robot, fit = feature_fit
     again = fit_robot(dataclasses.replace(robot))
     assert again.plan.dumps() == fit.plan.dumps()
+
+
+@pytest.mark.parametrize("entries", [16, 1024])
+def test_a_long_table_coordinate_stage_is_built_for_depth(entries):
+    """With long tables the cylindrical stage multiplies R * 2D (from the input) by cos beside
+    R cos, and keeps no clamp that saves no bit: rho2 is two stages after cos, not four."""
+    from ikseries.fit.features import CylindricalStage
+    from ikseries.fit.plan import PlanBuilder
+    from ikseries.fit.ports import plan_inputs
+    robot = with_fit(load_preset("cylinder-leg"), table_entries=entries)
+    stage = CylindricalStage(robot, 1e-6, table=True)
+    b = PlanBuilder(plan_inputs(robot))
+    stage.build(b, 16, 16)
+    rho2 = stage._rho2_node(b)
+    clamps = [n for n in b.nodes if n.op == "clamp" and b.nodes[n.args[0]].op != "input"]
+    gap = b.stage(rho2) - b.stage(stage._cos)
+    assert (gap, len(clamps)) == ((2, 0) if entries >= FEATURE_GRID_ENTRIES else (3, 2))
