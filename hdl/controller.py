@@ -115,7 +115,9 @@ class RobotController(wiring.Component):
                  time_bits: int = 16, home_at_reset: list[int] | None = None, channels=None):
         _check(plan, legs, period, clock_hz, name, manifest)
         self._divisor = uart_divisor(clock_hz, baud)
-        self._core = RobotCore(plan, legs, period, clock_hz, multipliers=multipliers, dsp=dsp, channels=channels)
+        # the dispatcher's target register holds a leg's target until its widths are taken
+        self._core = RobotCore(plan, legs, period, clock_hz, multipliers=multipliers, dsp=dsp, channels=channels,
+                               held_input=True)
         self._w = pulse_bits(plan, period)
         if self._w > _WIRE_PULSE_BITS:
             raise ValueError(f"pulse widths must fit {_WIRE_PULSE_BITS} bits (a u24 on the wire), not {self._w}")

@@ -88,6 +88,12 @@ class FoldedEvaluator(wiring.Component):
         registers (``dsp`` must be its size; see :class:`LimbMultiplier`), same timing and
         values; the Amaranth simulator cannot run it (simulate the core with None, the exported
         Verilog with the primitive's model). None (default): fabric registers.
+    held_input : bool
+        The sender holds ``i.payload`` from the input transfer until ``o.valid`` (its own
+        register, as the :class:`~ikseries.hdl.dispatch.Dispatcher`'s target), so the evaluator
+        reads the port itself instead of an input register of its own (16 flip-flops a
+        coordinate less, each a logic cell of its own on iCE40: a register fed by a register).
+        Default False: the payload is registered at the transfer.
 
     Attributes
     ----------
@@ -122,10 +128,11 @@ class FoldedEvaluator(wiring.Component):
     """
 
     def __init__(self, plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None,
-                 dsp_registers: str | None = None):
+                 dsp_registers: str | None = None, held_input: bool = False):
         self._prog = folded_program(plan, multipliers, dsp)
         check_dsp_registers(dsp_registers, self._prog.dsp)
         self._plan, self._dsp_registers = plan, dsp_registers
+        self._held_input = bool(held_input)
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),
             "o": Out(stream.Signature(output_layout(plan))),
@@ -226,8 +233,11 @@ class FoldedEvaluator(wiring.Component):
             m.d.sync += [w.eq(layout.const(prog.words[0])), hot.eq(1 << prog.words[0]["src"])]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
-        with m.If(~busy):   # idle: the input register follows the port (latched at accept)
-            m.d.sync += in_reg.eq(self.i.payload)
+        if self._held_input:    # the sender's own register holds the target: no copy
+            m.d.comb += in_reg.eq(self.i.payload)
+        else:
+            with m.If(~busy):   # idle: the input register follows the port (latched at accept)
+                m.d.sync += in_reg.eq(self.i.payload)
         with m.If(accept):
             m.d.sync += [running.eq(1), busy.eq(1), pc.eq(0)]
         with m.Elif(running):

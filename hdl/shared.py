@@ -76,6 +76,10 @@ class RobotCore(wiring.Component):
     channels : ChannelTable, optional
         The per-leg mirror and per-channel constants (:func:`table_in_use`: none, or one that
         changes nothing, gives the core without a table stage).
+    held_input : bool
+        The sender holds ``i.payload`` (leg and target) from the input transfer until the
+        widths transfer on ``o``: the evaluator has no input register
+        (:class:`~ikseries.hdl.folded.FoldedEvaluator`). Default False.
 
     Attributes
     ----------
@@ -107,14 +111,16 @@ class RobotCore(wiring.Component):
 
     def __init__(self, plan: Plan, legs: int, period: int, clock_hz: float, *, multipliers: int = 1,
                  dsp: tuple[int, int] | None = None, reset_widths: dict | None = None,
-                 channels: ChannelTable | None = None, dsp_registers: str | None = None):
+                 channels: ChannelTable | None = None, dsp_registers: str | None = None,
+                 held_input: bool = False):
         self._args = ((plan, legs, period, clock_hz), dict(multipliers=multipliers, dsp=dsp,
-                                                           reset_widths=reset_widths, channels=channels))
+                                                           reset_widths=reset_widths, channels=channels,
+                                                           held_input=held_input))
         if not isinstance(legs, int) or isinstance(legs, bool) or legs < 1:
             raise ValueError(f"legs must be a positive integer, not {legs!r}")
         if isinstance(clock_hz, bool) or not isinstance(clock_hz, (int, float)) or not clock_hz > 0:
             raise ValueError(f"clock_hz must be a positive number, not {clock_hz!r}")
-        self._evaluator = FoldedEvaluator(plan, multipliers, dsp, dsp_registers)
+        self._evaluator = FoldedEvaluator(plan, multipliers, dsp, dsp_registers, held_input)
         self._servos, reset_widths = servo_channels(plan, reset_widths)
         width_bits = max(plan.nodes[o.node].width for o in plan.outputs)
         self._bank = ServoPWMBank(period, width_bits, legs, len(self._servos),
@@ -150,6 +156,12 @@ class RobotCore(wiring.Component):
             return self
         args, kw = self._args
         return RobotCore(*args, **kw)
+
+    def registered(self) -> "RobotCore":
+        """This core with an input register of its own (``held_input`` False): the plain core a
+        board without a controller has, which :mod:`bench.controller_cells` measures against."""
+        args, kw = self._args
+        return self if not kw["held_input"] else RobotCore(*args, **{**kw, "held_input": False})
 
     @property
     def servos(self) -> list[str]:
