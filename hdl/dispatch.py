@@ -117,8 +117,9 @@ class Dispatcher(wiring.Component):
     ``stage_cycles`` to stage and commit), the header (a register) 2 cycles after the strobe.
     Status: a read of the servo controller per channel and flag of its two masks, then a cycle
     per answer byte (the link's counters read as they are then); channel_status: once the last
-    commit has been applied by a pass (so its answer shows every earlier move), the channel's
-    read, a cycle per answer byte. The widths reach the pins at the second period start after
+    commit has been applied by a pass (so its answer shows every earlier move) and in the
+    staging window (so that no pass comes between them), the channel's two reads (target,
+    current), a cycle per answer byte. The widths reach the pins at the second period start after
     the commit at the latest (the servo controller's latency). An
     answer byte is on ``answer_data`` the cycle after ``answer_index`` names it. A request waits
     in the link while the previous answer's payload is still being sent.
@@ -149,7 +150,10 @@ class Dispatcher(wiring.Component):
         self._asm = assemble(program(self._geometry))
         # from the cycle the staging window is seen open to the commit strobe on the port, every
         # leg selected (a read cycle and a target transfer per channel), plus a margin cycle
-        self._stage_cycles = 1 + legs * (1 + self._servos * (1 + servo.target_cycles)) + 3
+        staging = 1 + legs * (1 + self._servos * (1 + servo.target_cycles)) + 3
+        # channel_status's two reads (target, current) in the window too: no pass between them
+        reads = self._asm.longest("CSR", ("CSHDR",)) + 2 * servo.read_cycles
+        self._stage_cycles = max(staging, reads)
         self._pass_cycles, self._core_latency = servo.pass_cycles, core.latency
         ls, cs, ss = link.signature.members, core.signature.members, servo.signature.members
         super().__init__({
@@ -169,7 +173,8 @@ class Dispatcher(wiring.Component):
     @property
     def stage_cycles(self) -> int:
         """Cycles from the decision to stage a group of widths to its commit strobe, inclusive
-        of a margin cycle: staging starts only with this many cycles left before a period start."""
+        of a margin cycle, or more (channel_status's reads): staging starts only with this many
+        cycles left before a period start."""
         return self._stage_cycles
 
     @property
@@ -251,7 +256,7 @@ class Dispatcher(wiring.Component):
                 "tg_ready": self.target.ready, "rd_ready": self.read.ready, "st_valid": self.status.valid,
                 "ans_free": ~self.answer.valid, "window": window, "LM0": r.lm[0], "S0": r.s[0],
                 "leglast": r.leg == self._legs - 1, "chlast": r.ch == c - 1, "chlow0": r.ch[:3] == 0,
-                "applied": ~r.pending}
+                "applied": ~r.pending & window}
         # a binary tree of 2:1 multiplexers over the condition index
         level = [base[k] for k in CONDS] + [Const(0, 1)] * (32 - len(CONDS))
         for bit in range(5):
@@ -277,11 +282,10 @@ class Dispatcher(wiring.Component):
         flag = Mux(u["bsel"] | r.bl, st.enabled, st.moving)
         src = {"IMM": imm, "RD": self.rd_data, "F0": r.f[:8], "SEXT": r.f[31].replicate(8),
                "CNT": Mux(imm[4], cd[8:16], cd[:8]), "S": r.s, "FLAG": flag, "CMD": r.cmd,
-               "STB": Mux(u["bias"], st.current[:8], st.target[:8])}
-        # STB's byte is the low byte of the status's current (bias) or target; after the
-        # current's, the servo controller shifts both a byte down (dispatch_microcode
-        # _channel_status takes them in pairs)
-        m.d.comb += self.status_shift.eq(~r.boot & (u["src"] == SOURCES.index("STB")) & u["bias"])
+               "STB": st.pulse[:8]}
+        # STB's byte is the low byte of the status's pulse; the servo controller then shifts
+        # it a byte down
+        m.d.comb += self.status_shift.eq(~r.boot & (u["src"] == SOURCES.index("STB")))
         x = Signal(8)
         with m.Switch(u["src"]):
             for name, sig in src.items():
@@ -406,7 +410,8 @@ class Dispatcher(wiring.Component):
                      self.write.payload.field.eq(imm[:4]), self.write.payload.value.eq(r.f),
                      self.target.valid.eq(s["TGV"]), self.target.payload.channel.eq(r.ch),
                      self.target.payload.pulse.eq(rd.data), self.target.payload.time.eq(r.f[:self._time_bits]),
-                     self.read.valid.eq(s["RDV"]), self.read.payload.eq(r.ch), self.status.ready.eq(e["STR"])]
+                     self.read.valid.eq(s["RDV"]), self.read.payload.channel.eq(r.ch),
+                     self.read.payload.current.eq(u["bias"]), self.status.ready.eq(e["STR"])]
         m.d.comb += [self.ik_i.payload.target[inp.name].eq(r.tg[16 * k:16 * k + 16])
                      for k, inp in enumerate(self._plan.inputs)]
         # the header in registers, offered until the link takes it (the link's transmitter

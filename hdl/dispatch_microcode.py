@@ -89,7 +89,7 @@ class Ins:
     s: str | None = None
     sz: bool = False                # S shifts in 0 (else the status flag bsel names)
     bsel: int = 0                   # 0: moving, 1: enabled
-    current: bool = False           # STB: the status's current (else target); both shift a byte after it
+    current: bool = False           # RDV: read the current pulse (else the target)
     wm: str | None = None
     hold: bool = False
     sp: frozenset = field(default_factory=frozenset)
@@ -225,13 +225,13 @@ def _status(g):
 def _channel_status(g):
     # F still holds the checked channel field (zero-extended): the answer's channel byte is F0
     # read once the last commit has been applied by a pass: the answer shows every earlier move
-    return [_ins(sp={"ACC"}, at=_entry(1, "channel_status")), _wait("CSA", "applied"),
-            _wait("CSR", "rd_ready", sp={"RDV"}),
-            _wait("CSW", "st_valid"), _ins(wm="ans", src="F0"),
-            # target and current bytes in pairs (low bytes first): each pair shifts both a byte
-            # down, each write sets the address of the next (BSET): target at 1-3, current at 4-6
-            *[_ins(wm="ans", src="STB", current=bool(k % 2), sp={"BSET"}, imm=after)
-              for k, after in enumerate((4, 2, 5, 3, 6, 7))],
+    # two reads, the target's and the current pulse's (flags from the second), each pulse's
+    # bytes low first (each shifts the status a byte down), in the answer's order
+    return [_ins(sp={"ACC"}, wm="ans", src="F0", at=_entry(1, "channel_status")), _wait("CSA", "applied"),
+            _wait("CSR", "rd_ready", sp={"RDV"}), _wait("CSW", "st_valid"),
+            _ins(wm="ans", src="STB"), _ins(wm="ans", src="STB"), _ins(wm="ans", src="STB", sp={"STR"}),
+            _wait("CSR2", "rd_ready", sp={"RDV"}, current=True), _wait("CSW2", "st_valid"),
+            _ins(wm="ans", src="STB"), _ins(wm="ans", src="STB"), _ins(wm="ans", src="STB"),
             _ins(wm="ans", src="FLAG", bsel=0), _ins(wm="ans", src="FLAG", bsel=1, sp={"STR"}),
             _header("CSHDR", 9)]
 
@@ -495,10 +495,10 @@ def encode(asm: Assembled) -> list[int]:
             if s.imm & 3 and s.imm & 3 != (s.sz << 1 | s.bsel):
                 raise ValueError(f"instruction at {a} {s!r}: sz and bsel take immediate bits 1 and 0")
             v["imm"] = s.imm | s.sz << 1 | s.bsel
-        # current (STB's other word) is the bias bit: a byte that goes to no comparison
+        # current (the read's choice of pulse) is the bias bit: a read compares nothing
         if s.current:
-            if s.src != "STB" or s.alu is not None or s.bias:
-                raise ValueError(f"instruction at {a} {s!r}: current is a choice of STB outside comparisons")
+            if "RDV" not in s.sp or s.alu is not None or s.bias:
+                raise ValueError(f"instruction at {a} {s!r}: current is a choice of a read outside comparisons")
             v["bias"] = 1
         v.update({k: ops.index(getattr(s, k)) for k, ops in _OPS.items()})
         v.update({k: int(k in s.sp) for k in BITS})

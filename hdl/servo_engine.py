@@ -123,14 +123,15 @@ class ServoEngine(wiring.Component):
                                                "value": signed(width_bits + 1)})
         self.target_layout = data.StructLayout({"channel": range(channels),
                                                 "pulse": width_bits, "time": time_bits})
-        self.status_layout = data.StructLayout({"target": width_bits, "current": width_bits,
-                                                "moving": 1, "enabled": 1})
+        # one pulse a read, target or current: a reader taking bytes needs one at a time
+        self.read_layout = data.StructLayout({"channel": range(channels), "current": 1})
+        self.status_layout = data.StructLayout({"pulse": width_bits, "moving": 1, "enabled": 1})
         super().__init__({
             "write": In(stream.Signature(self.write_layout)),
             "target": In(stream.Signature(self.target_layout)),
             "ik": In(stream.Signature(data.StructLayout({"channel": range(channels),
                                                          "pulse": width_bits, "last": 1}))),
-            "read": In(stream.Signature(range(channels))),
+            "read": In(stream.Signature(self.read_layout)),
             "status": Out(stream.Signature(self.status_layout)),
             "load": Out(stream.Signature(data.StructLayout({"channel": range(channels),
                                                            "width": width_bits}))),
@@ -154,6 +155,13 @@ class ServoEngine(wiring.Component):
         """The longest path of one channel through the microprogram."""
         a = self._asm
         return a.longest("CH0", lambda i: a.ins[i].sp == "LOADNEXT")
+
+    @property
+    def read_cycles(self) -> int:
+        """Most cycles from a ``read`` offered while the engine idles to ``status.valid``: to
+        its accepting instruction (it alternates with the pass test), the status path."""
+        a = self._asm
+        return 2 + a.longest("S0", lambda i: a.ins[i].sp == "ST_E") + 1
 
     @property
     def pass_cycles(self) -> int:
@@ -343,16 +351,18 @@ class ServoEngine(wiring.Component):
         with m.If(s("LOADNEXT") | s("INITNEXT")):
             m.d.sync += g.ch.eq(g.ch + 1)
         with m.If(s("ACCEPT") & g.rdreq):
-            m.d.sync += g.ch.eq(self.read.payload)
-        # a byte-serial reader takes target and current a byte at a time from their low bytes
-        # (a 2-way choice instead of one of 6 bytes); a status read starts only once the
-        # offered one is taken, so its loads never meet a shift
+            m.d.sync += [g.ch.eq(self.read.payload.channel), g.st_current.eq(self.read.payload.current)]
+        # a byte-serial reader takes the pulse a byte at a time from its low byte (no choice
+        # of bytes); a status read starts only once the offered one is taken, so its loads
+        # never meet a shift
         with m.If(self.status_shift):
-            m.d.sync += [st.target.eq(st.target >> 8), st.current.eq(st.current >> 8)]
-        with m.If(s("ST_T")):
-            m.d.sync += st.target.eq(d[:w])
+            m.d.sync += st.pulse.eq(st.pulse >> 8)
+        with m.If(s("ST_T") & ~g.st_current):
+            m.d.sync += st.pulse.eq(d[:w])
+        with m.If(s("ST_C") & g.st_current):
+            m.d.sync += st.pulse.eq(d[:w])
         with m.If(s("ST_C")):
-            m.d.sync += [st.current.eq(d[:w]), st.moving.eq(~g.z)]
+            m.d.sync += st.moving.eq(~g.z)
         with m.If(s("ST_M") & ~g.z):
             m.d.sync += st.moving.eq(1)
         with m.If(s("ST_E")):
@@ -378,3 +388,4 @@ class _Globals:
         self.host_we, self.host_addr = Signal(), Signal(4 + (c).bit_length())
         self.host_data = Signal(aw)
         self.st, self.st_valid = Signal(eng.status_layout), Signal()
+        self.st_current = Signal()      # the read in progress asked for the current pulse
