@@ -10,7 +10,8 @@ from amaranth.lib.memory import Memory
 from . import protocol as P
 from .answers import answer_bytes, answer_constant
 from .bram import falling_edge_write_port
-from .dispatch_microcode import CODED, CONDS, SOURCES, STROBES, Geometry, assemble, encode, fields, program
+from .dispatch_microcode import (CODED, CONDS, MOVE_TIME_WORD, SOURCES, STROBES, Geometry, assemble, encode, fields,
+                                 program)
 
 __all__ = ["Dispatcher"]
 
@@ -40,8 +41,8 @@ class _Regs:
         self.b = Signal(range(d._region))                   # answer byte being built
         self.nack, self.ident, self.sending = Signal(), Signal(), Signal()
         self.ans_len = Signal(range(d._region + 1))
-        self.move_time = Signal(d._time_bits)
         self.pending, self.started = Signal(), Signal()     # a commit not yet applied; its pass began
+        self.mt = Signal()                                  # the memory's move time word was written
 
 
 class Dispatcher(wiring.Component):
@@ -143,7 +144,8 @@ class Dispatcher(wiring.Component):
         self._identity = answer_constant(_C["identity"].answer, identity)
         # three regions of one size in the memory: widths, the answer being built, identity;
         # an address is the region above the offset, so no adder
-        biggest = max([self._channels, len(self._identity)] + [answer_bytes(f) for f in _BUILT])
+        # the answer region also holds the move time, after every answer built there
+        biggest = max([self._channels, len(self._identity), MOVE_TIME_WORD + 1] + [answer_bytes(f) for f in _BUILT])
         self._region = 1 << (biggest - 1).bit_length()
         self._geometry = Geometry(self._channels, legs, self._servos, width_bits,
                                   tuple((inp.lo, inp.hi) for inp in plan.inputs), len(self._identity))
@@ -309,11 +311,6 @@ class Dispatcher(wiring.Component):
             m.d.sync += r.bl.eq(r.b_)
         with m.If(u["shf"] & go):
             m.d.sync += r.f.eq(Cat(r.f[8:], x))
-        # the move time into F for the staging (the target's time is F's low bits, and so is
-        # a write's value: one source for both in the servo controller's memory write); F's
-        # low 24 bits shift in from F itself, so the load takes no cell of its own there
-        with m.If(e["FMT"]):
-            m.d.sync += r.f[:self._time_bits].eq(r.move_time)
         with m.If(u["tg"] & go):
             m.d.sync += r.tg.eq(Cat(r.tg[8:], y))
         ra = self._op(m, u, "ra", go)
@@ -344,7 +341,7 @@ class Dispatcher(wiring.Component):
         with m.If(sh["load"]):
             m.d.sync += r.s.eq(self.rd_data)
         # one-register strobes, in this order (a later one wins in the same cycle)
-        for strobe, reg, value in (("CLRO", r.out, 0), ("OUTS", r.out, 1), ("MT", r.move_time, r.f),
+        for strobe, reg, value in (("CLRO", r.out, 0), ("OUTS", r.out, 1), ("MT", r.mt, 1),
                                    ("NACK", r.nack, 1), ("IDENT", r.ident, 1)):
             with m.If(e[strobe]):
                 m.d.sync += reg.eq(value)
@@ -385,12 +382,20 @@ class Dispatcher(wiring.Component):
         idx = self.answer_index
         shown = Signal()
         m.d.sync += shown.eq(r.sending)
+        # MTRD addresses the move time's word (MOVE_TIME_WORD of the answer region) for FMT
+        stage = Mux(u["MTRD"], self._region_addr(1, Const(MOVE_TIME_WORD, 8)), r.ch)
         m.d.comb += [rd.addr.eq(Mux(r.sending, Mux(r.ident, self._region_addr(2, idx), self._region_addr(1, idx)),
-                                    r.ch)),
+                                    stage)),
                      self.answer_data.valid.eq(r.sending & shown & ~self.answer_moved),
                      self.answer_data.payload.eq(rd.data[:8])]
         with m.If(self.answer_data.valid & self.answer_data.ready & (idx == r.ans_len - 1)):
             m.d.sync += r.sending.eq(0)
+        # the move time into F for the staging (the target's time is F's low bits, and so is
+        # a write's value: one source for both in the servo controller's memory write); F's
+        # low 24 bits shift in from F itself, so the load takes no cell of its own there; 0
+        # until set_move_time wrote the word (the memory keeps it over a reset)
+        with m.If(go & u["FMT"]):
+            m.d.sync += r.f[:self._time_bits].eq(rd.data[:self._time_bits] & r.mt.replicate(self._time_bits))
 
     def _ports(self, m, r, u, s, e, rd):
         imm = u["imm"]

@@ -38,7 +38,7 @@ CONDS = ("0", "B", "BL", "reqok", "ik_ready", "ik_valid", "wr_ready", "tg_ready"
 #: the byte sources of ``X`` (``ZERO`` is the default)
 SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "S", "FLAG", "CMD", "STB")
 #: one ROM bit each (the stream strobes, decoded by nothing)
-BITS = ("ACC", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV")
+BITS = ("ACC", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV", "MTRD")
 #: at most one of these an instruction: a 4-bit code (0: none)
 CODED = ("IDENT", "NACK", "TAKE", "DISP", "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET", "FMT")
 STROBES = BITS + CODED
@@ -51,6 +51,11 @@ _OPS = {"ra": (None, "inc", "set", "clear"), "ch": (None, "inc", "load", "clear"
         "s": (None, "shift", "load"), "wm": (None, "ans", "width", "pulse")}
 _REASON_BAD = 1 + [n for n, _ in P.NACK_REASONS].index("bad_value")
 _C = {c.name: c for c in P.COMMANDS}
+#: the word of the answer region (after every answer built there) that holds the move time:
+#: written by set_move_time as an answer byte is (its 16 bits ride on F's), read back into F by
+#: FMT (the read addressed by the instruction before, MTRD), so it takes no register; MT marks
+#: it written (a flag that reset clears: a reset does not clear the memory)
+MOVE_TIME_WORD = max(answer_bytes(f) for f in (_C["status"].answer, _C["channel_status"].answer, P.NACK_FIELDS))
 _NAMES = {c.code: c.name for c in P.COMMANDS}
 
 
@@ -181,7 +186,9 @@ def _common(g):
                     if c.request and c.request[0].name == "channel"]
     chan[0] = replace(chan[0], label="CH1")
     # a width field (u24 below 2 ** W), then the command's entry of the third table
-    wide = _load(*_kind("set_pulse", "pulse"), 1 << g.width_bits)[1:] + [_ins(cond="~B", to="NACK", sp={"DISP"}, imm=3)]
+    # MTRD: the move time's read for set_pulse's FMT (harmless for the other wide commands)
+    wide = _load(*_kind("set_pulse", "pulse"), 1 << g.width_bits)[1:] + [
+        _ins(cond="~B", to="NACK", sp={"DISP", "MTRD"}, imm=3)]
     wide[0] = replace(wide[0], label="WD1")
     names = {"set_pulse": "pulse", "set_speed": "speed", "set_accel": "accel", "set_home": "pulse"}
     assert {_kind(c, n) for c, n in names.items()} == {_kind("set_pulse", "pulse")}
@@ -253,8 +260,9 @@ def _writes(g):
     if w < 8 * nbytes:
         out.append(_ins(cond="~B", to="NACK"))
     out += [_ins(sp={"ACC"}), _write(ChannelField.TIMEOUT)]
-    out += [*_load(*_kind("set_move_time", "periods"), first={"at": _entry(0, "set_move_time")}),
-            _ins(sp={"ACC", "MT"}, nxt="ACK")]
+    out += [*_load(*_kind("set_move_time", "periods"),
+                   first={"at": _entry(0, "set_move_time"), "sp": {"BSET"}, "imm": MOVE_TIME_WORD}),
+            _ins(sp={"ACC", "MT"}, wm="ans", src="F0", nxt="ACK")]
     return out
 
 
@@ -348,7 +356,7 @@ def _moves(g):
     for j in range(g.servos):
         out.append(_wait(f"ST{j}", "ik_valid", wm="width", imm=j, ch="inc",
                          sp={"IKR"} if j == g.servos - 1 else ()))
-    out += [_ins(label="LNEXT", lm="rot", cond="leglast", to="MDONE", nxt="LEG"),
+    out += [_ins(label="LNEXT", lm="rot", cond="leglast", to="MDONE", nxt="LEG", sp={"MTRD"}),
             *_skip("SKIP", g.servos, "LNEXT"),
             _ins(label="MDONE", sp={"ACC", "FMT"}, ch="clear", nxt="STAGE")]
     return out
@@ -357,7 +365,8 @@ def _moves(g):
 def _stage(g):
     """Wait for the staging window; stage the legs' (or set_pulse's one) widths; commit. A
     width is read a cycle before it is offered (the buffer's read port follows the channel);
-    the move time is F's (FMT, with the request's acceptance: F is not needed after it)."""
+    the move time is F's (FMT, with the request's acceptance: F is not needed after it), read
+    from the memory as the instruction before addressed it (MTRD)."""
     out = [_ins(sp={"ACC", "FMT"}, wm="pulse", src="F0", at=_entry(2, "set_pulse")), _wait("SPW", "window"),
            _wait("SPT", "tg_ready", sp={"TGV"}, nxt="COMMIT")]
     out += [_wait("STAGE", "window"), _ins(label="SL", cond="~LM0", to="SSKIP")]
