@@ -98,8 +98,9 @@ class Dispatcher(wiring.Component):
     clamped
         To the link's ``clamped``: a pulse (registered) per leg target that was saturated; the
         link counts it in its counter memory (word ``CLAMPED_WORD``).
-    ik_i, ik_o
-        To the core's ``i`` and ``o``.
+    ik_i, ik_o, ik_rotate
+        To the core's ``i``, ``o`` and ``rotate`` (a :class:`~ikseries.hdl.shared.RobotCore` with
+        ``held_input`` and ``rotate_outputs``).
     write, target, commit, read, status, status_shift, keepalive, busy, period_start, phase
         To the servo controller's ports of the same names.
 
@@ -162,7 +163,7 @@ class Dispatcher(wiring.Component):
             **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counter_addr",
                                          "counter_data", "answer", "answer_data", "answer_index", "answer_moved",
                                          "clamped")},
-            "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(),
+            "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(), "ik_rotate": cs["rotate"].flip(),
             **{n: ss[n].flip() for n in ("write", "target", "commit", "read", "status",
                                          "keepalive", "busy", "period_start", "phase", "status_shift")},
         })
@@ -360,11 +361,10 @@ class Dispatcher(wiring.Component):
 
     def _memory(self, m, r, u, x, go, fire, wr, rd):
         wm = self._op(m, u, "wm", fire)
-        widths = Signal(self._w)
-        with m.Switch(u["imm"][:max(1, (self._servos - 1).bit_length())]):
-            for j, name in enumerate(self._servo_names):
-                with m.Case(j):
-                    m.d.comb += widths.eq(self.ik_o.payload.widths[name])
+        # the core's output moves a servo on per width taken (RobotCore rotate_outputs): the
+        # first servo's is every width in turn, no choice of three
+        widths = self.ik_o.payload.widths[self._servo_names[0]]
+        m.d.comb += self.ik_rotate.eq(wm["width"])
         with m.If(wm["ans"]):
             m.d.sync += r.b.eq(r.b + 1)
         with m.If(go & u["BSET"]):

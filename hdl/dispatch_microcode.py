@@ -354,7 +354,8 @@ def _moves(g):
         out += _coord(k, lo, hi, "OFFER" if last else f"K{k + 1}", not last)
     out.append(_wait("OFFER", "ik_ready", sp={"IKV", "CLI"}))
     for j in range(g.servos):
-        out.append(_wait(f"ST{j}", "ik_valid", wm="width", imm=j, ch="inc",
+        # each width taken moves the core's output a servo on (RobotCore rotate_outputs)
+        out.append(_wait(f"ST{j}", "ik_valid", wm="width", ch="inc",
                          sp={"IKR"} if j == g.servos - 1 else ()))
     out += [_ins(label="LNEXT", lm="rot", cond="leglast", to="MDONE", nxt="LEG", sp={"MTRD"}),
             *_skip("SKIP", g.servos, "LNEXT"),
