@@ -267,23 +267,30 @@ class ServoEngine(wiring.Component):
     def _sequencer(self, m, rp, rd, g, u, host_idle):
         w, aw, c = self._w, self._aw, self._c
         d = rd.data
-        le = g.n | g.z
-        base = {"0": Const(0, 1), "n": g.n, "z": g.z, "le": le, "staged": g.commit_now & d[aw - 1],
-                "fs_now": g.fs_now, "D0": d[0], "D1": d[1], "DW": d[w], "tflag": g.tflag,
-                "last": g.ch == c - 1, "ka": g.ka, "nocount": g.z | g.fired | ~g.tvalid,
+        # the adder's flags come last (through its carry chain and the zero test): the tree
+        # chooses among the other conditions (0 for n, z, le; nocount's other terms), the flags
+        # join after it, one LUT level before the addresses (they were at the tree's leaves)
+        base = {"0": Const(0, 1), "n": Const(0, 1), "z": Const(0, 1), "le": Const(0, 1),
+                "staged": g.commit_now & d[aw - 1], "fs_now": g.fs_now, "D0": d[0], "D1": d[1], "DW": d[w],
+                "tflag": g.tflag, "last": g.ch == c - 1, "ka": g.ka, "nocount": g.fired | ~g.tvalid,
                 "go": g.pass_pending & host_idle & ~g.ik_open, "rdreq": g.rdreq}
         m.d.comb += g.rdreq.eq(g.free & self.read.valid & ~g.st_valid)
         # a binary tree of 2:1 multiplexers (an indexed Array maps to a much larger shifter)
         level = [base[k] for k in BASE_CONDS]
         for bit in range(4):
             level = [Mux(u["cond"][bit], hi, lo) for lo, hi in zip(level[::2], level[1::2])]
-        m.d.comb += g.take.eq(level[0] ^ u["cond"][4])
+        code = u["cond"][:4]
+        on = {k: code == BASE_CONDS.index(k) for k in ("n", "z", "le", "nocount")}
+        uses_n, uses_z = on["n"] | on["le"], on["z"] | on["le"] | on["nocount"]
+        m.d.comb += g.take.eq((level[0] | (uses_n & g.n) | (uses_z & g.z)) ^ u["cond"][4])
         # the fall-through address is a ROM field too: no program counter, no incrementer
         m.d.comb += rp.addr.eq(Mux(g.boot, 0, Mux(g.take, u["to"], u["nxt"])))
-        opnd = Mux(g.take, u["rdt"], u["rdf"])
         # the last instruction of a channel already reads the next channel's first operand
         ch_next = Mux(u["is"]("LOADNEXT") | u["is"]("INITNEXT"), g.ch + 1, g.ch)
-        m.d.comb += rd.addr.eq(Cat(opnd[:4], Mux(opnd[4], c, ch_next)))
+        # both successors' addresses, then the branch's choice: take (the adder's flags through
+        # the condition multiplexer, the engine's longest path) meets one multiplexer level only
+        addr = [Cat(o[:4], Mux(o[4], c, ch_next)) for o in (u["rdf"], u["rdt"])]
+        m.d.comb += rd.addr.eq(Mux(g.take, addr[1], addr[0]))
         m.d.comb += self.busy.eq(~u["idle"] | g.pass_pending)
 
     # -- the single adder, the accumulator, the division register, the memory write
