@@ -40,7 +40,6 @@ class _Regs:
         self.out = Signal()                                 # a coordinate of this leg was saturated
         self.b = Signal(range(d._region))                   # answer byte being built
         self.nack, self.ident, self.sending = Signal(), Signal(), Signal()
-        self.ans_len = Signal(range(d._region + 1))
         self.pending, self.started = Signal(), Signal()     # a commit not yet applied; its pass began
         self.mt = Signal()                                  # the memory's move time word was written
 
@@ -60,9 +59,10 @@ class Dispatcher(wiring.Component):
     every range check and each target coordinate's saturation is a comparison of the field
     register's bytes with the program's constants by one 8-bit subtract-with-borrow unit;
     answers are built a byte a cycle in block RAM. The streams to the servo controller and the
-    core are driven by the ROM's output register and by registers, the answer header by
-    registers (its code from the request's and the NACK flag, both held while it is offered);
-    the conditions a wait ends on are the one combinational path in from them.
+    core are driven by the ROM's output register and by registers, and so is the answer header
+    (valid and length from the ROM while its instruction waits for the link to take it, its code
+    from the request's and the NACK flag); the conditions a wait ends on are the one
+    combinational path in from them.
 
     Moves: each leg of a ``move_leg``/``move_legs`` target goes through the IK core, one leg at
     a time; a coordinate is saturated to the plan input's ``[lo, hi]`` first (``status`` counts
@@ -93,7 +93,8 @@ class Dispatcher(wiring.Component):
 
     Attributes
     ----------
-    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index, answer_moved
+    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index, answer_moved,
+    answer_done
         To the link's ports of the same names.
     clamped
         To the link's ``clamped``: a pulse (registered) per leg target that was saturated; the
@@ -162,6 +163,7 @@ class Dispatcher(wiring.Component):
         super().__init__({
             **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counter_addr",
                                          "counter_data", "answer", "answer_data", "answer_index", "answer_moved",
+                                         "answer_done",
                                          "clamped")},
             "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(), "ik_rotate": cs["rotate"].flip(),
             **{n: ss[n].flip() for n in ("write", "target", "commit", "read", "status",
@@ -254,10 +256,10 @@ class Dispatcher(wiring.Component):
             m.d.sync += early.eq(0)
         window = ~self.busy & early
         base = {"0": Const(0, 1), "B": r.b_, "BL": r.bl,
-                "reqok": self.request.valid & ~r.sending & ~self.answer.valid,
+                "reqok": self.request.valid & ~r.sending,
                 "ik_ready": self.ik_i.ready, "ik_valid": self.ik_o.valid, "wr_ready": self.write.ready,
                 "tg_ready": self.target.ready, "rd_ready": self.read.ready, "st_valid": self.status.valid,
-                "ans_free": ~self.answer.valid, "window": window, "LM0": r.lm[0], "S0": r.s[0],
+                "ans_ready": self.answer.ready, "window": window, "LM0": r.lm[0], "S0": r.s[0],
                 "leglast": r.leg == self._legs - 1, "chlast": r.ch == c - 1, "chlow0": r.ch[:3] == 0,
                 "applied": ~r.pending & window}
         # a binary tree of 2:1 multiplexers over the condition index
@@ -270,7 +272,7 @@ class Dispatcher(wiring.Component):
         # allows, each ended by one stream's handshake: fire sees only that, not the whole
         # condition multiplexer
         ends = ((u["TGV"] & self.target.ready) | ((u["wm"] == 2) & self.ik_o.valid)
-                | (u["IKV"] & self.ik_i.ready) | (u["HDR"] & ~self.answer.valid))
+                | (u["IKV"] & self.ik_i.ready) | (u["HDR"] & self.answer.ready))
         fire = ~r.boot & (~u["hold"] | ends)
         cmd = r.cmd
         # the dispatch index of the command code (dispatch_microcode.command_index)
@@ -347,9 +349,9 @@ class Dispatcher(wiring.Component):
             with m.If(e[strobe]):
                 m.d.sync += reg.eq(value)
         # every cycle of the idle wait: the request's command is held while it is offered; the
-        # identity answer's region is kept while it is sent. Not while the answer header is
-        # offered (no request is taken then): its code comes from the command and NACK flag
-        with m.If(e["TAKE"] & ~self.answer.valid):
+        # identity answer's region is kept while it is sent. The previous answer's header was
+        # taken before the wait (its code, from the command and NACK flag, is the link's now)
+        with m.If(e["TAKE"]):
             m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.b.eq(0), r.nack.eq(0), r.bl.eq(0)]
             with m.If(~r.sending):
                 m.d.sync += r.ident.eq(0)
@@ -388,7 +390,8 @@ class Dispatcher(wiring.Component):
                                     stage)),
                      self.answer_data.valid.eq(r.sending & shown & ~self.answer_moved),
                      self.answer_data.payload.eq(rd.data[:8])]
-        with m.If(self.answer_data.valid & self.answer_data.ready & (idx == r.ans_len - 1)):
+        # the link's transmitter has taken the last payload byte (it knows the length)
+        with m.If(self.answer_done):
             m.d.sync += r.sending.eq(0)
         # the move time into F for the staging (the target's time is F's low bits, and so is
         # a write's value: one source for both in the servo controller's memory write); F's
@@ -409,7 +412,8 @@ class Dispatcher(wiring.Component):
         # registered: the request's acceptance depends on the field checks
         m.d.sync += [self.keepalive.eq(self.request.valid & self.request.ready), self.commit.eq(e["COMMIT"])]
         m.d.comb += [self.request.ready.eq(e["ACC"]), self.counter_addr.eq(imm[:4]), self.rd_addr.eq(r.ra),
-                     self.answer.payload.length.eq(r.ans_len), self.answer.payload.command.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT)),
+                     self.answer.valid.eq(s["HDR"]), self.answer.payload.length.eq(imm),
+                     self.answer.payload.command.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT)),
                      self.ik_i.valid.eq(s["IKV"]), self.ik_i.payload.leg.eq(r.leg), self.ik_o.ready.eq(s["IKR"]),
                      self.write.valid.eq(s["WRV"]), self.write.payload.channel.eq(r.ch),
                      self.write.payload.field.eq(imm[:4]), self.write.payload.value.eq(r.f),
@@ -419,9 +423,7 @@ class Dispatcher(wiring.Component):
                      self.read.payload.current.eq(u["bias"]), self.status.ready.eq(e["STR"])]
         m.d.comb += [self.ik_i.payload.target[inp.name].eq(r.tg[16 * k:16 * k + 16])
                      for k, inp in enumerate(self._plan.inputs)]
-        # the header in registers, offered until the link takes it (the link's transmitter
-        # registers its code: the LUTs of the code's choice pack with its flip-flops)
+        # the header from the ROM, offered while its instruction waits (the link's transmitter
+        # registers it as it takes it: no copy here); its payload is then pulled from memory
         with m.If(e["HDR"]):
-            m.d.sync += [self.answer.valid.eq(1), r.ans_len.eq(imm)]
-        with m.If(self.answer.valid & self.answer.ready):
-            m.d.sync += [self.answer.valid.eq(0), r.sending.eq(r.ans_len != 0)]
+            m.d.sync += r.sending.eq(imm != 0)

@@ -34,7 +34,7 @@ ROM_DEPTHS = (256, 512)
 ROM_DEPTH = ROM_DEPTHS[0]
 #: branch conditions (index 0 is constant 0: ``never``, inverted ``always``)
 CONDS = ("0", "B", "BL", "reqok", "ik_ready", "ik_valid", "wr_ready", "tg_ready", "rd_ready", "st_valid",
-         "ans_free", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
+         "ans_ready", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
 #: the byte sources of ``X`` (``ZERO`` is the default)
 SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "S", "FLAG", "CMD", "STB")
 #: one ROM bit each (the stream strobes, decoded by nothing)
@@ -46,7 +46,7 @@ STROBES = BITS + CODED
 _UNHELD = frozenset(STROBES) - {"CLI", "HDR", "TAKE", "RDV", "IKV", "IKR", "TGV", "WRV"}
 #: the waits whose effects happen as they end, and what ends them (Dispatcher: ``fire``)
 _HELD = {"~ik_valid": lambda s: s.wm == "width", "~tg_ready": lambda s: "TGV" in s.sp,
-         "~ik_ready": lambda s: "IKV" in s.sp, "~ans_free": lambda s: "HDR" in s.sp}
+         "~ik_ready": lambda s: "IKV" in s.sp, "~ans_ready": lambda s: "HDR" in s.sp}
 _OPS = {"ra": (None, "inc", "set", "clear"), "ch": (None, "inc", "load", "clear"), "lm": (None, "rot", "mask", "one"),
         "s": (None, "shift", "load"), "wm": (None, "ans", "width", "pulse")}
 _REASON_BAD = 1 + [n for n, _ in P.NACK_REASONS].index("bad_value")
@@ -152,9 +152,9 @@ def _rotate(k, signed):
 
 
 def _header(label, length):
-    """The answer header into its register (free: the previous one was taken before this
-    request was), then idle."""
-    return _wait(label, "ans_free", sp={"HDR"}, imm=length, nxt="IDLE")
+    """The answer header, offered until the link takes it (after the previous answer's last
+    byte: its CRC), then idle."""
+    return _wait(label, "ans_ready", sp={"HDR"}, imm=length, nxt="IDLE")
 
 
 def _write(fld):
