@@ -7,7 +7,8 @@ budget: at most 600 logic cells on the iCE40UP5K for everything but the core).
                                      [--json docs/results/controller_cells.json]
 
 The core inside the controller leaves its own PWM bank unconnected (synthesis removes it), so
-the core's share is the RobotCore alone minus that bank; the servo controller's share is
+the core's share is the RobotCore alone minus that bank (the plain core, with its own input
+register: the controller's reads the dispatcher's target register instead); the servo controller's share is
 given with and without its own bank. Two figures of what the controller adds: beyond the bare
 core (its servo PWM bank counted as added), and beyond the core with its own bank (what a
 plain IK core on a board has already: the servo pins' PWM; the rest is the UART, link,
@@ -83,7 +84,9 @@ def main(argv=None):
     plan = fit_robot(robot)[0]
     period = round(a.period_us * a.clock / 1e6)
     ctl = RobotController(plan, a.legs, period, int(a.clock), a.baud)
-    core, servo = ctl.core, ctl.servo
+    # the core as a board without the controller has it: with its own input register (the
+    # controller's core reads the dispatcher's target register instead, see RobotCore.held_input)
+    core, servo = ctl.core.registered(), ctl.servo
     parts = {"link": ctl.link, "dispatcher": ctl.dispatcher, "servo": servo, "core": core,
              "servo_bank": ServoPWMBank(period, ctl.width_bits, servo.channels, 1, in_order=True),
              "core_bank": ServoPWMBank(period, ctl.width_bits, a.legs, len(core.servos))}

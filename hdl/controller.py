@@ -115,7 +115,10 @@ class RobotController(wiring.Component):
                  time_bits: int = 16, home_at_reset: list[int] | None = None, channels=None):
         _check(plan, legs, period, clock_hz, name, manifest)
         self._divisor = uart_divisor(clock_hz, baud)
-        self._core = RobotCore(plan, legs, period, clock_hz, multipliers=multipliers, dsp=dsp, channels=channels)
+        # the dispatcher's target register holds a leg's target until its widths are taken,
+        # which it takes one at a time from the first servo's
+        self._core = RobotCore(plan, legs, period, clock_hz, multipliers=multipliers, dsp=dsp, channels=channels,
+                               held_input=True, rotate_outputs=True)
         self._w = pulse_bits(plan, period)
         if self._w > _WIRE_PULSE_BITS:
             raise ValueError(f"pulse widths must fit {_WIRE_PULSE_BITS} bits (a u24 on the wire), not {self._w}")
@@ -168,6 +171,7 @@ class RobotController(wiring.Component):
             wiring.connect(m, getattr(link, name), getattr(d, name))
         wiring.connect(m, d.ik_i, core.i)
         wiring.connect(m, core.o, d.ik_o)
+        m.d.comb += core.rotate.eq(d.ik_rotate)
         for name in ("write", "target", "read"):
             wiring.connect(m, getattr(d, name), getattr(servo, name))
         wiring.connect(m, servo.status, d.status)
@@ -175,6 +179,7 @@ class RobotController(wiring.Component):
                      link.rd_addr.eq(d.rd_addr), d.rd_data.eq(link.rd_data),
                      link.counter_addr.eq(d.counter_addr), d.counter_data.eq(link.counter_data), link.clamped.eq(d.clamped),
                      d.answer_index.eq(link.answer_index), d.answer_moved.eq(link.answer_moved),
+                     d.answer_done.eq(link.answer_done),
                      servo.commit.eq(d.commit), servo.keepalive.eq(d.keepalive), servo.status_shift.eq(d.status_shift),
                      d.busy.eq(servo.busy), d.period_start.eq(servo.period_start), d.phase.eq(servo.phase),
                      link.period.eq(servo.period_start)]

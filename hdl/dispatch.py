@@ -10,7 +10,8 @@ from amaranth.lib.memory import Memory
 from . import protocol as P
 from .answers import answer_bytes, answer_constant
 from .bram import falling_edge_write_port
-from .dispatch_microcode import CODED, CONDS, SOURCES, STROBES, Geometry, assemble, encode, fields, program
+from .dispatch_microcode import (CODED, CONDS, MOVE_TIME_WORD, SOURCES, STROBES, Geometry, assemble, encode, fields,
+                                 program)
 
 __all__ = ["Dispatcher"]
 
@@ -39,9 +40,8 @@ class _Regs:
         self.out = Signal()                                 # a coordinate of this leg was saturated
         self.b = Signal(range(d._region))                   # answer byte being built
         self.nack, self.ident, self.sending = Signal(), Signal(), Signal()
-        self.ans_len = Signal(range(d._region + 1))
-        self.move_time = Signal(d._time_bits)
         self.pending, self.started = Signal(), Signal()     # a commit not yet applied; its pass began
+        self.mt = Signal()                                  # the memory's move time word was written
 
 
 class Dispatcher(wiring.Component):
@@ -59,9 +59,10 @@ class Dispatcher(wiring.Component):
     every range check and each target coordinate's saturation is a comparison of the field
     register's bytes with the program's constants by one 8-bit subtract-with-borrow unit;
     answers are built a byte a cycle in block RAM. The streams to the servo controller and the
-    core are driven by the ROM's output register and by registers, the answer header by
-    registers (its code from the request's and the NACK flag, both held while it is offered);
-    the conditions a wait ends on are the one combinational path in from them.
+    core are driven by the ROM's output register and by registers, and so is the answer header
+    (valid and length from the ROM while its instruction waits for the link to take it, its code
+    from the request's and the NACK flag); the conditions a wait ends on are the one
+    combinational path in from them.
 
     Moves: each leg of a ``move_leg``/``move_legs`` target goes through the IK core, one leg at
     a time; a coordinate is saturated to the plan input's ``[lo, hi]`` first (``status`` counts
@@ -92,13 +93,15 @@ class Dispatcher(wiring.Component):
 
     Attributes
     ----------
-    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index, answer_moved
+    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index, answer_moved,
+    answer_done
         To the link's ports of the same names.
     clamped
         To the link's ``clamped``: a pulse (registered) per leg target that was saturated; the
         link counts it in its counter memory (word ``CLAMPED_WORD``).
-    ik_i, ik_o
-        To the core's ``i`` and ``o``.
+    ik_i, ik_o, ik_rotate
+        To the core's ``i``, ``o`` and ``rotate`` (a :class:`~ikseries.hdl.shared.RobotCore` with
+        ``held_input`` and ``rotate_outputs``).
     write, target, commit, read, status, status_shift, keepalive, busy, period_start, phase
         To the servo controller's ports of the same names.
 
@@ -117,8 +120,9 @@ class Dispatcher(wiring.Component):
     ``stage_cycles`` to stage and commit), the header (a register) 2 cycles after the strobe.
     Status: a read of the servo controller per channel and flag of its two masks, then a cycle
     per answer byte (the link's counters read as they are then); channel_status: once the last
-    commit has been applied by a pass (so its answer shows every earlier move), the channel's
-    read, a cycle per answer byte. The widths reach the pins at the second period start after
+    commit has been applied by a pass (so its answer shows every earlier move) and in the
+    staging window (so that no pass comes between them), the channel's two reads (target,
+    current), a cycle per answer byte. The widths reach the pins at the second period start after
     the commit at the latest (the servo controller's latency). An
     answer byte is on ``answer_data`` the cycle after ``answer_index`` names it. A request waits
     in the link while the previous answer's payload is still being sent.
@@ -142,21 +146,26 @@ class Dispatcher(wiring.Component):
         self._identity = answer_constant(_C["identity"].answer, identity)
         # three regions of one size in the memory: widths, the answer being built, identity;
         # an address is the region above the offset, so no adder
-        biggest = max([self._channels, len(self._identity)] + [answer_bytes(f) for f in _BUILT])
+        # the answer region also holds the move time, after every answer built there
+        biggest = max([self._channels, len(self._identity), MOVE_TIME_WORD + 1] + [answer_bytes(f) for f in _BUILT])
         self._region = 1 << (biggest - 1).bit_length()
         self._geometry = Geometry(self._channels, legs, self._servos, width_bits,
                                   tuple((inp.lo, inp.hi) for inp in plan.inputs), len(self._identity))
         self._asm = assemble(program(self._geometry))
         # from the cycle the staging window is seen open to the commit strobe on the port, every
         # leg selected (a read cycle and a target transfer per channel), plus a margin cycle
-        self._stage_cycles = 1 + legs * (1 + self._servos * (1 + servo.target_cycles)) + 3
+        staging = 1 + legs * (1 + self._servos * (1 + servo.target_cycles)) + 3
+        # channel_status's two reads (target, current) in the window too: no pass between them
+        reads = self._asm.longest("CSR", ("CSHDR",)) + 2 * servo.read_cycles
+        self._stage_cycles = max(staging, reads)
         self._pass_cycles, self._core_latency = servo.pass_cycles, core.latency
         ls, cs, ss = link.signature.members, core.signature.members, servo.signature.members
         super().__init__({
             **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counter_addr",
                                          "counter_data", "answer", "answer_data", "answer_index", "answer_moved",
+                                         "answer_done",
                                          "clamped")},
-            "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(),
+            "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(), "ik_rotate": cs["rotate"].flip(),
             **{n: ss[n].flip() for n in ("write", "target", "commit", "read", "status",
                                          "keepalive", "busy", "period_start", "phase", "status_shift")},
         })
@@ -169,7 +178,8 @@ class Dispatcher(wiring.Component):
     @property
     def stage_cycles(self) -> int:
         """Cycles from the decision to stage a group of widths to its commit strobe, inclusive
-        of a margin cycle: staging starts only with this many cycles left before a period start."""
+        of a margin cycle, or more (channel_status's reads): staging starts only with this many
+        cycles left before a period start."""
         return self._stage_cycles
 
     @property
@@ -246,12 +256,12 @@ class Dispatcher(wiring.Component):
             m.d.sync += early.eq(0)
         window = ~self.busy & early
         base = {"0": Const(0, 1), "B": r.b_, "BL": r.bl,
-                "reqok": self.request.valid & ~r.sending & ~self.answer.valid,
+                "reqok": self.request.valid & ~r.sending,
                 "ik_ready": self.ik_i.ready, "ik_valid": self.ik_o.valid, "wr_ready": self.write.ready,
                 "tg_ready": self.target.ready, "rd_ready": self.read.ready, "st_valid": self.status.valid,
-                "ans_free": ~self.answer.valid, "window": window, "LM0": r.lm[0], "S0": r.s[0],
+                "ans_ready": self.answer.ready, "window": window, "LM0": r.lm[0], "S0": r.s[0],
                 "leglast": r.leg == self._legs - 1, "chlast": r.ch == c - 1, "chlow0": r.ch[:3] == 0,
-                "applied": ~r.pending}
+                "applied": ~r.pending & window}
         # a binary tree of 2:1 multiplexers over the condition index
         level = [base[k] for k in CONDS] + [Const(0, 1)] * (32 - len(CONDS))
         for bit in range(5):
@@ -262,7 +272,7 @@ class Dispatcher(wiring.Component):
         # allows, each ended by one stream's handshake: fire sees only that, not the whole
         # condition multiplexer
         ends = ((u["TGV"] & self.target.ready) | ((u["wm"] == 2) & self.ik_o.valid)
-                | (u["IKV"] & self.ik_i.ready) | (u["HDR"] & ~self.answer.valid))
+                | (u["IKV"] & self.ik_i.ready) | (u["HDR"] & self.answer.ready))
         fire = ~r.boot & (~u["hold"] | ends)
         cmd = r.cmd
         # the dispatch index of the command code (dispatch_microcode.command_index)
@@ -277,11 +287,10 @@ class Dispatcher(wiring.Component):
         flag = Mux(u["bsel"] | r.bl, st.enabled, st.moving)
         src = {"IMM": imm, "RD": self.rd_data, "F0": r.f[:8], "SEXT": r.f[31].replicate(8),
                "CNT": Mux(imm[4], cd[8:16], cd[:8]), "S": r.s, "FLAG": flag, "CMD": r.cmd,
-               "STB": Mux(u["bias"], st.current[:8], st.target[:8])}
-        # STB's byte is the low byte of the status's current (bias) or target; after the
-        # current's, the servo controller shifts both a byte down (dispatch_microcode
-        # _channel_status takes them in pairs)
-        m.d.comb += self.status_shift.eq(~r.boot & (u["src"] == SOURCES.index("STB")) & u["bias"])
+               "STB": st.pulse[:8]}
+        # STB's byte is the low byte of the status's pulse; the servo controller then shifts
+        # it a byte down
+        m.d.comb += self.status_shift.eq(~r.boot & (u["src"] == SOURCES.index("STB")))
         x = Signal(8)
         with m.Switch(u["src"]):
             for name, sig in src.items():
@@ -305,11 +314,6 @@ class Dispatcher(wiring.Component):
             m.d.sync += r.bl.eq(r.b_)
         with m.If(u["shf"] & go):
             m.d.sync += r.f.eq(Cat(r.f[8:], x))
-        # the move time into F for the staging (the target's time is F's low bits, and so is
-        # a write's value: one source for both in the servo controller's memory write); F's
-        # low 24 bits shift in from F itself, so the load takes no cell of its own there
-        with m.If(e["FMT"]):
-            m.d.sync += r.f[:self._time_bits].eq(r.move_time)
         with m.If(u["tg"] & go):
             m.d.sync += r.tg.eq(Cat(r.tg[8:], y))
         ra = self._op(m, u, "ra", go)
@@ -340,14 +344,14 @@ class Dispatcher(wiring.Component):
         with m.If(sh["load"]):
             m.d.sync += r.s.eq(self.rd_data)
         # one-register strobes, in this order (a later one wins in the same cycle)
-        for strobe, reg, value in (("CLRO", r.out, 0), ("OUTS", r.out, 1), ("MT", r.move_time, r.f),
+        for strobe, reg, value in (("CLRO", r.out, 0), ("OUTS", r.out, 1), ("MT", r.mt, 1),
                                    ("NACK", r.nack, 1), ("IDENT", r.ident, 1)):
             with m.If(e[strobe]):
                 m.d.sync += reg.eq(value)
         # every cycle of the idle wait: the request's command is held while it is offered; the
-        # identity answer's region is kept while it is sent. Not while the answer header is
-        # offered (no request is taken then): its code comes from the command and NACK flag
-        with m.If(e["TAKE"] & ~self.answer.valid):
+        # identity answer's region is kept while it is sent. The previous answer's header was
+        # taken before the wait (its code, from the command and NACK flag, is the link's now)
+        with m.If(e["TAKE"]):
             m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.b.eq(0), r.nack.eq(0), r.bl.eq(0)]
             with m.If(~r.sending):
                 m.d.sync += r.ident.eq(0)
@@ -359,11 +363,10 @@ class Dispatcher(wiring.Component):
 
     def _memory(self, m, r, u, x, go, fire, wr, rd):
         wm = self._op(m, u, "wm", fire)
-        widths = Signal(self._w)
-        with m.Switch(u["imm"][:max(1, (self._servos - 1).bit_length())]):
-            for j, name in enumerate(self._servo_names):
-                with m.Case(j):
-                    m.d.comb += widths.eq(self.ik_o.payload.widths[name])
+        # the core's output moves a servo on per width taken (RobotCore rotate_outputs): the
+        # first servo's is every width in turn, no choice of three
+        widths = self.ik_o.payload.widths[self._servo_names[0]]
+        m.d.comb += self.ik_rotate.eq(wm["width"])
         with m.If(wm["ans"]):
             m.d.sync += r.b.eq(r.b + 1)
         with m.If(go & u["BSET"]):
@@ -381,12 +384,21 @@ class Dispatcher(wiring.Component):
         idx = self.answer_index
         shown = Signal()
         m.d.sync += shown.eq(r.sending)
+        # MTRD addresses the move time's word (MOVE_TIME_WORD of the answer region) for FMT
+        stage = Mux(u["MTRD"], self._region_addr(1, Const(MOVE_TIME_WORD, 8)), r.ch)
         m.d.comb += [rd.addr.eq(Mux(r.sending, Mux(r.ident, self._region_addr(2, idx), self._region_addr(1, idx)),
-                                    r.ch)),
+                                    stage)),
                      self.answer_data.valid.eq(r.sending & shown & ~self.answer_moved),
                      self.answer_data.payload.eq(rd.data[:8])]
-        with m.If(self.answer_data.valid & self.answer_data.ready & (idx == r.ans_len - 1)):
+        # the link's transmitter has taken the last payload byte (it knows the length)
+        with m.If(self.answer_done):
             m.d.sync += r.sending.eq(0)
+        # the move time into F for the staging (the target's time is F's low bits, and so is
+        # a write's value: one source for both in the servo controller's memory write); F's
+        # low 24 bits shift in from F itself, so the load takes no cell of its own there; 0
+        # until set_move_time wrote the word (the memory keeps it over a reset)
+        with m.If(go & u["FMT"]):
+            m.d.sync += r.f[:self._time_bits].eq(rd.data[:self._time_bits] & r.mt.replicate(self._time_bits))
 
     def _ports(self, m, r, u, s, e, rd):
         imm = u["imm"]
@@ -400,18 +412,18 @@ class Dispatcher(wiring.Component):
         # registered: the request's acceptance depends on the field checks
         m.d.sync += [self.keepalive.eq(self.request.valid & self.request.ready), self.commit.eq(e["COMMIT"])]
         m.d.comb += [self.request.ready.eq(e["ACC"]), self.counter_addr.eq(imm[:4]), self.rd_addr.eq(r.ra),
-                     self.answer.payload.length.eq(r.ans_len), self.answer.payload.command.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT)),
+                     self.answer.valid.eq(s["HDR"]), self.answer.payload.length.eq(imm),
+                     self.answer.payload.command.eq(Mux(r.nack, P.NACK, r.cmd | P.ANSWER_BIT)),
                      self.ik_i.valid.eq(s["IKV"]), self.ik_i.payload.leg.eq(r.leg), self.ik_o.ready.eq(s["IKR"]),
                      self.write.valid.eq(s["WRV"]), self.write.payload.channel.eq(r.ch),
                      self.write.payload.field.eq(imm[:4]), self.write.payload.value.eq(r.f),
                      self.target.valid.eq(s["TGV"]), self.target.payload.channel.eq(r.ch),
                      self.target.payload.pulse.eq(rd.data), self.target.payload.time.eq(r.f[:self._time_bits]),
-                     self.read.valid.eq(s["RDV"]), self.read.payload.eq(r.ch), self.status.ready.eq(e["STR"])]
+                     self.read.valid.eq(s["RDV"]), self.read.payload.channel.eq(r.ch),
+                     self.read.payload.current.eq(u["bias"]), self.status.ready.eq(e["STR"])]
         m.d.comb += [self.ik_i.payload.target[inp.name].eq(r.tg[16 * k:16 * k + 16])
                      for k, inp in enumerate(self._plan.inputs)]
-        # the header in registers, offered until the link takes it (the link's transmitter
-        # registers its code: the LUTs of the code's choice pack with its flip-flops)
+        # the header from the ROM, offered while its instruction waits (the link's transmitter
+        # registers it as it takes it: no copy here); its payload is then pulled from memory
         with m.If(e["HDR"]):
-            m.d.sync += [self.answer.valid.eq(1), r.ans_len.eq(imm)]
-        with m.If(self.answer.valid & self.answer.ready):
-            m.d.sync += [self.answer.valid.eq(0), r.sending.eq(r.ans_len != 0)]
+            m.d.sync += r.sending.eq(imm != 0)

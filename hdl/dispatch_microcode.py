@@ -34,11 +34,11 @@ ROM_DEPTHS = (256, 512)
 ROM_DEPTH = ROM_DEPTHS[0]
 #: branch conditions (index 0 is constant 0: ``never``, inverted ``always``)
 CONDS = ("0", "B", "BL", "reqok", "ik_ready", "ik_valid", "wr_ready", "tg_ready", "rd_ready", "st_valid",
-         "ans_free", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
+         "ans_ready", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
 #: the byte sources of ``X`` (``ZERO`` is the default)
 SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "S", "FLAG", "CMD", "STB")
 #: one ROM bit each (the stream strobes, decoded by nothing)
-BITS = ("ACC", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV")
+BITS = ("ACC", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV", "MTRD")
 #: at most one of these an instruction: a 4-bit code (0: none)
 CODED = ("IDENT", "NACK", "TAKE", "DISP", "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET", "FMT")
 STROBES = BITS + CODED
@@ -46,11 +46,16 @@ STROBES = BITS + CODED
 _UNHELD = frozenset(STROBES) - {"CLI", "HDR", "TAKE", "RDV", "IKV", "IKR", "TGV", "WRV"}
 #: the waits whose effects happen as they end, and what ends them (Dispatcher: ``fire``)
 _HELD = {"~ik_valid": lambda s: s.wm == "width", "~tg_ready": lambda s: "TGV" in s.sp,
-         "~ik_ready": lambda s: "IKV" in s.sp, "~ans_free": lambda s: "HDR" in s.sp}
+         "~ik_ready": lambda s: "IKV" in s.sp, "~ans_ready": lambda s: "HDR" in s.sp}
 _OPS = {"ra": (None, "inc", "set", "clear"), "ch": (None, "inc", "load", "clear"), "lm": (None, "rot", "mask", "one"),
         "s": (None, "shift", "load"), "wm": (None, "ans", "width", "pulse")}
 _REASON_BAD = 1 + [n for n, _ in P.NACK_REASONS].index("bad_value")
 _C = {c.name: c for c in P.COMMANDS}
+#: the word of the answer region (after every answer built there) that holds the move time:
+#: written by set_move_time as an answer byte is (its 16 bits ride on F's), read back into F by
+#: FMT (the read addressed by the instruction before, MTRD), so it takes no register; MT marks
+#: it written (a flag that reset clears: a reset does not clear the memory)
+MOVE_TIME_WORD = max(answer_bytes(f) for f in (_C["status"].answer, _C["channel_status"].answer, P.NACK_FIELDS))
 _NAMES = {c.code: c.name for c in P.COMMANDS}
 
 
@@ -89,7 +94,7 @@ class Ins:
     s: str | None = None
     sz: bool = False                # S shifts in 0 (else the status flag bsel names)
     bsel: int = 0                   # 0: moving, 1: enabled
-    current: bool = False           # STB: the status's current (else target); both shift a byte after it
+    current: bool = False           # RDV: read the current pulse (else the target)
     wm: str | None = None
     hold: bool = False
     sp: frozenset = field(default_factory=frozenset)
@@ -147,9 +152,9 @@ def _rotate(k, signed):
 
 
 def _header(label, length):
-    """The answer header into its register (free: the previous one was taken before this
-    request was), then idle."""
-    return _wait(label, "ans_free", sp={"HDR"}, imm=length, nxt="IDLE")
+    """The answer header, offered until the link takes it (after the previous answer's last
+    byte: its CRC), then idle."""
+    return _wait(label, "ans_ready", sp={"HDR"}, imm=length, nxt="IDLE")
 
 
 def _write(fld):
@@ -181,7 +186,9 @@ def _common(g):
                     if c.request and c.request[0].name == "channel"]
     chan[0] = replace(chan[0], label="CH1")
     # a width field (u24 below 2 ** W), then the command's entry of the third table
-    wide = _load(*_kind("set_pulse", "pulse"), 1 << g.width_bits)[1:] + [_ins(cond="~B", to="NACK", sp={"DISP"}, imm=3)]
+    # MTRD: the move time's read for set_pulse's FMT (harmless for the other wide commands)
+    wide = _load(*_kind("set_pulse", "pulse"), 1 << g.width_bits)[1:] + [
+        _ins(cond="~B", to="NACK", sp={"DISP", "MTRD"}, imm=3)]
     wide[0] = replace(wide[0], label="WD1")
     names = {"set_pulse": "pulse", "set_speed": "speed", "set_accel": "accel", "set_home": "pulse"}
     assert {_kind(c, n) for c, n in names.items()} == {_kind("set_pulse", "pulse")}
@@ -225,13 +232,13 @@ def _status(g):
 def _channel_status(g):
     # F still holds the checked channel field (zero-extended): the answer's channel byte is F0
     # read once the last commit has been applied by a pass: the answer shows every earlier move
-    return [_ins(sp={"ACC"}, at=_entry(1, "channel_status")), _wait("CSA", "applied"),
-            _wait("CSR", "rd_ready", sp={"RDV"}),
-            _wait("CSW", "st_valid"), _ins(wm="ans", src="F0"),
-            # target and current bytes in pairs (low bytes first): each pair shifts both a byte
-            # down, each write sets the address of the next (BSET): target at 1-3, current at 4-6
-            *[_ins(wm="ans", src="STB", current=bool(k % 2), sp={"BSET"}, imm=after)
-              for k, after in enumerate((4, 2, 5, 3, 6, 7))],
+    # two reads, the target's and the current pulse's (flags from the second), each pulse's
+    # bytes low first (each shifts the status a byte down), in the answer's order
+    return [_ins(sp={"ACC"}, wm="ans", src="F0", at=_entry(1, "channel_status")), _wait("CSA", "applied"),
+            _wait("CSR", "rd_ready", sp={"RDV"}), _wait("CSW", "st_valid"),
+            _ins(wm="ans", src="STB"), _ins(wm="ans", src="STB"), _ins(wm="ans", src="STB", sp={"STR"}),
+            _wait("CSR2", "rd_ready", sp={"RDV"}, current=True), _wait("CSW2", "st_valid"),
+            _ins(wm="ans", src="STB"), _ins(wm="ans", src="STB"), _ins(wm="ans", src="STB"),
             _ins(wm="ans", src="FLAG", bsel=0), _ins(wm="ans", src="FLAG", bsel=1, sp={"STR"}),
             _header("CSHDR", 9)]
 
@@ -253,8 +260,9 @@ def _writes(g):
     if w < 8 * nbytes:
         out.append(_ins(cond="~B", to="NACK"))
     out += [_ins(sp={"ACC"}), _write(ChannelField.TIMEOUT)]
-    out += [*_load(*_kind("set_move_time", "periods"), first={"at": _entry(0, "set_move_time")}),
-            _ins(sp={"ACC", "MT"}, nxt="ACK")]
+    out += [*_load(*_kind("set_move_time", "periods"),
+                   first={"at": _entry(0, "set_move_time"), "sp": {"BSET"}, "imm": MOVE_TIME_WORD}),
+            _ins(sp={"ACC", "MT"}, wm="ans", src="F0", nxt="ACK")]
     return out
 
 
@@ -346,9 +354,10 @@ def _moves(g):
         out += _coord(k, lo, hi, "OFFER" if last else f"K{k + 1}", not last)
     out.append(_wait("OFFER", "ik_ready", sp={"IKV", "CLI"}))
     for j in range(g.servos):
-        out.append(_wait(f"ST{j}", "ik_valid", wm="width", imm=j, ch="inc",
+        # each width taken moves the core's output a servo on (RobotCore rotate_outputs)
+        out.append(_wait(f"ST{j}", "ik_valid", wm="width", ch="inc",
                          sp={"IKR"} if j == g.servos - 1 else ()))
-    out += [_ins(label="LNEXT", lm="rot", cond="leglast", to="MDONE", nxt="LEG"),
+    out += [_ins(label="LNEXT", lm="rot", cond="leglast", to="MDONE", nxt="LEG", sp={"MTRD"}),
             *_skip("SKIP", g.servos, "LNEXT"),
             _ins(label="MDONE", sp={"ACC", "FMT"}, ch="clear", nxt="STAGE")]
     return out
@@ -357,7 +366,8 @@ def _moves(g):
 def _stage(g):
     """Wait for the staging window; stage the legs' (or set_pulse's one) widths; commit. A
     width is read a cycle before it is offered (the buffer's read port follows the channel);
-    the move time is F's (FMT, with the request's acceptance: F is not needed after it)."""
+    the move time is F's (FMT, with the request's acceptance: F is not needed after it), read
+    from the memory as the instruction before addressed it (MTRD)."""
     out = [_ins(sp={"ACC", "FMT"}, wm="pulse", src="F0", at=_entry(2, "set_pulse")), _wait("SPW", "window"),
            _wait("SPT", "tg_ready", sp={"TGV"}, nxt="COMMIT")]
     out += [_wait("STAGE", "window"), _ins(label="SL", cond="~LM0", to="SSKIP")]
@@ -495,10 +505,10 @@ def encode(asm: Assembled) -> list[int]:
             if s.imm & 3 and s.imm & 3 != (s.sz << 1 | s.bsel):
                 raise ValueError(f"instruction at {a} {s!r}: sz and bsel take immediate bits 1 and 0")
             v["imm"] = s.imm | s.sz << 1 | s.bsel
-        # current (STB's other word) is the bias bit: a byte that goes to no comparison
+        # current (the read's choice of pulse) is the bias bit: a read compares nothing
         if s.current:
-            if s.src != "STB" or s.alu is not None or s.bias:
-                raise ValueError(f"instruction at {a} {s!r}: current is a choice of STB outside comparisons")
+            if "RDV" not in s.sp or s.alu is not None or s.bias:
+                raise ValueError(f"instruction at {a} {s!r}: current is a choice of a read outside comparisons")
             v["bias"] = 1
         v.update({k: ops.index(getattr(s, k)) for k, ops in _OPS.items()})
         v.update({k: int(k in s.sp) for k in BITS})

@@ -88,11 +88,25 @@ class FoldedEvaluator(wiring.Component):
         registers (``dsp`` must be its size; see :class:`LimbMultiplier`), same timing and
         values; the Amaranth simulator cannot run it (simulate the core with None, the exported
         Verilog with the primitive's model). None (default): fabric registers.
+    held_input : bool
+        The sender holds ``i.payload`` from the input transfer until ``o.valid`` (its own
+        register, as the :class:`~ikseries.hdl.dispatch.Dispatcher`'s target), so the evaluator
+        reads the port itself instead of an input register of its own (16 flip-flops a
+        coordinate less, each a logic cell of its own on iCE40: a register fed by a register).
+        Default False: the payload is registered at the transfer.
+    rotate_outputs : bool
+        Adds ``rotate``: each strobe moves the output registers one place towards the first
+        output (the first takes the last's), for a reader that takes the widths one at a time
+        from the first (no multiplexer: the move packs into the registers' own logic cells).
+        The reader strobes it exactly once per output per evaluation (or never), so the
+        registers are in order again when the next evaluation captures into them. Default False.
 
     Attributes
     ----------
     i : In(stream.Signature(input_layout(plan)))
     o : Out(stream.Signature(output_layout(plan)))
+    rotate : In(1)
+        With ``rotate_outputs``: a strobe while ``o.valid`` (the machine is idle: no capture meets it).
     program : Program
         The schedule and microcode.
 
@@ -122,13 +136,15 @@ class FoldedEvaluator(wiring.Component):
     """
 
     def __init__(self, plan: Plan, multipliers: int = 1, dsp: tuple[int, int] | None = None,
-                 dsp_registers: str | None = None):
+                 dsp_registers: str | None = None, held_input: bool = False, rotate_outputs: bool = False):
         self._prog = folded_program(plan, multipliers, dsp)
         check_dsp_registers(dsp_registers, self._prog.dsp)
         self._plan, self._dsp_registers = plan, dsp_registers
+        self._held_input, self._rotate = bool(held_input), bool(rotate_outputs)
         super().__init__({
             "i": In(stream.Signature(input_layout(plan))),
             "o": Out(stream.Signature(output_layout(plan))),
+            **({"rotate": In(1)} if self._rotate else {}),
         })
 
     @property
@@ -226,8 +242,11 @@ class FoldedEvaluator(wiring.Component):
             m.d.sync += [w.eq(layout.const(prog.words[0])), hot.eq(1 << prog.words[0]["src"])]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
-        with m.If(~busy):   # idle: the input register follows the port (latched at accept)
-            m.d.sync += in_reg.eq(self.i.payload)
+        if self._held_input:    # the sender's own register holds the target: no copy
+            m.d.comb += in_reg.eq(self.i.payload)
+        else:
+            with m.If(~busy):   # idle: the input register follows the port (latched at accept)
+                m.d.sync += in_reg.eq(self.i.payload)
         with m.If(accept):
             m.d.sync += [running.eq(1), busy.eq(1), pc.eq(0)]
         with m.Elif(running):
@@ -319,6 +338,9 @@ class FoldedEvaluator(wiring.Component):
     def _outputs(self, m, wb_data, wb_cap):
         """The output registers (constant outputs wired), each captured from the write-back."""
         prog, plan = self._prog, self._plan
+        if self._rotate:
+            self._rotating_outputs(m, wb_data, wb_cap)
+            return
         outs = Signal(output_layout(plan))
         for j, o in enumerate(plan.outputs):
             vid = prog.outputs[o.name]
@@ -328,3 +350,18 @@ class FoldedEvaluator(wiring.Component):
                 with m.If(wb_cap[j]):
                     m.d.sync += outs[o.name].eq(wb_data)
                 m.d.comb += self.o.payload[o.name].eq(outs[o.name])
+
+    def _rotating_outputs(self, m, wb_data, wb_cap):
+        """The output registers of ``rotate_outputs``: a constant output is a register too (its
+        value from reset, never captured), so that it moves round with the others."""
+        prog, plan = self._prog, self._plan
+        consts = [prog.const_value.get(prog.outputs[o.name]) for o in plan.outputs]
+        regs = [Signal.like(self.o.payload[o.name], name=f"out_{o.name}", init=c or 0)
+                for o, c in zip(plan.outputs, consts)]
+        for j, (o, reg, const) in enumerate(zip(plan.outputs, regs, consts)):
+            m.d.comb += self.o.payload[o.name].eq(reg)
+            with m.If(self.rotate):
+                m.d.sync += reg.eq(regs[(j + 1) % len(regs)])
+            if const is None:
+                with m.If(wb_cap[j]):
+                    m.d.sync += reg.eq(wb_data)

@@ -424,6 +424,9 @@ class FrameTransmitter(wiring.Component):
     moved : Out(1)
         High in the cycle after ``index`` was set (registered): a source that shows the byte of
         an index a cycle later (a block RAM read) has it on ``data`` while this is low.
+    done : Out(1)
+        High for one cycle as the payload ends (its last byte taken; at once for an empty one):
+        a source that stops offering then needs no count of its own.
     o : Out(stream.Signature(8))
         Frame bytes, registered.
 
@@ -447,7 +450,7 @@ class FrameTransmitter(wiring.Component):
         self._max = top
         super().__init__({
             "i": In(stream.Signature(frame_layout(top))), "data": In(stream.Signature(8)),
-            "index": Out(range(top)), "moved": Out(1), "o": Out(stream.Signature(8)),
+            "index": Out(range(top)), "moved": Out(1), "done": Out(1), "o": Out(stream.Signature(8)),
         })
 
     @property
@@ -496,6 +499,7 @@ class FrameTransmitter(wiring.Component):
             with m.State("payload"):        # until ``sent`` reaches the length (at once for an empty payload)
                 m.d.comb += self.data.ready.eq(free & ~done)
                 with m.If(done):
+                    m.d.comb += self.done.eq(1)
                     m.next = crc_states[0]
                 with m.Elif(self.data.valid & free):
                     send(self.data.payload)
@@ -532,8 +536,8 @@ class Link(wiring.Component):
     request, rd_addr, rd_data, counter_addr, counter_data, period, clamped
         The receiver's ``o``, ``rd_addr``, ``rd_data``, ``counter_addr``, ``counter_data``,
         ``period`` and ``clamped``.
-    answer, answer_data, answer_index, answer_moved
-        The transmitter's ``i``, ``data``, ``index`` and ``moved``.
+    answer, answer_data, answer_index, answer_moved, answer_done
+        The transmitter's ``i``, ``data``, ``index``, ``moved`` and ``done``.
 
     Latency
     -------
@@ -554,7 +558,7 @@ class Link(wiring.Component):
             "request": Out(stream.Signature(frame_layout(r.max_payload))), "rd_addr": In(r.addr_bits), "rd_data": Out(8),
             "counter_addr": In(range(CLAMPED_WORD + 1)), "counter_data": Out(counter_bits), "period": In(1),
             "clamped": In(1), "answer": In(stream.Signature(frame_layout(t.max_payload))), "answer_data": In(stream.Signature(8)),
-            "answer_index": Out(range(t.max_payload)), "answer_moved": Out(1),
+            "answer_index": Out(range(t.max_payload)), "answer_moved": Out(1), "answer_done": Out(1),
         })
 
     @property
@@ -583,5 +587,5 @@ class Link(wiring.Component):
                      r.overrun.eq(rx.overrun), r.tick.eq(rx.idle_tick), r.rd_addr.eq(self.rd_addr),
                      self.rd_data.eq(r.rd_data), r.counter_addr.eq(self.counter_addr),
                      self.counter_data.eq(r.counter_data), r.period.eq(self.period), r.clamped.eq(self.clamped),
-                     self.answer_index.eq(t.index), self.answer_moved.eq(t.moved)]
+                     self.answer_index.eq(t.index), self.answer_moved.eq(t.moved), self.answer_done.eq(t.done)]
         return m

@@ -103,14 +103,16 @@ class ServoController(wiring.Component):
     ik : In(stream.Signature(ik_layout))
         Stages one leg's widths (untimed) and commits (present with ``ik_layout``); a leg out of
         range is dropped and pulses ``bad_write``.
-    read : In(stream.Signature(range(channels)))
-        Status request for a channel.
-    status : Out(stream.Signature(StructLayout({"target": W, "current": W, "moving": 1, "enabled": 1})))
-        The answer (``moving``: current pulse != target or the profile has a nonzero step).
+    read : In(stream.Signature(StructLayout({"channel": range(channels), "current": 1})))
+        Status request for a channel: its target pulse, or with ``current`` its current pulse.
+    status : Out(stream.Signature(StructLayout({"pulse": W, "moving": 1, "enabled": 1})))
+        The answer: the pulse asked for, the flags (``moving``: current pulse != target or the
+        profile has a nonzero step). One pulse a read: a byte-serial reader takes one at a
+        time, and the second register it would need costs more than a second read.
     status_shift : In(1)
-        Strobe while ``status`` is offered: its ``target`` and ``current`` shift right by 8 bits
-        (zeros in), for a reader that takes them a byte at a time from their low bytes. Tie it
-        low to keep the answer as it is until taken.
+        Strobe while ``status`` is offered: its ``pulse`` shifts right by 8 bits (zeros in),
+        for a reader that takes it a byte at a time from its low byte. Tie it low to keep the
+        answer as it is until taken.
     keepalive : In(1)
         Strobe: restarts the failsafe timeout (the link pulses it on every valid frame).
     failsafe : Out(1)
@@ -184,7 +186,7 @@ class ServoController(wiring.Component):
             "write": In(stream.Signature(self._engine.write_layout)),
             "target": In(stream.Signature(self._engine.target_layout)),
             "commit": In(1),
-            "read": In(stream.Signature(range(channels))),
+            "read": In(stream.Signature(self._engine.read_layout)),
             "status": Out(stream.Signature(self._engine.status_layout)),
             "keepalive": In(1), "status_shift": In(1),
             "failsafe": Out(1), "clamped": Out(1), "bad_write": Out(1), "busy": Out(1),
@@ -215,6 +217,11 @@ class ServoController(wiring.Component):
     def target_cycles(self) -> int:
         """Cycles of one ``target`` transfer while the engine is idle."""
         return self._engine.target_cycles
+
+    @property
+    def read_cycles(self) -> int:
+        """Most cycles from a ``read`` offered while the engine is idle to ``status.valid``."""
+        return self._engine.read_cycles
 
     @property
     def pass_cycles(self) -> int:

@@ -123,14 +123,15 @@ class ServoEngine(wiring.Component):
                                                "value": signed(width_bits + 1)})
         self.target_layout = data.StructLayout({"channel": range(channels),
                                                 "pulse": width_bits, "time": time_bits})
-        self.status_layout = data.StructLayout({"target": width_bits, "current": width_bits,
-                                                "moving": 1, "enabled": 1})
+        # one pulse a read, target or current: a reader taking bytes needs one at a time
+        self.read_layout = data.StructLayout({"channel": range(channels), "current": 1})
+        self.status_layout = data.StructLayout({"pulse": width_bits, "moving": 1, "enabled": 1})
         super().__init__({
             "write": In(stream.Signature(self.write_layout)),
             "target": In(stream.Signature(self.target_layout)),
             "ik": In(stream.Signature(data.StructLayout({"channel": range(channels),
                                                          "pulse": width_bits, "last": 1}))),
-            "read": In(stream.Signature(range(channels))),
+            "read": In(stream.Signature(self.read_layout)),
             "status": Out(stream.Signature(self.status_layout)),
             "load": Out(stream.Signature(data.StructLayout({"channel": range(channels),
                                                            "width": width_bits}))),
@@ -154,6 +155,13 @@ class ServoEngine(wiring.Component):
         """The longest path of one channel through the microprogram."""
         a = self._asm
         return a.longest("CH0", lambda i: a.ins[i].sp == "LOADNEXT")
+
+    @property
+    def read_cycles(self) -> int:
+        """Most cycles from a ``read`` offered while the engine idles to ``status.valid``: to
+        its accepting instruction (it alternates with the pass test), the status path."""
+        a = self._asm
+        return 2 + a.longest("S0", lambda i: a.ins[i].sp == "ST_E") + 1
 
     @property
     def pass_cycles(self) -> int:
@@ -259,23 +267,30 @@ class ServoEngine(wiring.Component):
     def _sequencer(self, m, rp, rd, g, u, host_idle):
         w, aw, c = self._w, self._aw, self._c
         d = rd.data
-        le = g.n | g.z
-        base = {"0": Const(0, 1), "n": g.n, "z": g.z, "le": le, "staged": g.commit_now & d[aw - 1],
-                "fs_now": g.fs_now, "D0": d[0], "D1": d[1], "DW": d[w], "tflag": g.tflag,
-                "last": g.ch == c - 1, "ka": g.ka, "nocount": g.z | g.fired | ~g.tvalid,
+        # the adder's flags come last (through its carry chain and the zero test): the tree
+        # chooses among the other conditions (0 for n, z, le; nocount's other terms), the flags
+        # join after it, one LUT level before the addresses (they were at the tree's leaves)
+        base = {"0": Const(0, 1), "n": Const(0, 1), "z": Const(0, 1), "le": Const(0, 1),
+                "staged": g.commit_now & d[aw - 1], "fs_now": g.fs_now, "D0": d[0], "D1": d[1], "DW": d[w],
+                "tflag": g.tflag, "last": g.ch == c - 1, "ka": g.ka, "nocount": g.fired | ~g.tvalid,
                 "go": g.pass_pending & host_idle & ~g.ik_open, "rdreq": g.rdreq}
         m.d.comb += g.rdreq.eq(g.free & self.read.valid & ~g.st_valid)
         # a binary tree of 2:1 multiplexers (an indexed Array maps to a much larger shifter)
         level = [base[k] for k in BASE_CONDS]
         for bit in range(4):
             level = [Mux(u["cond"][bit], hi, lo) for lo, hi in zip(level[::2], level[1::2])]
-        m.d.comb += g.take.eq(level[0] ^ u["cond"][4])
+        code = u["cond"][:4]
+        on = {k: code == BASE_CONDS.index(k) for k in ("n", "z", "le", "nocount")}
+        uses_n, uses_z = on["n"] | on["le"], on["z"] | on["le"] | on["nocount"]
+        m.d.comb += g.take.eq((level[0] | (uses_n & g.n) | (uses_z & g.z)) ^ u["cond"][4])
         # the fall-through address is a ROM field too: no program counter, no incrementer
         m.d.comb += rp.addr.eq(Mux(g.boot, 0, Mux(g.take, u["to"], u["nxt"])))
-        opnd = Mux(g.take, u["rdt"], u["rdf"])
         # the last instruction of a channel already reads the next channel's first operand
         ch_next = Mux(u["is"]("LOADNEXT") | u["is"]("INITNEXT"), g.ch + 1, g.ch)
-        m.d.comb += rd.addr.eq(Cat(opnd[:4], Mux(opnd[4], c, ch_next)))
+        # both successors' addresses, then the branch's choice: take (the adder's flags through
+        # the condition multiplexer, the engine's longest path) meets one multiplexer level only
+        addr = [Cat(o[:4], Mux(o[4], c, ch_next)) for o in (u["rdf"], u["rdt"])]
+        m.d.comb += rd.addr.eq(Mux(g.take, addr[1], addr[0]))
         m.d.comb += self.busy.eq(~u["idle"] | g.pass_pending)
 
     # -- the single adder, the accumulator, the division register, the memory write
@@ -343,16 +358,18 @@ class ServoEngine(wiring.Component):
         with m.If(s("LOADNEXT") | s("INITNEXT")):
             m.d.sync += g.ch.eq(g.ch + 1)
         with m.If(s("ACCEPT") & g.rdreq):
-            m.d.sync += g.ch.eq(self.read.payload)
-        # a byte-serial reader takes target and current a byte at a time from their low bytes
-        # (a 2-way choice instead of one of 6 bytes); a status read starts only once the
-        # offered one is taken, so its loads never meet a shift
+            m.d.sync += [g.ch.eq(self.read.payload.channel), g.st_current.eq(self.read.payload.current)]
+        # a byte-serial reader takes the pulse a byte at a time from its low byte (no choice
+        # of bytes); a status read starts only once the offered one is taken, so its loads
+        # never meet a shift
         with m.If(self.status_shift):
-            m.d.sync += [st.target.eq(st.target >> 8), st.current.eq(st.current >> 8)]
-        with m.If(s("ST_T")):
-            m.d.sync += st.target.eq(d[:w])
+            m.d.sync += st.pulse.eq(st.pulse >> 8)
+        with m.If(s("ST_T") & ~g.st_current):
+            m.d.sync += st.pulse.eq(d[:w])
+        with m.If(s("ST_C") & g.st_current):
+            m.d.sync += st.pulse.eq(d[:w])
         with m.If(s("ST_C")):
-            m.d.sync += [st.current.eq(d[:w]), st.moving.eq(~g.z)]
+            m.d.sync += st.moving.eq(~g.z)
         with m.If(s("ST_M") & ~g.z):
             m.d.sync += st.moving.eq(1)
         with m.If(s("ST_E")):
@@ -378,3 +395,4 @@ class _Globals:
         self.host_we, self.host_addr = Signal(), Signal(4 + (c).bit_length())
         self.host_data = Signal(aw)
         self.st, self.st_valid = Signal(eng.status_layout), Signal()
+        self.st_current = Signal()      # the read in progress asked for the current pulse

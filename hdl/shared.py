@@ -76,6 +76,15 @@ class RobotCore(wiring.Component):
     channels : ChannelTable, optional
         The per-leg mirror and per-channel constants (:func:`table_in_use`: none, or one that
         changes nothing, gives the core without a table stage).
+    held_input : bool
+        The sender holds ``i.payload`` (leg and target) from the input transfer until the
+        widths transfer on ``o``: the evaluator has no input register
+        (:class:`~ikseries.hdl.folded.FoldedEvaluator`). Default False.
+    rotate_outputs : bool
+        Adds ``rotate`` for a reader that takes the widths one at a time from the first servo's
+        (:class:`~ikseries.hdl.folded.FoldedEvaluator`'s ``rotate_outputs``; with a channel
+        table its output register moves instead). The PWM bank is then not loaded: its pins
+        keep the reset widths (the reader drives pins of its own). Default False.
 
     Attributes
     ----------
@@ -87,6 +96,10 @@ class RobotCore(wiring.Component):
         Servo signals; bit ``leg * len(plan.outputs) + j`` drives servo ``j`` of ``leg``.
     period_start : Out(1)
         High for one cycle when a PWM period starts (widths take effect).
+    rotate : In(1)
+        With ``rotate_outputs``: a strobe while ``o.valid`` moves ``o.payload.widths`` one servo
+        towards the first (the first takes the last's place); exactly once per servo per
+        transfer (or never).
 
     Reset: the evaluator idle, the table's output register empty (``o.valid`` low), the PWM
     bank's reset widths.
@@ -107,27 +120,33 @@ class RobotCore(wiring.Component):
 
     def __init__(self, plan: Plan, legs: int, period: int, clock_hz: float, *, multipliers: int = 1,
                  dsp: tuple[int, int] | None = None, reset_widths: dict | None = None,
-                 channels: ChannelTable | None = None, dsp_registers: str | None = None):
+                 channels: ChannelTable | None = None, dsp_registers: str | None = None,
+                 held_input: bool = False, rotate_outputs: bool = False):
         self._args = ((plan, legs, period, clock_hz), dict(multipliers=multipliers, dsp=dsp,
-                                                           reset_widths=reset_widths, channels=channels))
+                                                           reset_widths=reset_widths, channels=channels,
+                                                           held_input=held_input, rotate_outputs=rotate_outputs))
         if not isinstance(legs, int) or isinstance(legs, bool) or legs < 1:
             raise ValueError(f"legs must be a positive integer, not {legs!r}")
         if isinstance(clock_hz, bool) or not isinstance(clock_hz, (int, float)) or not clock_hz > 0:
             raise ValueError(f"clock_hz must be a positive number, not {clock_hz!r}")
-        self._evaluator = FoldedEvaluator(plan, multipliers, dsp, dsp_registers)
+        if channels is not None and channels.legs != legs:
+            raise ValueError(f"channels must be a table of {legs} legs, not {channels.legs}")
+        self._table = table_in_use(plan, channels)
+        self._rotate = bool(rotate_outputs)
+        # with a table stage its output register is the one that rotates
+        self._evaluator = FoldedEvaluator(plan, multipliers, dsp, dsp_registers, held_input,
+                                          self._rotate and self._table is None)
         self._servos, reset_widths = servo_channels(plan, reset_widths)
         width_bits = max(plan.nodes[o.node].width for o in plan.outputs)
         self._bank = ServoPWMBank(period, width_bits, legs, len(self._servos),
                                   [reset_widths.get(s, 0) for s in self._servos] * legs)
         self._plan, self._legs, self._clock_hz = plan, legs, clock_hz
-        if channels is not None and channels.legs != legs:
-            raise ValueError(f"channels must be a table of {legs} legs, not {channels.legs}")
-        self._table = table_in_use(plan, channels)
         super().__init__({
             "i": In(stream.Signature(robot_input_layout(plan, legs))),
             "o": Out(stream.Signature(robot_output_layout(plan, legs))),
             "pwm": Out(legs * len(self._servos)),
             "period_start": Out(1),
+            **({"rotate": In(1)} if self._rotate else {}),
         })
 
     @property
@@ -150,6 +169,14 @@ class RobotCore(wiring.Component):
             return self
         args, kw = self._args
         return RobotCore(*args, **kw)
+
+    def registered(self) -> "RobotCore":
+        """This core with an input register of its own and whole outputs (``held_input`` and
+        ``rotate_outputs`` False): the plain core a board without a controller has, which
+        :mod:`bench.controller_cells` measures against."""
+        args, kw = self._args
+        plain = {**kw, "held_input": False, "rotate_outputs": False}
+        return self if plain == kw else RobotCore(*args, **plain)
 
     @property
     def servos(self) -> list[str]:
@@ -203,7 +230,10 @@ class RobotCore(wiring.Component):
             m.d.sync += leg.eq(self.i.payload.leg)
         m.d.comb += [self.o.valid.eq(ev.o.valid), ev.o.ready.eq(self.o.ready),
                      self.o.payload.leg.eq(leg), self.o.payload.widths.eq(ev.o.payload)]
-        m.d.comb += [bank.i.valid.eq(ev.o.valid & self.o.ready), bank.i.payload.group.eq(leg)]
+        if self._rotate:
+            m.d.comb += ev.rotate.eq(self.rotate)
+        else:
+            m.d.comb += [bank.i.valid.eq(ev.o.valid & self.o.ready), bank.i.payload.group.eq(leg)]
         for j, s in enumerate(self._servos):
             m.d.comb += bank.i.payload.widths[j].eq(ev.o.payload[s])
         m.d.comb += [self.pwm.eq(bank.pwm), self.period_start.eq(bank.period_start)]
@@ -228,12 +258,18 @@ class RobotCore(wiring.Component):
             w = self._calibrated(m, j, ev.o.payload[s], leg)
             with m.If(load):
                 m.d.sync += out[s].eq(w)
+        if self._rotate:        # the register is full (no load) while a reader rotates it
+            names = self._servos
+            with m.If(self.rotate):
+                m.d.sync += [out[s].eq(out[names[(j + 1) % len(names)]]) for j, s in enumerate(names)]
         with m.If(load):
             m.d.sync += [full.eq(1), out_leg.eq(leg)]
         with m.Elif(self.o.valid & self.o.ready):
             m.d.sync += full.eq(0)
+        # a rotating register does not load the bank
+        loads = [] if self._rotate else [bank.i.valid.eq(full & self.o.ready)]
         m.d.comb += [self.o.valid.eq(full), self.o.payload.leg.eq(out_leg), self.o.payload.widths.eq(out),
-                     bank.i.valid.eq(full & self.o.ready), bank.i.payload.group.eq(out_leg)]
+                     *loads, bank.i.payload.group.eq(out_leg)]
         for j, s in enumerate(self._servos):
             m.d.comb += bank.i.payload.widths[j].eq(out[s])
 

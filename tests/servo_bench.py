@@ -43,15 +43,18 @@ async def apply(ctx, dut, cmd, statuses):
             ctx.set(dut.ik.payload.widths[name], w)
         await _send(ctx, dut.ik)
     elif kind == "read":
-        await _send(ctx, dut.read, _=cmd[1])
-        ctx.set(dut.status.ready, 1)
-        while not ctx.get(dut.status.valid):
+        # the target, then the current pulse (the flags of the second read)
+        got = []
+        for current in (0, 1):
+            await _send(ctx, dut.read, channel=cmd[1], current=current)
+            ctx.set(dut.status.ready, 1)
+            while not ctx.get(dut.status.valid):
+                await ctx.tick()
+            got.append(ctx.get(dut.status.payload.pulse))
+            flags = (bool(ctx.get(dut.status.payload.moving)), bool(ctx.get(dut.status.payload.enabled)))
             await ctx.tick()
-        p = dut.status.payload
-        statuses.append((ctx.get(p.target), ctx.get(p.current), bool(ctx.get(p.moving)),
-                         bool(ctx.get(p.enabled))))
-        await ctx.tick()
-        ctx.set(dut.status.ready, 0)
+            ctx.set(dut.status.ready, 0)
+        statuses.append((*got, *flags))
     else:
         raise ValueError(f"unknown command {cmd!r}")
 

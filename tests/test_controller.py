@@ -234,3 +234,32 @@ def test_host_controller_drives_the_simulated_controller(two_legs, small_plan):
             return b""
     with pytest.raises(AnswerTimeout, match=r"^no answer to identity within 0.05 s$"):
         Controller(DeadLine(), timeout=0.05)
+
+
+def test_controller_with_a_channel_table_commands_the_table_widths(small_plan):
+    """With a channel table the core's table stage is the output register that rotates for the
+    dispatcher (RobotCore rotate_outputs): every channel's commanded pulse is its table width."""
+    import numpy as np
+
+    from controller_bench import SimulatedPort
+    from ikseries.fit.channels import ChannelTable, TableChannel
+    from ikseries.host.controller import Controller
+    from ikseries.sim.golden import robot_outputs
+    plan = small_plan
+    names = tuple(o.name for o in plan.outputs)
+    nodes = [plan.nodes[o.node] for o in plan.outputs]
+    mirror = next((i.name for i in plan.inputs if i.lo == -i.hi), None)
+    # leg 0 shifted (a different offset per servo), leg 1 reflected within its servos' ranges
+    chans = [TableChannel(1, 7 + 5 * j, n.lo, n.hi) for j, n in enumerate(nodes)]
+    chans += [TableChannel(-1, n.lo + n.hi, n.lo, n.hi) for n in nodes]
+    table = ChannelTable(2, names, mirror, (False, mirror is not None), tuple(chans))
+    dut = RobotController(plan, 2, PERIOD, CLOCK, BAUD, channels=table)
+    assert dut.core.channels is table
+    host = Controller(SimulatedPort(dut), timeout=60)
+    host.move(0, T1)
+    host.move_legs({1: T2})
+    for leg, target in ((0, T1), (1, T2)):
+        ints = {i.name: np.array([v]) for i, v in zip(plan.inputs, target)}
+        want = robot_outputs(plan, table, np.array([leg]), ints)
+        got = [host.channel_status(len(names) * leg + j)["commanded"] for j in range(len(names))]
+        assert got == [int(want[n][0]) for n in names], (leg, got)
