@@ -251,8 +251,9 @@ def output_rounding(plan: Plan, k: int) -> tuple[float, tuple[float, float] | No
     chain = []     # ("add", real constant) or ("shr", node), from the accumulator up
     while i != o.preround:
         n = plan.nodes[i]
-        if n.op in ("shr", "shl"):
-            chain.append(("shr", n) if n.op == "shr" else ("shl", n))
+        if n.op in ("shr", "shl"):     # a shl is exact: nothing to record
+            if n.op == "shr":
+                chain.append(("shr", n))
             i = n.args[0]
         elif (c := _constant_offset(plan, i, o.preround)) is not None:
             chain.append(("add", np.ldexp(float(c), -n.frac)))

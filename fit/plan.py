@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 from .ops import OPS, operation
 
-__all__ = ["quantize", "extend_stages", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for",
+__all__ = ["quantize", "extend_stages", "under", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for",
            "signed_bits", "PLAN_FORMAT",
            "PLAN_VERSION", "READABLE_VERSIONS", "REGISTERED_OPS"]
 
@@ -48,6 +48,13 @@ def extend_stages(nodes: list["Node"], st: list[int]) -> list[int]:
     for n in nodes[len(st):]:   # an input is registered (stage 1), a constant is not (0)
         st.append(max([st[a] for a in n.args] + [0]) + OPS[n.op].registered)
     return st
+
+
+def under(nodes: list["Node"], a: int, ops: tuple[str, ...]) -> int:
+    """The node under node ``a``'s chain of single-operand ``ops`` (``a`` itself if it is none)."""
+    while nodes[a].op in ops:
+        a = nodes[a].args[0]
+    return a
 
 
 def bits_for(lo: int, hi: int) -> tuple[int, bool]:
@@ -364,13 +371,7 @@ class PlanBuilder:
 
     def _product(self, a: int) -> bool:
         """Node ``a`` is a product under shifts and binary point moves."""
-        return self.nodes[self._under(a, ("frac", "shr", "shl"))].op == "mul"
-
-    def _under(self, a: int, ops: tuple[str, ...]) -> int:
-        """The node under ``a``'s chain of single-operand ``ops``."""
-        while self.nodes[a].op in ops:
-            a = self.nodes[a].args[0]
-        return a
+        return self.nodes[under(self.nodes, a, ("frac", "shr", "shl"))].op == "mul"
 
     def _fold_constants(self, a: int, b: int) -> int | None:
         """``(x + c1) + c2`` as ``x + (c1 + c2)``: one adder (and one pipeline stage) fewer, the
@@ -397,7 +398,7 @@ class PlanBuilder:
         sum: ``frac(y) + c`` is ``frac(y + c)`` (the same integers) and ``(y >> s) + c`` is
         ``(y + c * 2**s) >> s`` (floor((y + c 2**s) / 2**s) = floor(y / 2**s) + c), so the
         constant joins the sum's own (one adder and pipeline stage fewer, same integers)."""
-        n, c, base = self.nodes[a], self.nodes[b], self._under(a, ("frac", "shr"))
+        n, c, base = self.nodes[a], self.nodes[b], under(self.nodes, a, ("frac", "shr"))
         if c.op != "const" or base == a or self.nodes[base].op != "add":
             return None
         y = n.args[0]

@@ -10,7 +10,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..constraints.devices import dsp_size
 from ..fit.ops import OPS, node_shape
-from ..fit.plan import Plan
+from ..fit.plan import Plan, under
 from .evaluator import input_layout, lut_groups, node_expression, output_layout
 from .limbmul import check_dsp, check_dsp_registers
 from .planmemo import per_plan
@@ -40,9 +40,14 @@ def _kind(plan: Plan, i: int) -> str:
     """The op's kind (:data:`~ikseries.fit.ops.OPS`), except that an addition whose operands'
     bits cannot overlap (:func:`_carry_free`) is wiring here (an OR, no carry chain), and so
     is the addition of a table's index offset (:func:`_offset_add`: its operand, unchanged)."""
-    if _carry_free(plan, i) or _offset_add(plan, i) is not None:
-        return "wiring"
-    return OPS[plan.nodes[i].op].kind
+    return _kinds(plan)[i]
+
+
+@per_plan
+def _kinds(plan: Plan) -> tuple[str, ...]:
+    """:func:`_kind` of every node, found once per plan (the scheduler asks every cycle)."""
+    return tuple("wiring" if _carry_free(plan, i) or _offset_add(plan, i) is not None else OPS[n.op].kind
+                 for i, n in enumerate(plan.nodes))
 
 
 @per_plan
@@ -70,10 +75,7 @@ def _offset_add(plan: Plan, i: int) -> tuple[int, int] | None:
     if len(consts) != 1:
         return None
     c, x = plan.nodes[n.args[consts[0]]].param, n.args[1 - consts[0]]
-    base = x
-    while plan.nodes[base].op in ("frac", "shr", "shl"):
-        base = plan.nodes[base].args[0]
-    if plan.nodes[base].op == "mul":    # a product's bits would drive the tables' address logic
+    if plan.nodes[under(plan.nodes, x, ("frac", "shr", "shl"))].op == "mul":   # its bits would drive the address logic
         return None
     users, todo = _users(plan), list(_users(plan)[i])
     if not todo:
@@ -94,10 +96,7 @@ def _index_rotation(plan: Plan, index: int) -> int:
     n = plan.nodes[index]
     if n.op != "index":
         return 0
-    a = n.args[0]
-    while plan.nodes[a].op == "frac":
-        a = plan.nodes[a].args[0]
-    off = _offset_add(plan, a)
+    off = _offset_add(plan, under(plan.nodes, n.args[0], ("frac",)))
     return 0 if off is None else off[1] >> n.param
 
 
