@@ -47,8 +47,9 @@ FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record
 TOP = "leg_core"
 
 
-#: architectures whose leg top stalls as a whole when an output waits (the bench counts latency
-#: in cycles of that pipeline enable); the folded and shared cores handshake differently
+#: stream rules (:data:`ikseries.hdl.architectures.STREAM_RULES`) of leg tops that stall as a
+#: whole when an output waits (the bench counts latency in cycles of that pipeline enable); the
+#: folded, shared and buffered cores handshake differently
 GLOBAL_STALL = ("pipelined", "modulo")
 
 
@@ -68,10 +69,10 @@ def _load(args) -> tuple[Plan, str, str, int, int, str]:
         sys.exit(f"{str(bdir)!r} holds no ikseries build (no manifest.json / plan.json); run "
                  f"`ikseries build -o {bdir}` first or give --fit")
     man = json.loads((bdir / "manifest.json").read_text())
-    arch = man.get("architecture", {}).get("architecture", "pipelined")
-    if arch not in GLOBAL_STALL:
-        sys.exit(f"this bench runs pipelined and modulo-scheduled leg cores (the whole pipeline stalls "
-                 f"while an output waits), not a {arch!r} build ({bdir})")
+    rule = man.get("stream_rule", "pipelined")
+    if rule not in GLOBAL_STALL:
+        sys.exit(f"this bench runs leg cores whose whole pipeline stalls while an output waits (stream rules "
+                 f"{', '.join(GLOBAL_STALL)}), not a {rule!r} build ({bdir})")
     plan = Plan.from_json(json.loads((bdir / "plan.json").read_text()))
     vfile = bdir / f"{man['module']}.v"
     return (plan, vfile.read_text(), man["module"], int(man["latency_cycles"]),

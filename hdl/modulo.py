@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Array, Cat, Module, Mux, Signal, signed
+from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -13,11 +13,13 @@ from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan, under
 from .evaluator import input_layout, lut_groups, node_expression, output_layout
 from .limbmul import check_dsp, check_dsp_registers
+from .outbuffer import OutputBuffer
 from .planmemo import per_plan
 from .tables import default_registered_depth, registered_rom, rotated_table, table_primitive, table_registered
 
-__all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "MUL_LATENCY", "WIDE_MUL_LATENCY",
-           "CLAMP_LATENCY", "TABLE_LATENCY", "REGISTERED_TABLE_LATENCY"]
+__all__ = ["ModuloEvaluator", "ModuloSchedule", "modulo_schedule", "modulo_latency", "modulo_stream_rule", "stall_free",
+           "MUL_LATENCY", "WIDE_MUL_LATENCY", "CLAMP_LATENCY", "TABLE_LATENCY", "REGISTERED_TABLE_LATENCY",
+           "BUFFER_LATENCY"]
 
 #: cycles from reading a multiplication's operands to the first cycle its product can be read:
 #: operand registers at the multiplier inputs, then the product register. Consumers scheduled in
@@ -34,6 +36,35 @@ TABLE_LATENCY = 1
 #: the same with registered tables: the ROM's read, then its output register (on the ECP5 the
 #: block RAM's own, REGMODE "OUTREG": 0.97 ns clock-to-out instead of 5.6 ns)
 REGISTERED_TABLE_LATENCY = 2
+#: cycles the output buffer of a core that never stalls (:func:`stall_free`) adds: the
+#: pipeline's last cycle writes the buffer, whose first-word-fall-through read is valid the
+#: next cycle
+BUFFER_LATENCY = 1
+
+
+def stall_free(initiation_interval: int) -> bool:
+    """Whether a modulo core at ``initiation_interval`` never stalls its pipeline.
+
+    At 1 every register of the pipeline would load under the backpressure enable, whose
+    fanout, not the arithmetic, limits the clock on the ECP5 (measured: 198.8 against
+    228.5 MHz median with the enable tied high). Such a core runs unconditionally and
+    buffers its outputs instead (:class:`ModuloEvaluator`). Slower cores keep the enable:
+    their pipelines are short in targets and the iCE40 they are built for has no LUT RAM
+    for the buffer.
+    """
+    return initiation_interval == 1
+
+
+def modulo_stream_rule(initiation_interval: int) -> str:
+    """The stream rule (:data:`~ikseries.hdl.architectures.STREAM_RULES`) of a modulo core at
+    ``initiation_interval``: ``"buffered"`` when it never stalls (:func:`stall_free`)."""
+    return "buffered" if stall_free(initiation_interval) else "modulo"
+
+
+def modulo_latency(schedule: ModuloSchedule) -> int:
+    """Cycles from a target's input transfer to its output transfer, the output buffer of a
+    stall-free core (:func:`stall_free`) included."""
+    return schedule.latency + (BUFFER_LATENCY if stall_free(schedule.initiation_interval) else 0)
 
 
 def _kind(plan: Plan, i: int) -> str:
@@ -433,7 +464,8 @@ class ModuloEvaluator(wiring.Component):
     Latency
     -------
     ``latency`` cycles from an input transfer to its output transfer while ``o.ready`` is
-    high (the schedule's length; a multiplication takes ``MUL_LATENCY`` cycles, one split in
+    high (:func:`modulo_latency`: the schedule's length, plus ``BUFFER_LATENCY`` for a core
+    that never stalls, see below; a multiplication takes ``MUL_LATENCY`` cycles, one split in
     limbs ``WIDE_MUL_LATENCY``, a clamp ``CLAMP_LATENCY`` (one cycle if the limits it reaches
     are bit tests: 0 below, ``2**k - 1`` above), a table read ``TABLE_LATENCY``, or
     ``REGISTERED_TABLE_LATENCY`` if its table is registered (``registered_tables``), other
@@ -443,8 +475,11 @@ class ModuloEvaluator(wiring.Component):
 
     Throughput
     ----------
-    One input every ``initiation_interval`` cycles: ``i.ready`` is high one cycle in
-    ``initiation_interval`` (when the phase counter is 0). When ``o.valid`` is high and
+    One input every ``initiation_interval`` cycles. At an interval of 1 (:func:`stall_free`)
+    the pipeline never stalls: its outputs go through a FIFO of ``latency + 1`` words, and
+    ``i.ready`` is low only while every word is taken or promised to a target in flight, so
+    with ``o.ready`` high it stays high. At longer intervals ``i.ready`` is high one cycle in
+    ``initiation_interval`` (when the phase counter is 0), and when ``o.valid`` is high and
     ``o.ready`` low, everything, the phase counter included, stalls.
     """
 
@@ -508,7 +543,7 @@ class ModuloEvaluator(wiring.Component):
 
     @property
     def latency(self) -> int:
-        return self._schedule.latency
+        return modulo_latency(self._schedule)
 
     @property
     def initiation_interval(self) -> int:
@@ -535,12 +570,14 @@ class ModuloEvaluator(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         plan, sch = self._plan, self._schedule
-        en = Signal()
-        m.d.comb += en.eq(~self.o.valid | self.o.ready)
         phase = Signal(range(sch.initiation_interval), name="phase")
+        if stall_free(sch.initiation_interval):
+            en, end = Const(1), self._output_buffer(m)
+        else:
+            en, end = Signal(name="en"), self.o
+            m.d.comb += [en.eq(~self.o.valid | self.o.ready), self.i.ready.eq(en & (phase == 0))]
         with m.If(en):
             m.d.sync += phase.eq(Mux(phase == sch.initiation_interval - 1, 0, phase + 1))
-        m.d.comb += self.i.ready.eq(en & (phase == 0))
         values = _NodeValues(m, plan, sch, en, phase)
         registered = self._registered_groups()
         live = plan.live()
@@ -563,10 +600,22 @@ class ModuloEvaluator(wiring.Component):
         valid = Signal(lat, name="valid")    # valid[k]: a target accepted k + 1 cycles ago
         with m.If(en):
             m.d.sync += valid.eq(Cat(self.i.valid & self.i.ready, valid[:lat - 1]))
-        m.d.comb += self.o.valid.eq(valid[lat - 1])
+        m.d.comb += end.valid.eq(valid[lat - 1])
         for o in plan.outputs:
-            m.d.comb += self.o.payload[o.name].eq(values.read(o.node, lat))
+            m.d.comb += end.payload[o.name].eq(values.read(o.node, lat))
         return m
+
+    def _output_buffer(self, m):
+        """The outputs of a pipeline that never stalls, through an :class:`OutputBuffer` with a
+        word for every target in flight: at one target a cycle a word is promised for the
+        pipeline's cycles, the buffer's, then the read's return to ``room``, so that many
+        keep ``i.ready`` high while ``o.ready`` is. Returns the stream (valid and payload) the
+        pipeline's last cycle drives."""
+        depth = self._schedule.latency + BUFFER_LATENCY + 1
+        m.submodules.buffer = buffer = OutputBuffer(output_layout(self._plan), depth)
+        wiring.connect(m, wiring.flipped(self.o), buffer.o)
+        m.d.comb += [self.i.ready.eq(buffer.room), buffer.promise.eq(self.i.valid & buffer.room)]
+        return buffer.w
 
     def _operation(self, m, values: _NodeValues, i: int):
         """The register of node ``i``, neither a multiplication nor wiring nor a constant: an

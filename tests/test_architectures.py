@@ -80,7 +80,7 @@ def test_cordic_architectures_time_their_solver(robot):
     (lambda: Folded(1, "virtex"), r"^dsp must be None, 'none' or one of ice40, ecp5, xc7, not 'virtex'$"),
     (lambda: Shared(0), r"^legs must be an integer >= 1, not 0$"),
     (lambda: CordicIterative(1.5), r"^interval must be an integer >= 1, not 1.5$"),
-    (lambda: Timing(3, 1, "systolic"), r"^stream_rule must be one of pipelined, modulo, folded, not 'systolic'$"),
+    (lambda: Timing(3, 1, "systolic"), r"^stream_rule must be one of pipelined, modulo, folded, buffered, not 'systolic'$"),
 ])
 def test_option_errors(make, msg):
     with pytest.raises(ValueError, match=msg):

@@ -24,7 +24,8 @@ The modulo-scheduled leg top (``LegCore(small_plan, PWM_PERIOD, interval=4)``: s
 in flight, i_ready high when the phase counter is 0) runs them too on both simulators, with 1000
 random targets: ~30 s on Icarus (which simulates the running modulo pipeline at a few thousand
 cycles per second; the PWM test keeps it frozen while outputs wait for their edges), ~45 s on
-Verilator (mostly the C++ build).
+Verilator (mostly the C++ build). At II = 1 the same core never stalls and queues its outputs
+(stream rule ``buffered``), and runs them too on both simulators.
 """
 from __future__ import annotations
 
@@ -156,21 +157,26 @@ def _modulo_core(small_plan, interval: int = 4):
     return core
 
 
+@pytest.mark.parametrize("interval, rule", [(4, "modulo"), (1, "buffered")])
 @pytest.mark.parametrize("simulator", ["icarus", "verilator"])
-def test_modulo_leg_core_cocotb(simulator, small_plan, small_plan_file, tmp_path_factory):
-    """The modulo-scheduled leg top (II = 4, several targets in flight): every cocotb test with
-    the phase rule (i_ready == en & phase 0, checked every cycle), 1000 random targets (plus
-    corners) one every II cycles back to back at the exact latency, half as many with
-    backpressure (latency + stalls), PWM waveforms (outputs held at o until their scheduled edge)."""
+def test_modulo_leg_core_cocotb(simulator, interval, rule, small_plan, small_plan_file, tmp_path_factory):
+    """The modulo-scheduled leg top. At II = 4 (several targets in flight) every cocotb test
+    with the phase rule (i_ready == en & phase 0, checked every cycle), 1000 random targets
+    (plus corners) one every II cycles back to back at the exact latency, half as many with
+    backpressure (latency + stalls), PWM waveforms (outputs held at o until their scheduled
+    edge). At II = 1 the pipeline never stalls and buffers its outputs: the buffered rule
+    (i_ready == fewer than latency + 1 targets in flight), with backpressure each output out
+    at the first edge without a stall once it is ready."""
+    from ikseries.hdl.leg import LegCore
     _skip_unless_available(simulator)
-    core = _modulo_core(small_plan)
-    build_dir = tmp_path_factory.mktemp(f"cocotb_{simulator}_modulo")
+    core = _modulo_core(small_plan) if interval > 1 else LegCore(small_plan, PWM_PERIOD, interval=1)
+    build_dir = tmp_path_factory.mktemp(f"cocotb_{simulator}_{rule}")
     res = run(small_plan_file, PWM_PERIOD, simulator, build_dir, core=core, n_random=1000)
     print(res.summary())
     assert set(res.tests) == COCOTB_TESTS, res.summary()
     assert res.ok, res.summary()
     assert (res.latency, res.initiation_interval, res.stream_rule, res.top) == \
-        (core.latency, core.initiation_interval, "modulo", "leg")
+        (core.latency, interval, rule, "leg")
 
 
 @pytest.mark.parametrize("wrong", ["latency", "ii"])
@@ -181,6 +187,17 @@ def test_cocotb_bench_detects_wrong_modulo_timing(wrong, small_plan, small_plan_
     passed, msg, summary = _back_to_back_told_wrong(_modulo_core(small_plan), wrong, small_plan_file,
                                                     tmp_path_factory.mktemp(f"cocotb_icarus_modulo_wrong_{wrong}"))
     assert not passed and ("latency (expected" if wrong == "latency" else "i_ready") in msg, summary
+
+
+def test_cocotb_bench_detects_wrong_buffered_latency(small_plan, small_plan_file, tmp_path_factory):
+    """Not vacuous for the buffered core: told a latency one cycle long, back to back fails on
+    latency."""
+    from ikseries.hdl.leg import LegCore
+    _skip_unless_available("icarus")
+    core = LegCore(small_plan, PWM_PERIOD, interval=1)
+    passed, msg, summary = _back_to_back_told_wrong(core, "latency", small_plan_file,
+                                                    tmp_path_factory.mktemp("cocotb_icarus_buffered_wrong"))
+    assert not passed and "latency (expected" in msg, summary
 
 
 def test_build_notes_simulators_auto_skipped(monkeypatch, tmp_path):

@@ -15,7 +15,7 @@ from ikseries.hdl.leg import LegCore
 from ikseries.hdl.shared import RobotCore
 from ikseries.sim.cocotb_leg.config import Design, RunConfig
 from ikseries.sim.cocotb_leg.monitor import Sample
-from ikseries.sim.cocotb_leg.rules import RULES, Folded, Modulo, Pipelined, timing_rule
+from ikseries.sim.cocotb_leg.rules import RULES, Buffered, Folded, Modulo, Pipelined, timing_rule
 from ikseries.sim.runner import bench_manifest, run
 
 
@@ -31,6 +31,8 @@ def test_a_timing_rule_for_every_stream_rule():
 def test_stream_rule_of_each_core(tiny):
     assert stream_rule(LegCore(tiny, 64)) == "pipelined"
     assert stream_rule(LegCore(tiny, 512, multipliers=1, dsp=(16, 16))) == "folded"
+    assert stream_rule(LegCore(tiny, 512, interval=2)) == "modulo"
+    assert stream_rule(LegCore(tiny, 512, interval=1)) == "buffered"
     assert stream_rule(RobotCore(tiny, 2, 4096, 48e6, multipliers=1, dsp=(16, 16))) == "folded"
 
 
@@ -56,7 +58,7 @@ def test_robot_design_read_from_the_manifest(tiny):
 
 def test_bad_manifests_are_one_line_errors(tiny):
     man = bench_manifest(tiny, LegCore(tiny, 64), "tiny_core")
-    with pytest.raises(ValueError, match=r"^manifest stream_rule must be one of pipelined, folded, modulo, "
+    with pytest.raises(ValueError, match=r"^manifest stream_rule must be one of pipelined, folded, modulo, buffered, "
                                          r"not 'systolic'$"):
         Design.from_manifest({**man, "stream_rule": "systolic"})
     with pytest.raises(ValueError, match=r"^manifest has no stream_rule$"):
@@ -113,6 +115,36 @@ def test_modulo_rule_follows_the_phase_through_stalls():
         ["edge 26: i_ready 1, expected 0 (modulo schedule: phase 2 of II 3, o_valid 0, o_ready 1)"]
 
 
+def test_buffered_rule_counts_the_buffer_words():
+    r = Buffered(10, 1)
+    r.start(1)
+    assert r.check(_s(1, False, True, True), 10) == []
+    assert r.check(_s(2, True, False, False), 11) == []
+    assert r.check(_s(3, True, False, True), 11) == \
+        ["edge 3: i_ready 1 with 11 target(s) in flight, expected 0 (an output buffer of 11 words)"]
+    assert r.check(_s(4, False, True, False), 4) != []
+
+
+def test_buffered_latency_allows_waiting_only_behind_stalls():
+    """An output of a buffered core is out ``latency`` edges after its input, or at the first
+    edge without a stall once the one before it is out; one more edge is an error."""
+    from types import SimpleNamespace
+
+    from ikseries.sim.cocotb_leg.scoreboard import Checker, Scoreboard
+
+    def problems(outs, stalls):
+        lat = Checker("latency")
+        Scoreboard(["y"], 5, 1, buffered=True)._buffered_latency(
+            SimpleNamespace(in_edges=[1, 2, 3], out_edges=outs, stall_edges=stalls), lat)
+
+    problems([6, 7, 8], [])
+    problems([6, 9, 10], [7, 8])              # the second waits behind two stalls, the third behind it
+    with pytest.raises(AssertionError, match="target 1"):
+        problems([6, 9, 10], [7])             # an edge without a stall and without a transfer
+    with pytest.raises(AssertionError, match="target 0"):
+        problems([5, 7, 8], [])               # sooner than the latency
+
+
 def test_modulo_pwm_timing_waits_for_the_scheduled_edges():
     r = timing_rule("modulo", 12, 4)
     sched = {"A": 100, "B": 104, "C": 200, "D": 204, "F": 405}
@@ -123,7 +155,7 @@ def test_modulo_pwm_timing_waits_for_the_scheduled_edges():
     assert t.o_valid[sched["A"] - 2] == 1 and t.o_valid[-1] == 1       # G waits until the reset
     p = timing_rule("pipelined", 12, 1).pwm_timing(sched, 820)
     assert p.inputs == {nm: e - 12 for nm, e in sched.items()} and np.all(p.i_ready == 1)
-    with pytest.raises(ValueError, match=r"^stream rule must be one of pipelined, folded, modulo, not 'x'$"):
+    with pytest.raises(ValueError, match=r"^stream rule must be one of pipelined, folded, modulo, buffered, not 'x'$"):
         timing_rule("x", 1, 1)
 
 

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from helpers import all_ports, simulate_bit_exact, tiny_grid_plan, tiny_piecewise_plan, tiny_plan
-from ikseries.hdl.modulo import (CLAMP_LATENCY, MUL_LATENCY, REGISTERED_TABLE_LATENCY, TABLE_LATENCY,
-                                 WIDE_MUL_LATENCY, ModuloEvaluator, modulo_schedule)
+from ikseries.hdl.modulo import (BUFFER_LATENCY, CLAMP_LATENCY, MUL_LATENCY, REGISTERED_TABLE_LATENCY,
+                                 TABLE_LATENCY, WIDE_MUL_LATENCY, ModuloEvaluator, modulo_schedule)
 from ikseries.sim.targets import corner_targets, random_targets
 
 
@@ -18,6 +18,57 @@ def test_every_port_value_bit_exact_at_each_initiation_interval(ii):
     assert np.all(res.latencies == core.latency)
     # back to back: one target every ii cycles
     assert np.all(np.diff(res.input_cycles) == ii)
+
+
+def test_interval_one_buffers_its_outputs_instead_of_stalling():
+    """At an interval of 1 the pipeline runs unconditionally (no enable on its registers) and
+    its outputs wait in a FIFO: one buffer cycle more than the schedule, one target a cycle
+    back to back, and under backpressure every target still arrives, in order, bit exact."""
+    from amaranth.back import verilog
+    plan = tiny_piecewise_plan(0)
+    core = ModuloEvaluator(plan, 1)
+    assert core.latency == core.schedule.latency + BUFFER_LATENCY
+    res = simulate_bit_exact(core, plan, all_ports(plan))
+    assert np.all(res.latencies == core.latency) and np.all(np.diff(res.input_cycles) == 1)
+    simulate_bit_exact(core, plan, all_ports(plan), ready_prob=0.3, valid_prob=0.8, seed=5)
+    stalling = verilog.convert(ModuloEvaluator(plan, 2), name="m", emit_src=False)
+    assert "o__ready" in stalling.split("assign en =")[1].split(";")[0]
+    assert "assign en =" not in verilog.convert(core, name="m", emit_src=False)
+
+
+def test_interval_one_accepts_only_what_its_buffer_holds():
+    """With ``o.ready`` low the core takes exactly as many targets as its FIFO has words
+    (``latency + 1``), then drops ``i.ready``; released, it gives them all, bit exact."""
+    from amaranth.sim import Simulator
+
+    from ikseries.sim import golden
+    plan = tiny_plan(1)
+    core = ModuloEvaluator(plan, 1, dsp=None)
+    ports = all_ports(plan)
+    n = 3 * core.latency
+    taken, out = [], []
+
+    async def bench(ctx):
+        ctx.set(core.o.ready, 0)
+        for cycle in range(6 * core.latency + n):
+            k = len(taken)
+            ctx.set(core.i.valid, int(k < n))
+            ctx.set(core.i.payload, {p: int(v[k % n]) for p, v in ports.items()})
+            if cycle == 3 * core.latency:
+                assert len(taken) == core.latency + 1
+                ctx.set(core.o.ready, 1)
+            if k < n and ctx.get(core.i.ready):
+                taken.append(k)
+            if ctx.get(core.o.valid) and ctx.get(core.o.ready):
+                out.append(ctx.get(core.o.payload.y))
+            await ctx.tick()
+
+    sim = Simulator(core)
+    sim.add_clock(1e-6)
+    sim.add_testbench(bench)
+    sim.run()
+    assert len(out) == n
+    assert out == list(golden.outputs(plan, {p: v[:n] for p, v in ports.items()})["y"])
 
 
 @pytest.mark.parametrize("seed", [0, 1])

@@ -151,20 +151,22 @@ def test_iterative_cordic_latency_needs_the_enable_count(cordic_benches, tmp_pat
         build_testbench(core.plan, "", "x", tmp_path, advance="ready")
 
 
-def _fake_build(bdir, plan, core, architecture):
+def _fake_build(bdir, plan, core):
+    from ikseries.hdl.export import stream_rule
     (bdir / "plan.json").write_text(plan.dumps())
     (bdir / "tiny_core.v").write_text(leg_verilog(core, "tiny_core"))
     (bdir / "manifest.json").write_text(json.dumps({
         "module": "tiny_core", "latency_cycles": core.latency, "initiation_interval": core.initiation_interval,
-        "architecture": {"architecture": architecture}}))
+        "architecture": {"architecture": core.architecture}, "stream_rule": stream_rule(core)}))
 
 
 def test_bench_runs_a_modulo_build(tmp_path):
     """A modulo-scheduled build (a target every 3 cycles) passes, latency counted in cycles of
-    the pipeline enable; a folded build is refused with a message."""
+    the pipeline enable; a folded build and a buffered one (never stalls) are refused with a
+    message."""
     plan = tiny_plan(3, clamp=(0, 100))
     core = LegCore(plan, 1000, interval=3)
-    _fake_build(tmp_path, plan, core, "modulo")
+    _fake_build(tmp_path, plan, core)
     jpath = tmp_path / "out.json"
     code = _bench_main()([str(tmp_path), "-n", "600", "--cxx-opt=-O0", "--workdir", str(tmp_path / "w"),
                           "--json", str(jpath)])
@@ -175,6 +177,11 @@ def test_bench_runs_a_modulo_build(tmp_path):
     assert b2b["cycles"] >= 3 * res["targets"]
     folded = tmp_path / "folded"
     folded.mkdir()
-    _fake_build(folded, plan, LegCore(plan, 1000, multipliers=1, dsp=(16, 16)), "folded")
-    with pytest.raises(SystemExit, match="this bench runs pipelined and modulo-scheduled leg cores .* not a 'folded' build"):
-        _bench_main()([str(folded), "-n", "10"])
+    _fake_build(folded, plan, LegCore(plan, 1000, multipliers=1, dsp=(16, 16)))
+    with pytest.raises(SystemExit, match=r"whole pipeline stalls .* \(stream rules pipelined, modulo\), not a 'folded' build"):
+        _bench_main()([str(folded), "-n", "10", "--json", str(jpath)])
+    buffered = tmp_path / "buffered"
+    buffered.mkdir()
+    _fake_build(buffered, plan, LegCore(plan, 1000, interval=1))
+    with pytest.raises(SystemExit, match="not a 'buffered' build"):
+        _bench_main()([str(buffered), "-n", "10", "--json", str(jpath)])

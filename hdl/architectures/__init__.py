@@ -31,6 +31,10 @@ Stream rules (:data:`STREAM_RULES`), what a bench must expect of a core:
 ``folded``
     One evaluation in flight: ``i_ready`` is low from an input transfer until its output
     transfers; latency counts clock cycles.
+``buffered``
+    One target per cycle, the pipeline never stalls: its outputs wait in a FIFO of
+    ``latency + 1`` words, and ``i_ready`` is high exactly while fewer targets than that are
+    in flight (input transferred, output not yet); latency counts clock cycles.
 """
 from __future__ import annotations
 
@@ -44,7 +48,7 @@ from ...plugins import load_registered, registered
 __all__ = ["STREAM_RULES", "ENTRY_POINT_GROUP", "Timing", "BuildTarget", "Architecture", "architecture_names",
            "architecture_class"]
 
-STREAM_RULES = ("pipelined", "modulo", "folded")
+STREAM_RULES = ("pipelined", "modulo", "folded", "buffered")
 ENTRY_POINT_GROUP = "ikseries.architectures"
 
 

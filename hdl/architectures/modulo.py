@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from ..leg import LegCore
-from ..modulo import ModuloEvaluator, modulo_schedule
+from ..modulo import ModuloEvaluator, modulo_latency, modulo_schedule, modulo_stream_rule
 from ..tables import default_registered_depth
 from . import Architecture, BuildTarget, Timing
 from .options import check_primitives, dsp_label, dsp_size, positive_int
@@ -51,7 +51,7 @@ class Modulo(Architecture):
 
     def timing(self, plan) -> Timing:
         s = modulo_schedule(plan, self.interval, self._size, self._registered_depth)
-        return Timing(s.latency, s.initiation_interval, "modulo")
+        return Timing(modulo_latency(s), s.initiation_interval, modulo_stream_rule(s.initiation_interval))
 
     def evaluator(self, plan):
         return ModuloEvaluator(plan, self.interval, dsp=self._size, dsp_registers=self._registers)

@@ -94,7 +94,8 @@ class Bench:
         d = self.design
         n = len(next(iter(targets.values())))
         legs = np.zeros(n, dtype=np.int64) if legs is None else legs
-        mon, sb = Monitor(self.ports, self.servos), Scoreboard(self.servos, d.latency, d.initiation_interval)
+        mon = Monitor(self.ports, self.servos)
+        sb = Scoreboard(self.servos, d.latency, d.initiation_interval, d.stream_rule == "buffered")
         k, drain, cycle = 0, 0, 0
         limit = 50 * n * d.initiation_interval + 10 * d.latency + 1000
         while drain <= d.latency + 4:

@@ -22,6 +22,9 @@ Rules
     with the whole pipeline in a stall; i_ready is en & (phase == 0), whether i_valid is high or
     not (an un-offered slot is a bubble). The rule keeps its own copy of the phase (0 in the
     cycle before relative edge 1, advanced after every cycle in which en was sampled high).
+``buffered`` (:class:`Buffered`)
+    One target per cycle into a pipeline that never stalls, its outputs buffered in a FIFO of
+    latency + 1 words: i_ready high exactly while fewer targets than that are in flight.
 
 Adding a timing rule for a new architecture
 -------------------------------------------
@@ -49,7 +52,7 @@ import numpy as np
 if TYPE_CHECKING:
     from .monitor import Sample
 
-__all__ = ["PwmTiming", "TimingRule", "Pipelined", "Folded", "Modulo", "RULES", "timing_rule"]
+__all__ = ["PwmTiming", "TimingRule", "Pipelined", "Folded", "Modulo", "Buffered", "RULES", "timing_rule"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -251,8 +254,25 @@ class Modulo(TimingRule):
         return inputs, arrive, ready
 
 
+class Buffered(TimingRule):
+    """A pipeline that never stalls, its outputs buffered: i_ready = in flight < latency + 1.
+
+    The buffer has a word for every target in flight, so with o_ready high in every cycle (the
+    PWM test's default schedule) i_ready never falls.
+    """
+
+    name = "buffered"
+
+    def check(self, s: "Sample", in_flight: int) -> list[str]:
+        want = in_flight < self.latency + 1
+        if s.i_ready == want:
+            return []
+        return [f"edge {s.edge}: i_ready {int(s.i_ready)} with {in_flight} target(s) in flight, expected "
+                f"{int(want)} (an output buffer of {self.latency + 1} words)"]
+
+
 #: the timing rule of each stream rule
-RULES = {r.name: r for r in (Pipelined, Folded, Modulo)}
+RULES = {r.name: r for r in (Pipelined, Folded, Modulo, Buffered)}
 
 
 def timing_rule(stream_rule: str, latency: int, initiation_interval: int) -> TimingRule:
