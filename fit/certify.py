@@ -207,7 +207,10 @@ def _reference_function(robot, servo: int, ticks_per_pu: float):
 def _summands(plan: Plan, i: int) -> tuple[Counter, int]:
     """The terms of the adder tree at node ``i``: its non-constant leaves (with multiplicity)
     and the integer sum of its constants (an addition's operands share its binary point, so
-    the tree's value is the leaves' sum plus that)."""
+    the tree's value is the leaves' sum plus that). A table counts as its first entry (a
+    constant) plus the table of its entries less that one, so a table with a constant added to
+    every entry (:meth:`~ikseries.fit.plan.PlanBuilder.add` stores a rounding half there) is
+    the same term."""
     leaves, const, todo = Counter(), 0, [i]
     while todo:
         n = plan.nodes[j := todo.pop()]
@@ -215,6 +218,9 @@ def _summands(plan: Plan, i: int) -> tuple[Counter, int]:
             todo.extend(n.args)
         elif n.op == "const":
             const += n.param
+        elif n.op == "lut":
+            const += n.param[0]
+            leaves["lut", n.args, n.frac, tuple(v - n.param[0] for v in n.param)] += 1
         else:
             leaves[j] += 1
     return leaves, const

@@ -150,7 +150,8 @@ class Plan:
     def live(self) -> set[int]:
         """The nodes the outputs need: hardware evaluates these only. The rest are sums only
         the certifier reads, an output's accumulator before its rounding constant moved
-        into it (:meth:`PlanBuilder.round`)."""
+        into it (:meth:`PlanBuilder.round`), and the table it summed before that constant
+        joined the table's entries."""
         return set().union(*(self.cone(o.node) for o in self.outputs))
 
     def cone(self, node: int) -> set[int]:
@@ -344,7 +345,8 @@ class PlanBuilder:
             return a
         f = max(self.frac(a), self.frac(b))
         a, b = self.align(a, f), self.align(b, f)
-        for rule in (self._fold_constants, self._latest_last, self._before_shift):   # either operand may be the sum
+        for rule in (self._into_table, self._fold_constants, self._latest_last,
+                     self._before_shift):   # either operand may be the sum
             for x, y in ((a, b), (b, a)):
                 if (folded := rule(x, y)) is not None:
                     return folded
@@ -372,6 +374,44 @@ class PlanBuilder:
     def _product(self, a: int) -> bool:
         """Node ``a`` is a product under shifts and binary point moves."""
         return self.nodes[under(self.nodes, a, ("frac", "shr", "shl"))].op == "mul"
+
+    def _into_table(self, a: int, b: int) -> int | None:
+        """A constant ``c`` (a rounding half, say) added to a sum that holds a table read
+        ``lut(i)`` (through additions on the sum's binary point) is stored in the table:
+        ``lut'(i) = lut(i) + c``, FloPoCo's trick. Its adder and any stage it would cost are
+        gone; the same integers, the ideal values summed. The sum's additions above the table
+        are rebuilt over ``lut'``."""
+        c = self.nodes[b]
+        if c.op != "const" or (path := self._table_path(a, c.frac)) is None:
+            return None
+        t = self.nodes[path[-1]]
+        q = tuple(v + c.param for v in t.param)
+        ideal = None
+        if t.ideal is not None or c.ideal is not None:
+            scale = 2.0 ** -c.frac
+            cv = c.ideal if c.ideal is not None else c.param * scale
+            ideal = tuple((v * scale if t.ideal is None else t.ideal[k]) + cv for k, v in enumerate(t.param))
+            ideal = None if all(x == v * scale for x, v in zip(ideal, q)) else ideal
+        new = self._append("lut", t.args, t.frac, q, ideal)
+        for node, child in zip(reversed(path[:-1]), reversed(path[1:])):
+            args = list(self.nodes[node].args)
+            args[args.index(child)] = new            # one operand only: x + x holds c once
+            new = self._append("add", tuple(args), self.frac(node))
+        return new
+
+    def _table_path(self, a: int, frac: int) -> list[int] | None:
+        """Nodes from ``a`` down to a table read on binary point ``frac`` through additions on
+        it (first operands first), or None."""
+        n = self.nodes[a]
+        if n.frac != frac:
+            return None
+        if n.op == "lut":
+            return [a]
+        if n.op == "add":
+            for x in n.args:
+                if (path := self._table_path(x, frac)) is not None:
+                    return [a, *path]
+        return None
 
     def _fold_constants(self, a: int, b: int) -> int | None:
         """``(x + c1) + c2`` as ``x + (c1 + c2)``: one adder (and one pipeline stage) fewer, the

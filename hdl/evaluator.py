@@ -14,10 +14,12 @@ __all__ = ["PlanEvaluator", "input_layout", "lut_fields", "lut_groups", "lut_rom
 
 
 def lut_groups(plan: Plan) -> dict[int, list[int]]:
-    """``lut`` nodes by index node (in plan order): the tables one ROM holds side by side."""
+    """The live (:meth:`~ikseries.fit.plan.Plan.live`) ``lut`` nodes by index node (in plan
+    order): the tables one ROM holds side by side."""
     groups: dict[int, list[int]] = {}
+    live = plan.live()
     for idx, n in enumerate(plan.nodes):
-        if OPS[n.op].kind == "table":
+        if OPS[n.op].kind == "table" and idx in live:
             groups.setdefault(n.args[0], []).append(idx)
     return groups
 

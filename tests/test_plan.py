@@ -180,6 +180,33 @@ def test_the_rounding_half_joins_a_term_ready_before_the_last_product():
     assert output_rounding(plan, 0) == (0.5, None)
 
 
+def test_the_rounding_half_is_stored_in_a_table_of_the_sum():
+    """``round(p + (q + lut(i)))``: the half joins the table's entries (``lut'(i) = lut(i) +
+    half``), the additions above it rebuilt, so no constant is added in hardware; the
+    accumulator keeps the original table for the certifier, which sees the output as the
+    accumulator plus the half, bit for bit."""
+    inputs = [PlanInput("a", "mm", 0, 0, 15, 4, False), PlanInput("b", "mm", 0, -8, 7, 4, True)]
+    b = PlanBuilder(inputs)
+    a, q = (b.reinterpret(b.input_nodes[k], 2) for k in "ab")
+    cell, _ = b.cell(b.input_nodes["a"], 2)
+    table = b.lut(cell, [0.3, -1.1, 2.0, 0.7], 4)           # rounded: ideal values kept
+    acc = b.add(b.mul(q, q), b.add(b.align(a, 4), table))
+    out = b.round(acc, 0)
+    plan = b.build([PlanOutput("y", out, acc, "ticks", 1.0)])
+    live = plan.live()
+    assert not any(plan.nodes[i].op == "const" for i in live)
+    (new,) = [i for i in live if plan.nodes[i].op == "lut"]
+    o = plan.outputs[0]
+    (orig,) = [i for i in plan.cone(o.preround) if plan.nodes[i].op == "lut"]
+    assert orig not in live and orig != new
+    assert plan.nodes[new].param == tuple(v + 8 for v in plan.nodes[orig].param)
+    assert plan.nodes[new].ideal == tuple(v + 0.5 for v in plan.nodes[orig].ideal)
+    iv = golden.evaluate(plan, all_ports(plan))
+    assert np.array_equal(iv[o.node], (np.asarray(iv[o.preround]) + 8) >> 4)
+    assert output_rounding(plan, 0) == (0.5, None)
+    check_exhaustively(plan)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_piecewise_plan_intervals_and_rounding_bound_hold_exhaustively(seed):
     plan = tiny_piecewise_plan(seed)
