@@ -1,7 +1,7 @@
 """Pipelined fixed-point evaluator generated from an evaluation plan."""
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Signal, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -10,7 +10,7 @@ from ..fit.ops import OPS, node_shape
 from ..fit.plan import Plan
 
 __all__ = ["PlanEvaluator", "input_layout", "lut_fields", "lut_groups", "lut_rom_init", "node_expression",
-           "output_layout"]
+           "output_layout", "stored_field"]
 
 
 def lut_groups(plan: Plan) -> dict[int, list[int]]:
@@ -24,34 +24,49 @@ def lut_groups(plan: Plan) -> dict[int, list[int]]:
     return groups
 
 
+def stored_field(plan: Plan, li: int) -> tuple[int, int]:
+    """``(bits, top)``: the low ``bits`` of lut ``li``'s entries (two's complement at its node
+    width) are stored in its ROM; the rest, ``top``, is the same in every entry its index
+    reaches, and is wiring (FloPoCo's constant sign bits not stored: a table of negative
+    values, or one far from 0, keeps only the bits that vary). At least one bit is stored."""
+    n = plan.nodes[li]
+    ix, w = plan.nodes[n.args[0]], n.width
+    words = {v & ((1 << w) - 1) for v in n.param[ix.lo:ix.hi + 1]}
+    bits = w
+    while bits > 1 and len({v >> (bits - 1) for v in words}) == 1:
+        bits -= 1
+    return bits, next(iter(words)) >> bits
+
+
 def lut_rom_init(plan: Plan, index: int, luts: list[int]) -> tuple[list[int], int]:
     """``(init, width)`` of the ROM shared by the ``luts`` read at node ``index``.
 
     Entry ``j`` (0 <= j <= index.hi) is the concatenation, first lut in the low bits, of
-    ``table[j]`` of every lut as a ``width``-bit two's complement field of that lut's node
-    width; entries the index never takes (j < index.lo) hold 0 (they may not fit the field).
+    ``table[j]`` of every lut, each its stored field (:func:`stored_field`: the low bits of
+    its two's complement at the node's width); entries the index never takes (j < index.lo)
+    hold 0 (they may not fit the field).
     """
     lo, hi = plan.nodes[index].lo, plan.nodes[index].hi
     init = [0] * (hi + 1)
     off = 0
     for li in luts:
-        n = plan.nodes[li]
-        mask = (1 << n.width) - 1
+        bits = stored_field(plan, li)[0]
         for j in range(lo, hi + 1):
-            init[j] |= (n.param[j] & mask) << off
-        off += n.width
+            init[j] |= (plan.nodes[li].param[j] & ((1 << bits) - 1)) << off
+        off += bits
     return init, off
 
 
 def lut_fields(plan: Plan, luts: list[int], data) -> dict:
     """Each lut's value in ``data``, a word of the ROM :func:`lut_rom_init` lays out for
-    ``luts``: its field, sign-restored for a signed node."""
+    ``luts``: its stored field under its constant top bits, sign-restored for a signed node."""
     fields, off = {}, 0
     for li in luts:
         n = plan.nodes[li]
-        f = data[off:off + n.width]
+        bits, top = stored_field(plan, li)
+        f = Cat(data[off:off + bits], Const(top, n.width - bits))
         fields[li] = f.as_signed() if n.signed else f
-        off += n.width
+        off += bits
     return fields
 
 

@@ -9,7 +9,7 @@ import pytest
 from amaranth.sim import Simulator
 
 from helpers import all_ports, signed_cell_plan, simulate_bit_exact, tiny_grid_plan, tiny_piecewise_plan, tiny_plan
-from ikseries.hdl.evaluator import PlanEvaluator, lut_groups, lut_rom_init
+from ikseries.hdl.evaluator import PlanEvaluator, lut_groups, lut_rom_init, stored_field
 from ikseries.hdl.leg import LegCore
 from ikseries.hdl.pwm import ServoPWM
 from ikseries.sim import golden
@@ -63,8 +63,9 @@ def test_evaluator_signed_cells_exhaustive():
 
 
 def test_lut_rom_init_packs_fields_low_first():
-    """Per index the tables side by side (first lut in the low bits, two's complement fields
-    of each node's width); entries below the index's interval are 0."""
+    """Per index the tables side by side (first lut in the low bits, each its stored field:
+    the low bits of its two's complement, under top bits every reached entry shares); entries
+    below the index's interval are 0."""
     plan = signed_cell_plan()
     groups = lut_groups(plan)
     assert len(groups) == 2
@@ -72,18 +73,39 @@ def test_lut_rom_init_packs_fields_low_first():
         init, width = lut_rom_init(plan, index, luts)
         (li,) = luts
         n, ix = plan.nodes[li], plan.nodes[index]
-        assert width == n.width and len(init) == ix.hi + 1
+        bits, top = stored_field(plan, li)
+        assert width == bits and len(init) == ix.hi + 1
         for j, word in enumerate(init):
-            want = n.param[j] if j >= ix.lo else 0
-            assert word == want & ((1 << n.width) - 1)
+            if j >= ix.lo:
+                assert word | top << bits == n.param[j] & ((1 << n.width) - 1)
+            else:
+                assert word == 0
     assert any(plan.nodes[i].lo > 0 for i in groups)   # the 900 entry is never stored
     plan = tiny_piecewise_plan(0)
     ((index, luts),) = lut_groups(plan).items()
     init, width = lut_rom_init(plan, index, luts)
-    assert width == sum(plan.nodes[i].width for i in luts)
-    w0 = plan.nodes[luts[0]].width
+    assert width == sum(stored_field(plan, i)[0] for i in luts)
+    w0 = stored_field(plan, luts[0])[0]
     assert all((word & ((1 << w0) - 1)) == plan.nodes[luts[0]].param[j] & ((1 << w0) - 1)
                for j, word in enumerate(init))
+
+
+def test_constant_top_bits_of_a_table_are_not_stored():
+    """A table of negative entries stores no sign bit, one far from 0 not its common top
+    bits; the evaluator rebuilds them by wiring, bit-exact."""
+    from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput
+    b = PlanBuilder([PlanInput("a", "mm", 0, 0, 15, 4, False)])
+    cell, _ = b.cell(b.input_nodes["a"], 2)
+    neg = b.lut(cell, [-300, -200, -257, -290], 0)          # 10-bit signed: top bits 1 and ...
+    far = b.lut(cell, [1000, 1010, 1003, 1015], 0)          # 10-bit unsigned: 11111xxxxx
+    out = b.add(neg, far)
+    plan = b.build([PlanOutput("y", out, out, "ticks", 1.0)])
+    fields = {plan.nodes[li].param: stored_field(plan, li) for li in range(len(plan.nodes))
+              if plan.nodes[li].op == "lut"}
+    assert fields[(-300, -200, -257, -290)] == (9, 1)
+    assert fields[(1000, 1010, 1003, 1015)] == (5, 0b11111)
+    res = simulate_bit_exact(PlanEvaluator(plan), plan, all_ports(plan))
+    assert set(res.latencies.tolist()) == {PlanEvaluator(plan).latency}
 
 
 _EXPORT_BOTH = """
@@ -100,7 +122,7 @@ for name, kw in (("pipelined", {}), ("folded", {"multipliers": 1, "dsp": (16, 16
 def test_piecewise_verilog_deterministic(tmp_path):
     """The exported Verilog of a piecewise leg core (pipelined and folded) is byte-identical
     when exported again in another process with another hash seed; the pipelined core holds
-    its luts (one shared index) in one memory as wide as their fields together."""
+    its luts (one shared index) in one memory as wide as their stored fields together."""
     from ikseries.hdl.export import leg_verilog
     plan = tiny_piecewise_plan(0, clamp=(0, 100))
     (tmp_path / "plan.json").write_text(plan.dumps())
@@ -114,7 +136,7 @@ def test_piecewise_verilog_deterministic(tmp_path):
         if name == "pipelined":
             ((index, luts),) = lut_groups(plan).items()
             assert [(int(w) + 1, int(d) + 1) for w, _, d in mems] == [
-                (sum(plan.nodes[i].width for i in luts), plan.nodes[index].hi + 1)]
+                (sum(stored_field(plan, i)[0] for i in luts), plan.nodes[index].hi + 1)]
         else:
             assert {m for _, m, _ in mems} == {"microcode", "tables", "values"}
 
