@@ -603,6 +603,9 @@ def main(argv=None):
     ap.add_argument("--seeds", default="1,2,3", help="nextpnr placer seeds (comma-separated); the median is reported")
     ap.add_argument("--out", default=FACTS["default_json"]("pareto"))
     ap.add_argument("--work", default="build/bench/pareto", help="place-and-route working directory")
+    ap.add_argument("--timeout", type=float, default=600.0,
+                    help="seconds per tool run; a run that takes longer (nextpnr's router not converging "
+                         "on a seed, say) is recorded as an error of that seed")
     ap.add_argument("--merge", action="store_true",
                     help="keep the other designs' records of the existing --out (re-measure only --designs)")
     args = ap.parse_args(argv)
@@ -613,6 +616,8 @@ def main(argv=None):
     designs = _csv(args.designs, DESIGNS, "designs")
     if args.jobs not in (1, 2):
         sys.exit(f"--jobs must be 1 or 2, not {args.jobs}")
+    if not args.timeout > 0:
+        sys.exit(f"--timeout must be positive seconds, not {args.timeout}")
     if not args.clock_mhz > 0:
         sys.exit(f"--clock-mhz must be positive, not {args.clock_mhz}")
     try:
@@ -630,7 +635,7 @@ def main(argv=None):
     specs.sort(key=lambda s: order.get(s.name, 3))
     clock_hz = int(round(args.clock_mhz * 1e6))
     runs = [run_matrix(specs, devices, clock_hz, Path(args.work).resolve() / f"seed{s}", jobs=args.jobs, seed=s,
-                       progress=lambda m, s=s: say(f"seed {s}: {m}")) for s in seeds]
+                       timeout=args.timeout, progress=lambda m, s=s: say(f"seed {s}: {m}")) for s in seeds]
     records = median_records(runs, seeds)
     for r in records:
         if r["kind"] == "robot" and r["status"] == "placed":

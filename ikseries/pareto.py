@@ -172,8 +172,10 @@ def run_design(spec: DesignSpec, device: str, clock_hz: int, workdir: Path, *, s
 
 
 def run_matrix(specs: Sequence[DesignSpec], devices: Sequence[str], clock_hz: int, workdir: Path, *,
-               jobs: int = 1, seed: int = 1, progress: Callable[[str], None] = lambda m: None) -> list[dict]:
-    """:func:`run_design` for every spec on every device it allows, ``jobs`` (1 or 2) at a time.
+               jobs: int = 1, seed: int = 1, timeout: float | None = None,
+               progress: Callable[[str], None] = lambda m: None) -> list[dict]:
+    """:func:`run_design` for every spec on every device it allows, ``jobs`` (1 or 2) at a time,
+    each tool run given ``timeout`` seconds (None: no limit).
 
     Returns the records in spec order, then device order (deterministic whatever ``jobs``).
     """
@@ -187,7 +189,7 @@ def run_matrix(specs: Sequence[DesignSpec], devices: Sequence[str], clock_hz: in
     def one(item):
         s, d = item
         progress(f"{s.name} on {d} ...")
-        rec = run_design(s, d, clock_hz, Path(workdir) / f"{s.name}_{d}", seed=seed)
+        rec = run_design(s, d, clock_hz, Path(workdir) / f"{s.name}_{d}", seed=seed, timeout=timeout)
         extra = f"Fmax {rec['fmax_mhz']} MHz" if rec["status"] == "placed" else \
             (json.dumps(rec["overflow"]) if rec["overflow"] else rec["error"])
         progress(f"{s.name} on {d}: {rec['status']}, {extra} ({rec['wall_seconds']} s)")

@@ -97,6 +97,15 @@ def test_does_not_fit_is_recorded(records, tmp_path, monkeypatch):
     assert "not decided" in lines[0]
 
 
+def test_a_tool_past_its_timeout_is_an_error_record(records, tmp_path):
+    """A run that outlasts ``timeout`` (a router that does not converge, say) is recorded as an
+    error of that seed, naming the timeout, and the matrix goes on."""
+    _, bench = records
+    spec = bench.polynomial_specs(tiny_plan(3, clamp=(0, 100), degree=2), None, ("folded1",))[0]
+    (r,) = run_matrix([spec], [ICE40], 48_000_000, tmp_path / "w", timeout=0.01)
+    assert r["status"] == "error" and "timed out after 0.01 s" in r["error"] and r["fmax_mhz"] is None
+
+
 def test_verdicts_on_hand_made_records(records):
     _, bench = records
     base = {"kind": "polynomial", "status": "placed", "overflow": None, "error": None, "max_error_pu": 0.4}
