@@ -265,7 +265,7 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
                 return
             fit = data.fit_terms(terms, budget_ticks, settle=False)
             progress(f"  {name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
-                     f"{len(terms)} terms, {cost} multipliers, {_fit_note(fit)}")
+                     f"{len(terms)} terms, {ctx.cost_model.label(cost)}, {_fit_note(fit)}")
             if not fit.refused and fit.error <= budget_ticks:
                 found.append((cost, ServoFit(name, fs, deg, data.poly(terms, fit.coef), fit.error), fit.states, data))
                 return
@@ -355,7 +355,8 @@ class _Grids:
         terms = fs.terms(deg)
         fit = data.fit_terms(terms, self.budget, settle=False)
         self.progress(f"  {self.name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
-                      f"{len(terms)} terms, {cost} multipliers{', ' + note if note else ''}, {_fit_note(fit)}")
+                      f"{len(terms)} terms, {self.ctx.cost_model.label(cost)}{', ' + note if note else ''}, "
+                      f"{_fit_note(fit)}")
         return None if fit.refused or fit.error > self.budget else fit
 
 
@@ -466,7 +467,7 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
     if not all(st.optimal for st in state):     # the trials only needed to know they fit
         fit = data.fit_terms(terms, budget_ticks, warm=state)
         sf, state = dataclasses.replace(sf, poly=data.poly(terms, fit.coef), fit_error_ticks=fit.error), fit.states
-    progress(f"  {sf.name}: pruned to {len(terms)} terms, {cost} multipliers, "
+    progress(f"  {sf.name}: pruned to {len(terms)} terms, {ctx.cost_model.label(cost)}, "
              f"max fit error {sf.fit_error_ticks:.4g} ticks")
     data.forget_columns()
     return cost, dataclasses.replace(sf, refit=(data, state, budget_ticks))

@@ -7,19 +7,10 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..fit.ops import OPS, node_shape
-from ..fit.plan import Plan
+from ..fit.plan import Plan, lut_groups
 
 __all__ = ["PlanEvaluator", "input_layout", "lut_fields", "lut_groups", "lut_rom_init", "node_expression",
            "output_layout"]
-
-
-def lut_groups(plan: Plan) -> dict[int, list[int]]:
-    """``lut`` nodes by index node (in plan order): the tables one ROM holds side by side."""
-    groups: dict[int, list[int]] = {}
-    for idx, n in enumerate(plan.nodes):
-        if OPS[n.op].kind == "table":
-            groups.setdefault(n.args[0], []).append(idx)
-    return groups
 
 
 def lut_rom_init(plan: Plan, index: int, luts: list[int]) -> tuple[list[int], int]:

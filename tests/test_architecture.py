@@ -66,8 +66,8 @@ def test_defaults_and_hexapod_preset():
     ({"legs": 6}, {"architecture": "pipelined"},
      "hardware.architecture must be auto, folded or fastest for legs = 6 (the legs share one folded evaluator), "
      "not 'pipelined'"),
-    ({}, {"colour": 1}, "unknown field hardware.colour (expected one of: architecture, clock_hz, dsp, "
-                        "dsp_primitives, fit_device, interval, min_refresh_hz, multipliers, pwm_period_us)"),
+    ({}, {"colour": 1}, "unknown field hardware.colour (expected one of: architecture, clock_hz, cost, "
+                        "dsp, dsp_primitives, fit_device, interval, min_refresh_hz, multipliers, pwm_period_us)"),
     ({}, {"dsp_primitives": "yes"}, "hardware.dsp_primitives must be true or false, not 'yes'"),
     ({}, {"dsp_primitives": True, "dsp": "xc7"}, "hardware.dsp must be ice40 or ecp5 when hardware.dsp_primitives "
                                                  "is true (the DSP primitives instantiated: iCE40 SB_MAC16, ECP5 "
