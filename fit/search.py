@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .context import FitError
-from .lowering import structure_cost
+from .lowering import structure_cost, structure_multipliers
 from .minimax import minimax, region_ids
 from .polyfit import Basis
 from .features import FEATURE_GRID_ENTRIES
@@ -25,7 +25,8 @@ __all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "MAX
            "PRUNE_REJECTS", "FINALISTS", "FINALIST_MARGIN"]
 
 MAX_DEGREE = 12
-MAX_COST = 100                   # no structure costing more is tried (issue 3: <= 100 multiply-adds per servo):
+MAX_COST = 100                   # no structure of more multiplications is tried, whatever the cost model
+                                 # (issue 3: <= 100 multiply-adds per servo):
                                  # where no whole polynomial fits, the climb to MAX_DEGREE of a tensor set of three
                                  # variables reaches 1183 terms, a minimax fit of minutes each, all futile
 PRUNE_REJECTS = 5                # refused removals in a row that end pruning (a refusal is cheap: a lower bound)
@@ -260,8 +261,8 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     def search(fs, data):
         for deg in range(1, MAX_DEGREE + 1):
             terms = fs.terms(deg)
-            cost = structure_cost(ctx, fs, terms, name)
-            if cost >= _ceiling(found):
+            cost = _affordable(ctx, fs, terms, name, found)
+            if cost is None:
                 return
             fit = data.fit_terms(terms, budget_ticks, settle=False)
             progress(f"  {name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
@@ -306,10 +307,14 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     return min(pruned, key=lambda p: p[0])[1]
 
 
-def _ceiling(found: list) -> float:
-    """The cost a structure must stay below to be tried: the best found so far, else just above
-    ``MAX_COST``."""
-    return found[-1][0] if found else MAX_COST + 1
+def _affordable(ctx, fs, terms, name: str, found: list) -> float | None:
+    """The cost of structure ``fs`` with ``terms`` for servo ``name`` if it is to be tried: at
+    most ``MAX_COST`` multiplications (the effort bound, whatever the cost model) and cheaper
+    than the best found so far; else None."""
+    cost = structure_cost(ctx, fs, terms, name)
+    if structure_multipliers(ctx, fs, terms, name) > MAX_COST or (found and cost >= found[-1][0]):
+        return None
+    return cost
 
 
 class _Grids:
@@ -333,8 +338,8 @@ class _Grids:
         downwards on the pool until refused."""
         degrees = []
         for deg in range(1, MAX_DEGREE + 1):
-            cost = structure_cost(self.ctx, fs, fs.terms(deg), self.name)
-            if cost >= _ceiling(found):
+            cost = _affordable(self.ctx, fs, fs.terms(deg), self.name, found)
+            if cost is None:
                 break
             degrees.append((deg, cost))
         if not degrees:

@@ -116,7 +116,7 @@ def _configuration(arch: str, k, hardware, legs: int, table: Callable[[], object
     if arch == "folded":
         return Folded(k, hardware.dsp, primitives=prim)
     # the DSP family is the pipelined core's only to price its products on (hardware.cost)
-    return Pipelined(hardware.dsp if hardware.cost != "multipliers" else None, cost=hardware.cost)
+    return Pipelined(hardware.dsp if hardware.cost != DEFAULT_COST_MODEL.name else None, cost=hardware.cost)
 
 
 def _candidates(hardware, legs: int, table: Callable[[], object]) -> list[Architecture]:

@@ -429,7 +429,7 @@ class HardwareOptions:
     min_refresh_hz: float = 1000.0  # every leg's servos re-evaluated at least this often
     fit_device: str | None = None   # one of FIT_DEVICES: the device "fastest" must fit
     dsp_primitives: bool = False    # modulo, folded, shared cores: products on DSP primitives with their registers
-    cost: str = "multipliers"       # one of COSTS: what the fitter minimises
+    cost: str = COSTS[0]            # one of ikseries.fit.cost.COSTS: what the fitter minimises
 
     @property
     def pwm_period_ticks(self) -> int:
@@ -470,7 +470,7 @@ class HardwareOptions:
     def _validate_cost(self, lab: dict) -> None:
         if self.cost not in COSTS:
             raise RobotError(f"{lab['cost']} must be one of {', '.join(COSTS)}, not {self.cost!r}")
-        if self.cost == "multipliers":
+        if self.cost == COSTS[0]:         # the default
             return
         if self.architecture not in DEVICE_COST_ARCHITECTURES:
             raise RobotError(f"{lab['architecture']} must be {' or '.join(DEVICE_COST_ARCHITECTURES)} when "
@@ -515,6 +515,6 @@ class HardwareOptions:
         """The fields; ``cost`` only where it is not the default (records written before it stay
         the same)."""
         rec = dataclasses.asdict(self)
-        if rec["cost"] == "multipliers":
+        if rec["cost"] == COSTS[0]:
             del rec["cost"]
         return rec

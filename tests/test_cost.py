@@ -173,3 +173,23 @@ def test_hardware_cost_chooses_the_model_and_joins_the_fit_key(robot):
         with_hardware(robot, dsp="none", cost="device")
     with pytest.raises(RobotError, match=r"^hardware.cost must be one of multipliers, device, not 'luts'$"):
         with_hardware(robot, cost="luts")
+
+
+def test_the_fitter_chooses_other_structures_by_the_device(small_robot, small_fitted):
+    """Where the multiplier count and the device disagree, the fit follows its model: with
+    exact products (some wider than 18 x 18) the ECP5 model's plan takes fewer DSP blocks of
+    the part than the multiplier count's (other structures for some servos), and records the
+    model it minimised."""
+    from ikseries.architecture import cost_model
+    from ikseries.fit.fitter import fit_robot
+    from ikseries.robot import with_hardware
+    plan, fits = small_fitted
+    robot = with_hardware(small_robot, dsp="ecp5", cost="device")
+    model = cost_model(robot)
+    dev_plan, dev_fits = fit_robot(robot, cost_model=model)
+    assert model == DeviceCost(ECP5) and dev_plan.meta["method"]["cost_model"] == model.record()
+    assert "cost_model" not in plan.meta["method"]
+    assert [sf.features.structure() for sf in dev_fits] != [sf.features.structure() for sf in fits]
+    assert model.usage(dev_plan).dsp < model.usage(plan).dsp
+    assert sum(model.cost(dev_plan, o.name) for o in dev_plan.outputs) < \
+        sum(model.cost(plan, o.name) for o in plan.outputs)

@@ -4,6 +4,7 @@ from __future__ import annotations
 from ..leg import LegCore
 from ..modulo import ModuloEvaluator, modulo_schedule
 from ..tables import default_registered_depth
+from ...fit.cost import COSTS
 from . import Architecture, BuildTarget, Timing
 from .options import check_cost, check_primitives, dsp_label, dsp_size, offered_cost_model, positive_int
 
@@ -36,7 +37,7 @@ class Modulo(Architecture):
 
     name = "modulo"
 
-    def __init__(self, interval: int, dsp: str | None = None, primitives: bool = False, cost: str = "multipliers"):
+    def __init__(self, interval: int, dsp: str | None = None, primitives: bool = False, cost: str = COSTS[0]):
         self.interval = positive_int(interval, "interval")
         dsp_size(dsp)
         self.dsp, self.primitives = dsp, check_primitives(primitives, dsp)
@@ -78,4 +79,4 @@ class Modulo(Architecture):
     def record(self) -> dict:
         # cost only where it is not the default: records of cores before it stay the same
         return {**super().record(), "primitives": self.primitives,
-                **({"cost": self.cost} if self.cost != "multipliers" else {})}
+                **({"cost": self.cost} if self.cost != COSTS[0] else {})}

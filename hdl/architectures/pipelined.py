@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from ..evaluator import PlanEvaluator
 from ..leg import LegCore
+from ...fit.cost import COSTS
 from . import Architecture, BuildTarget, Timing
 from .options import check_cost, dsp_size, offered_cost_model
 
@@ -26,7 +27,7 @@ class Pipelined(Architecture):
 
     name = "pipelined"
 
-    def __init__(self, dsp: str | None = None, cost: str = "multipliers"):
+    def __init__(self, dsp: str | None = None, cost: str = COSTS[0]):
         dsp_size(dsp)
         self.dsp, self.cost = dsp, check_cost(cost, dsp)
 
@@ -35,7 +36,7 @@ class Pipelined(Architecture):
 
     def record(self) -> dict:
         # cost only where it is not the default: records of cores before it stay the same
-        return {**super().record(), **({"cost": self.cost} if self.cost != "multipliers" else {})}
+        return {**super().record(), **({"cost": self.cost} if self.cost != COSTS[0] else {})}
 
     def timing(self, plan) -> Timing:
         return Timing(plan.depth, 1, "pipelined")
