@@ -119,9 +119,11 @@ class DeviceCost(CostModel):
     :func:`ikseries.hdl.tables.table_registered` and of the family's own synthesis of a
     registered ROM) takes blocks of it, every ``lut`` node read at one index side by side
     (:func:`ikseries.fit.plan.lut_groups`); a shallower table, or any table on a family without
-    a table primitive in the registry (the iCE40: its cores put no table on SB_RAM40_4K), is a
-    LUT ROM: per bit ``ceil(words / 2**lut_inputs)`` LUTs (an estimate: the multiplexers above
-    the first LUT are free on the ECP5, LUTs on the iCE40; constant bits cost none). The
+    a table primitive in the registry, is a LUT ROM: per bit ``ceil(words / 2**lut_inputs)``
+    LUTs (an estimate: the multiplexers above the first LUT are free on the ECP5, LUTs on the
+    iCE40; constant bits cost none). The iCE40 has none: its modulo and folded cores keep
+    their tables in the fabric, but Yosys may put a deep table of the pipelined core (a
+    ``Memory`` read port) on SB_RAM40_4K, which this model prices as LUTs. The
     iCE40UP5K's SPRAM is not priced as table memory: the bitstream cannot initialise it, so a
     ROM there needs a loader writing it after configuration, which no core has.
 
@@ -129,8 +131,14 @@ class DeviceCost(CostModel):
     path, costs it nothing in clock rate. Measured on the ECP5 one-per-clock core
     (``bench/pareto.py --designs modulo1dt --cost device``), it chose for one servo a grid of
     16 x 6 cells (96-word tables: LUT ROMs) over one of 32 x 21 (block RAM): 3 EBR fewer (10),
-    472 LUTs more, Fmax 110.9 instead of 198.8 MHz, latency 171 instead of 96 ns. So it is not
-    the default (``hardware.cost = "multipliers"``).
+    472 LUTs more, Fmax 110.9 instead of 198.8 MHz, latency 171 instead of 96 ns. And the fitter
+    prices a structure on its trial plan (:func:`ikseries.fit.lowering.structure_cost`:
+    coefficients at 16 fractional bits, before any is fitted), whose operand widths are not the
+    fitted plan's: with exact products (``fit.products = "exact"``) the fitted coefficients are
+    wider and take more blocks than priced. On the default cylinder-leg the device model's plan
+    (one servo on another structure, priced 0.1 % cheaper on its trial plan) took more of the
+    part than the multiplier count's: 60 products, 112 ECP5 DSP blocks and 4376 LUTs against
+    57, 103 and 4088. So it is not the default (``hardware.cost = "multipliers"``).
 
     Parameters
     ----------

@@ -179,7 +179,7 @@ def test_the_fitter_chooses_other_structures_by_the_device(small_robot, small_fi
     """Where the multiplier count and the device disagree, the fit follows its model: with
     exact products (some wider than 18 x 18) the ECP5 model's plan takes fewer DSP blocks of
     the part than the multiplier count's (other structures for some servos), and records the
-    model it minimised."""
+    model it minimised; fitted in worker processes, the same plan."""
     from ikseries.architecture import cost_model
     from ikseries.fit.fitter import fit_robot
     from ikseries.robot import with_hardware
@@ -193,3 +193,5 @@ def test_the_fitter_chooses_other_structures_by_the_device(small_robot, small_fi
     assert model.usage(dev_plan).dsp < model.usage(plan).dsp
     assert sum(model.cost(dev_plan, o.name) for o in dev_plan.outputs) < \
         sum(model.cost(plan, o.name) for o in plan.outputs)
+    # the model goes to the servos' worker processes: the same plan, byte for byte
+    assert fit_robot(robot, cost_model=model, jobs=2)[0].dumps() == dev_plan.dumps()
