@@ -124,8 +124,10 @@ class DeviceCost(CostModel):
     iCE40; constant bits cost none). The iCE40 has none: its modulo and folded cores keep
     their tables in the fabric, but Yosys may put a deep table of the pipelined core (a
     ``Memory`` read port) on SB_RAM40_4K, which this model prices as LUTs. The
-    iCE40UP5K's SPRAM is not priced as table memory: the bitstream cannot initialise it, so a
-    ROM there needs a loader writing it after configuration, which no core has.
+    iCE40UP5K's SPRAM is not priced as table memory: the bitstream cannot initialise it
+    (SB_SPRAM256KA has no initial-value parameters, unlike SB_RAM40_4K's INIT_0..F; Yosys's
+    ``ice40/cells_sim.v`` model leaves its contents undefined at power-up), so a ROM there
+    needs a loader writing it after configuration, which no core has.
 
     It prices area, not timing: a table moved from block RAM to a LUT ROM, or a longer
     path, costs it nothing in clock rate. Measured on the ECP5 one-per-clock core

@@ -263,6 +263,12 @@ def test_flat_robot_top_ports_match_the_manifest(auto_robot, small_plan):
                                    "(the device the fastest configuration must fit), not 'pipelined'"),
     (["--architecture", "fastest"], "--fit-device must be one of ice40-up5k, ecp5-25f, xc7a35t when "
                                     "--architecture is fastest (the device to fit), not None"),
+    (["--cost", "area"], "--cost must be one of multipliers, device, not 'area'"),
+    (["--cost", "device", "--architecture", "folded"],
+     "--architecture must be modulo or pipelined when --cost is 'device' (the cores that price a plan on the "
+     "device), not 'folded'"),
+    (["--cost", "device", "--dsp", "none"], "--dsp must be one of ice40, ecp5, xc7 when --cost is 'device' (the "
+                                            "family whose reference part prices the plan), not 'none'"),
 ])
 def test_build_option_errors(capsys, tmp_path, argv, message):
     out = tmp_path / "out"
