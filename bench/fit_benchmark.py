@@ -5,7 +5,7 @@ Per preset and servo: variables, total degree, terms, multiplications per evalua
 representable points, certified bound (pu), and the preset's fit time (wall and CPU, certification
 included; the CPU seconds of the certifications alone beside them).
 
-    python bench/fit_benchmark.py [PRESET ...] [--box-scale S] [--table-entries N] [--jobs N]
+    python bench/fit_benchmark.py [PRESET ...] [--box-scale S] [--table-entries N] [--jobs N] [--cost device]
                                   [--json docs/results/fit_benchmark.json] [--merge]
 
 ``--box-scale S`` fits every preset's workspace box scaled S times about its centre (each
@@ -16,6 +16,11 @@ reported beside the name.
 With ``--jobs N`` each preset is fitted a second time with its servos in N processes
 (``fit_robot(jobs=N)``): its wall time beside the one-process fit's, and the two plans compared
 byte for byte (the run fails if they differ).
+``--cost device`` fits one-leg presets with ``hardware.architecture = "pipelined"`` and
+``hardware.cost = "device"`` (:class:`ikseries.fit.cost.DeviceCost` of the preset's
+``hardware.dsp`` family's reference part), reported as ``NAME (cost device)``; the rows then
+also carry the plan's usage of that part. Every fit minimises the robot's cost model
+(:func:`ikseries.architecture.cost_model`).
 ``--merge`` keeps the rows of the ``--json`` file for every preset (as reported, box scale and
 table entries included) this run does not fit, before this run's, with the runs they come from:
 e.g. the enlarged cylinder-leg box recorded beside every preset's default box.
@@ -42,7 +47,9 @@ from pathlib import Path
 import ikseries.fit.fitter as fitter
 from ikseries.accuracy import measure
 from ikseries.fit.fitter import FitError, fit_robot, output_multipliers
-from ikseries.robot import RobotError, load_preset, parse_robot, preset_names, preset_text, with_fit
+from ikseries.architecture import cost_model
+from ikseries.fit.cost import COSTS, DEFAULT_COST_MODEL
+from ikseries.robot import RobotError, load_preset, parse_robot, preset_names, preset_text, with_fit, with_hardware
 from ikseries.robot_parts import TABLE_ENTRIES, FitOptions
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
@@ -84,16 +91,23 @@ def scaled_robot(name: str, scale: float):
     return parse_robot(data, f"preset {name} scaled {scale:g}")
 
 
-def bench_preset(name: str, scale: float = 1.0, jobs: int = 1, table_entries: int = TABLE_ENTRIES) -> dict:
+def bench_preset(name: str, scale: float = 1.0, jobs: int = 1, table_entries: int = TABLE_ENTRIES,
+                 cost: str = COSTS[0]) -> dict:
     robot = load_preset(name) if scale == 1.0 else scaled_robot(name, scale)
     name = robot.name
     if table_entries != TABLE_ENTRIES:
         robot = with_fit(robot, table_entries=table_entries)
         name += f" (table_entries {table_entries})"
+    if cost != COSTS[0]:
+        if robot.legs != 1:
+            return {"preset": name, "error": f"--cost {cost} needs a one-leg preset (a pipelined core), not {robot.legs} legs"}
+        robot = with_hardware(robot, architecture="pipelined", cost=cost)
+        name += f" (cost {cost})"
+    model = cost_model(robot)
     t0, c0 = time.perf_counter(), time.process_time()
     with certify_seconds() as cert_cpu:
         try:
-            plan, fits = fit_robot(robot)
+            plan, fits = fit_robot(robot, cost_model=model)
         except FitError as e:
             return {"preset": name, "error": str(e)}
     fit_s, fit_cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -114,9 +128,12 @@ def bench_preset(name: str, scale: float = 1.0, jobs: int = 1, table_entries: in
            "certify_cpu_s": sum(cert_cpu), "certifications": len(cert_cpu),
            "points": acc["points"], "plan_multipliers": plan.count("mul"),
            "servos": servos}
+    if model != DEFAULT_COST_MODEL:
+        rec["cost_model"] = model.record()
+        rec["usage"] = vars(model.usage(plan))
     if jobs > 1:
         t0 = time.perf_counter()
-        again = fit_robot(robot, jobs=jobs).plan
+        again = fit_robot(robot, cost_model=model, jobs=jobs).plan
         rec["parallel"] = {"jobs": jobs, "fit_s": time.perf_counter() - t0}
         if again.dumps() != plan.dumps():
             raise SystemExit(f"{name}: the plan fitted with jobs={jobs} differs from the one-process plan")
@@ -149,6 +166,8 @@ def main(argv=None):
                     help="fit.table_entries of every fit (from 64: cells of computed features)")
     ap.add_argument("--jobs", type=int, default=1, help="also fit each preset with its servos in N processes")
     ap.add_argument("--json", default=FACTS["default_json"]("fit_benchmark"))
+    ap.add_argument("--cost", default=COSTS[0], choices=COSTS,
+                    help="what one-leg presets are fitted to minimise (device: pipelined, hardware.cost = device)")
     ap.add_argument("--merge", action="store_true",
                     help="keep the --json file's rows of the presets this run does not fit")
     args = ap.parse_args(argv)
@@ -168,7 +187,7 @@ def main(argv=None):
     results = []
     for n in names:
         print(f"fitting {n} ...", flush=True)
-        results.append(bench_preset(n, args.box_scale, args.jobs, args.table_entries))
+        results.append(bench_preset(n, args.box_scale, args.jobs, args.table_entries, args.cost))
     earlier = FACTS["merge_rows"](args.json, results, "preset") if args.merge else []
     print(table(results))
     out = FACTS["write_result"](args.json, {"results": results, **({"earlier_runs": earlier} if earlier else {})},

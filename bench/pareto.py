@@ -61,8 +61,11 @@ throughput; the hexapod within the iCE40 part; polynomial against CORDIC).
                            [--designs pipelined,modulo4,modulo8,modulo12,modulo4d,modulo7d,modulo16d,folded1,folded2,cordic,cordic_iter,hexapod]
                            [--jobs 2] [--seeds 1,2,3]
                            [--clock-mhz 100] [--cordic-design JSON] [--out docs/results/pareto.json]
-                           [--work build/bench/pareto] [--merge]
+                           [--work build/bench/pareto] [--cost multipliers|device] [--merge]
 
+``--cost device`` fits the ECP5 DSP-sized plans (``moduloNd``, ``moduloNdt``) with the ECP5's
+device cost model at one target per clock (``hardware.cost = "device"``,
+:class:`ikseries.fit.cost.DeviceCost`) instead of the multiplier count.
 ``--merge`` re-measures only the given designs: the records of every other (design, device) in
 the existing ``--out`` are kept (plots and verdicts are recomputed over all of them), and the
 run records of the runs they came from are listed under ``earlier_runs``.
@@ -167,13 +170,23 @@ def dsp_specs(plan, max_error_pu: float | None, names=DSP_DESIGNS, extra: dict |
             for ii in MODULO_DSP_II if f"modulo{ii}d" in names]
 
 
-def long_table_specs(robot, names, fitted) -> list[DesignSpec]:
+def dsp_robot(robot, cost: str = "multipliers"):
+    """``robot`` with ``fit.products = "dsp"`` on the ECP5 (the ``moduloNd`` plans); with
+    ``cost`` "device" fitted by the ECP5's device model at one target per clock
+    (``hardware.cost``, :class:`ikseries.fit.cost.DeviceCost` of its reference part, interval 1:
+    the rate of ``modulo1d``)."""
+    from ikseries.robot import with_fit, with_hardware
+    r = with_fit(with_hardware(robot, dsp="ecp5"), products="dsp")
+    return with_hardware(r, architecture="pipelined", cost="device") if cost == "device" else r
+
+
+def long_table_specs(robot, names, fitted, cost: str = "multipliers") -> list[DesignSpec]:
     """The "t" designs of ``names``: on the ECP5, ``pipelined``, ``modulo1d`` and ``modulo4d``
     (``pipelinedt``, ...) of plans fitted (``fitted(robot, what, **extra)``) with
     ``fit.table_entries = LONG_TABLES["ecp5"]``; on the iCE40, ``modulo16t``: one target per 16
     cycles on multipliers of its DSP size, of the plan fitted with ``LONG_TABLES["ice40"]``."""
     from ikseries.hdl.architectures.modulo import Modulo
-    from ikseries.robot import with_fit, with_hardware
+    from ikseries.robot import with_fit
 
     def note(family):
         return f"fit.table_entries = {LONG_TABLES[family]} (cells of computed features)"
@@ -185,8 +198,7 @@ def long_table_specs(robot, names, fitted) -> list[DesignSpec]:
                   for sp in polynomial_specs(plan, worst, ("pipelined",), extra)]
     dsp = [n[:-1] for n in names if n[:-1] in DSP_DESIGNS]
     if dsp:
-        plan, worst, extra = fitted(with_fit(with_hardware(ecp5, dsp="ecp5"), products="dsp"),
-                                    "ECP5 long-table DSP-sized plan", products="dsp ({}x{})".format(*dsp_size("ecp5")),
+        plan, worst, extra = fitted(dsp_robot(ecp5, cost), "ECP5 long-table DSP-sized plan", products="dsp ({}x{})".format(*dsp_size("ecp5")),
                                     table_entries=LONG_TABLES["ecp5"])
         specs += [dataclasses.replace(sp, description=f"{sp.description}; {note('ecp5')}")
                   for sp in dsp_specs(plan, worst, dsp, extra)]
@@ -512,13 +524,15 @@ def _csv(value: str, allowed, what: str) -> list[str]:
     return out
 
 
-def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], dict]:
+def build_specs(designs, cordic_design: str | None, cost: str = "multipliers") -> tuple[list[DesignSpec], dict]:
     """Fit / size / measure what ``designs`` needs and return their specs and robot info."""
     from ikseries.accuracy import measure, verification_points
     from ikseries.fit.baselines.cordic import CordicDesign
     from ikseries.fit.baselines.cordic_sizing import measure_cordic, size_cordic
+    from ikseries.architecture import cost_model
+    from ikseries.fit.cost import DEFAULT_COST_MODEL
     from ikseries.fit.fitter import fit_robot
-    from ikseries.robot import load_preset, with_fit, with_hardware
+    from ikseries.robot import load_preset, with_fit
 
     robot = load_preset("cylinder-leg")
     info = {"robot": robot.name, "tolerance_pu": robot.fit.tolerance_pu}
@@ -529,7 +543,10 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
         """Fit ``r``, measure it on the verification points; (plan, max error, spec extras)."""
         nonlocal points
         t0 = time.perf_counter()
-        plan, _ = fit_robot(r)
+        model = cost_model(r)       # the robot's: the multiplier count unless dsp_robot(..., "device")
+        plan, _ = fit_robot(r, cost_model=model)
+        if model != DEFAULT_COST_MODEL:
+            extra = {**extra, "cost_model": model.record()}
         points = verification_points(robot) if points is None else points
         m = measure(r, plan, points)
         err = {s: e["total"] for s, e in m["servos"].items()}
@@ -544,12 +561,12 @@ def build_specs(designs, cordic_design: str | None) -> tuple[list[DesignSpec], d
         specs += polynomial_specs(plan, worst, poly_names, extra)
     dsp_names = [d for d in designs if d in DSP_DESIGNS]
     if dsp_names:
-        plan, worst, extra = fitted(with_fit(with_hardware(robot, dsp="ecp5"), products="dsp"), "DSP-sized plan",
+        plan, worst, extra = fitted(dsp_robot(robot, cost), "DSP-sized plan",
                                     products="dsp ({}x{})".format(*dsp_size("ecp5")))
         specs += dsp_specs(plan, worst, dsp_names, extra)
     long_names = [d for d in designs if d in LONG_DESIGNS]
     if long_names:
-        specs += long_table_specs(robot, long_names, fitted)
+        specs += long_table_specs(robot, long_names, fitted, cost)
     cordic_names = [d for d in designs if d in CORDIC_DESIGNS]
     if cordic_names:
         points = verification_points(robot) if points is None else points
@@ -606,6 +623,9 @@ def main(argv=None):
     ap.add_argument("--timeout", type=float, default=600.0,
                     help="seconds per tool run; a run that takes longer (nextpnr's router not converging "
                          "on a seed, say) is recorded as an error of that seed")
+    ap.add_argument("--cost", default="multipliers", choices=("multipliers", "device"),
+                    help="what the ECP5 DSP-sized plans (moduloNd, moduloNdt) are fitted to minimise: the "
+                         "multipliers (default) or the ECP5's device model at one target per clock (dsp_robot)")
     ap.add_argument("--merge", action="store_true",
                     help="keep the other designs' records of the existing --out (re-measure only --designs)")
     args = ap.parse_args(argv)
@@ -629,7 +649,9 @@ def main(argv=None):
     out = Path(args.out).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    specs, info = build_specs(designs, args.cordic_design)
+    specs, info = build_specs(designs, args.cordic_design, args.cost)
+    if args.cost != "multipliers":
+        info["cost"] = args.cost
     # the slowest runs first, so two jobs overlap well
     order = {"pipelined": 0, "cordic": 1, "hexapod": 2}
     specs.sort(key=lambda s: order.get(s.name, 3))

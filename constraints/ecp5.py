@@ -80,10 +80,7 @@ DP16KD_MIN_DEPTH = 128
 def dp16kd_shape(depth: int) -> tuple[int, int]:
     """The DP16KD configuration (data bits, words) for a table of ``depth`` words: the widest
     one that holds them (the fewest blocks side by side)."""
-    if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= DP16KD_SHAPES[-1][1]:
-        raise ValueError(f"depth must be an integer in [1, {DP16KD_SHAPES[-1][1]}] (one DP16KD deep), "
-                         f"not {depth!r}")
-    return next(s for s in DP16KD_SHAPES if s[1] >= depth)
+    return DP16KD.shape(depth)
 
 
 def dp16kd_bit(width: int, address: int, bit: int) -> int:
@@ -153,5 +150,6 @@ def dp16kd_rom(m, name, addr, data, init, read_enable, output_enable):
             **{f"o_DOA{j}": out[j] for j in range(18)})
 
 
-PRIMITIVES = (Primitive("MULT18X18D", "ecp5", 18, 36, "MULT18X18D.v", mult18x18d),
-              Primitive("DP16KD", "ecp5", 0, 0, "DP16KD.v", dp16kd_rom, role="table", min_depth=DP16KD_MIN_DEPTH))
+DP16KD = Primitive("DP16KD", "ecp5", 0, 0, "DP16KD.v", dp16kd_rom, role="table", min_depth=DP16KD_MIN_DEPTH,
+                   shapes=DP16KD_SHAPES)
+PRIMITIVES = (Primitive("MULT18X18D", "ecp5", 18, 36, "MULT18X18D.v", mult18x18d), DP16KD)

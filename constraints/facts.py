@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["CATEGORIES", "Family", "Nextpnr", "Part", "PnrDevice", "Primitive", "check_operands"]
+__all__ = ["CATEGORIES", "Family", "Nextpnr", "Part", "PnrDevice", "Primitive", "check_operands", "dsp_limbs"]
 
 #: resource categories of a synthesised design; every raw Yosys cell falls in exactly one
 #: (unknown cells in "other")
@@ -97,6 +97,8 @@ class Family:
         Place and route, None where nextpnr has no such architecture.
     lc_note : str
         What nextpnr's placed logic cell ("LC") is on this family (empty without nextpnr).
+    lut_inputs : int
+        Inputs of one look-up table (LUT4: 4): a LUT holds a ROM of ``2**lut_inputs`` one-bit words.
     """
     name: str
     title: str
@@ -110,6 +112,13 @@ class Family:
     ripple_luts: int = 0
     nextpnr: Nextpnr | None = None
     lc_note: str = ""
+    lut_inputs: int = 4
+
+    def dsp_blocks(self, a_bits: int, b_bits: int) -> int:
+        """DSP blocks of one signed ``a_bits`` x ``b_bits`` product: 1 if the operands fit
+        :attr:`dsp` (either orientation), else the limb pairs of the split the cores make
+        (:func:`dsp_limbs` per operand; the orientation with fewer)."""
+        return min(dsp_limbs(a_bits, x) * dsp_limbs(b_bits, y) for x, y in (self.dsp, self.dsp[::-1]))
 
     def categorise(self, cells: dict[str, int]) -> tuple[dict[str, int], dict[str, int]]:
         """Sort raw ``num_cells_by_type`` into :data:`CATEGORIES`.
@@ -242,11 +251,33 @@ class Primitive:
     instance: Callable
     role: str = "multiplier"
     min_depth: int = 0
+    shapes: tuple[tuple[int, int], ...] = ()
+
+    def shape(self, depth: int) -> tuple[int, int]:
+        """The configuration (data bits, words) of a table primitive for a table of ``depth``
+        words: the widest one that holds them (the fewest blocks side by side)."""
+        if isinstance(depth, bool) or not isinstance(depth, int) or not self.shapes or \
+                not 1 <= depth <= self.shapes[-1][1]:
+            deepest = self.shapes[-1][1] if self.shapes else 0
+            raise ValueError(f"depth must be an integer in [1, {deepest}] (one {self.name} deep), not {depth!r}")
+        return next(s for s in self.shapes if s[1] >= depth)
+
+    def blocks(self, depth: int, width: int) -> int:
+        """Blocks of a table primitive holding ``depth`` words of ``width`` bits side by side."""
+        return -(-width // self.shape(depth)[0])
 
     @property
     def model_path(self) -> Path:
         """Path of :attr:`model`, a file of the ``ikseries.sim`` package."""
         return Path(__file__).resolve().parent.parent / "sim" / "models" / self.model
+
+
+def dsp_limbs(bits: int, operand_bits: int) -> int:
+    """Limbs of a signed ``bits``-bit operand cut for signed DSP ports of ``operand_bits``: low
+    limbs of ``operand_bits - 1`` bits (zero-extended, never negative), a signed top limb with
+    the rest, so ``n`` limbs hold ``(operand_bits - 1) * n + 1`` signed bits (the split of
+    :func:`ikseries.hdl.limbmul.limb_split` and of the modulo core's wide products)."""
+    return max(1, -(-(bits - 1) // (operand_bits - 1)))
 
 
 def check_operands(name: str, operand_bits: int, product_bits: int, a, b, product) -> None:

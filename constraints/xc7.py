@@ -21,7 +21,7 @@ FAMILY = Family(
            ("LUTRAM", r"RAM\d+X\d+\w*|RAM(32|64)M\d*|SRL\w+"),
            ("mux", r"MUXF[5-9]"),
            ("io", r"I?BUF\w*|OBUF\w*|IOBUF\w*|BUFG\w*|BUFH\w*")),
-    carry_cell="CARRY4", carry_bits=4)
+    carry_cell="CARRY4", carry_bits=4, lut_inputs=6)
 
 XC7A35T = Part("xc7a35t", "xc7", "XC7A35T", (("LUT", 20800), ("FF", 41600), ("DSP", 90), ("BRAM", 100)))
 

@@ -8,10 +8,16 @@ a trial plan holding the one servo (its coordinate stage included), built from t
 alone before any coefficient is fitted.
 
 A cost model that changes which structure is chosen changes the fitted plan, so it is part of
-the fit. Every registered architecture offers :class:`MultiplierCount`, and the fit's cache key
-(``ikseries.robot.Robot.fit_record``) does not name the model; an architecture offering another
-one must add :meth:`CostModel.record` to that key (``tests/test_architectures.py`` fails until
-it is considered).
+the fit. Every architecture offers :class:`MultiplierCount` by default, which the fit's cache
+key (``ikseries.robot.Robot.fit_record``) does not name, so that keys of plans fitted before
+the models existed stay the same; any other model's :meth:`CostModel.record` is part of that
+key. The modulo-scheduled and pipelined architectures offer :class:`DeviceCost` with
+``hardware.cost = "device"`` (``tests/test_architectures.py`` checks that every other
+architecture offers the default).
+
+The structure search bounds its effort by multiplications whatever the model
+(:data:`ikseries.fit.search.MAX_COST`) and compares costs with a margin counted in products
+(``FINALIST_MARGIN``): every model's unit is one product on one multiplier.
 """
 from __future__ import annotations
 
@@ -19,7 +25,11 @@ import abc
 from dataclasses import dataclass
 from typing import ClassVar
 
-__all__ = ["CostModel", "MultiplierCount", "DEFAULT_COST_MODEL"]
+from ..constraints.devices import Part, family, family_primitives, part
+from .ops import OPS
+from .plan import Plan, lut_groups
+
+__all__ = ["CostModel", "MultiplierCount", "DeviceCost", "Usage", "DEFAULT_COST_MODEL", "COSTS"]
 
 
 class CostModel(abc.ABC):
@@ -27,6 +37,8 @@ class CostModel(abc.ABC):
 
     #: name in records and messages
     name: ClassVar[str]
+    #: what the fit chooses per servo, in the plan's method record ("with the fewest multipliers")
+    objective: ClassVar[str]
 
     @abc.abstractmethod
     def cost(self, plan, output: str) -> float:
@@ -35,6 +47,10 @@ class CostModel(abc.ABC):
     def record(self) -> dict:
         """JSON-ready description."""
         return {"cost_model": self.name}
+
+    def label(self, cost: float) -> str:
+        """``cost`` in progress messages: "12 multipliers"."""
+        return f"{cost:g} {self.name}"
 
 
 @dataclass(frozen=True)
@@ -47,10 +63,169 @@ class MultiplierCount(CostModel):
     additions, shifts and clamps are cheap beside them.
     """
     name: ClassVar[str] = "multipliers"
+    objective: ClassVar[str] = "with the fewest multipliers"
 
     def cost(self, plan, output: str) -> float:
         node = next(o.node for o in plan.outputs if o.name == output)
         return sum(1 for i in plan.cone(node) if plan.nodes[i].op == "mul")
 
 
+@dataclass(frozen=True)
+class Usage:
+    """Resources an output's cone takes on a device, before any sharing (:meth:`DeviceCost.usage`).
+
+    Attributes
+    ----------
+    products : int
+        Multiplications.
+    dsp : int
+        DSP blocks of those products, one each (:meth:`ikseries.constraints.facts.Family.dsp_blocks`).
+    bram : int
+        Block RAM blocks of the tables deep enough for the family's table primitive.
+    ports : int
+        Block RAM read ports: one per block (a ROM word of a table read is on every block side
+        by side; the cores use one port of each, the other is free).
+    lut : int
+        LUTs of additions, clamps, the sums of split products' partial products, the tables in
+        the fabric and, on a shared multiplier, its operand multiplexers.
+    ff : int
+        Flip-flops of each registered node's own register (delay registers not counted).
+    """
+    products: int = 0
+    dsp: int = 0
+    bram: int = 0
+    ports: int = 0
+    lut: int = 0
+    ff: int = 0
+
+
+@dataclass(frozen=True)
+class DeviceCost(CostModel):
+    """The share of a device an output's evaluation takes, at the architecture's rate.
+
+    Built from the registry (:mod:`ikseries.constraints.devices`) for part ``part``: its
+    family's DSP operand size and LUT inputs, its table primitive (the shapes and the fewest
+    words of a table put on it, :attr:`~ikseries.constraints.facts.Primitive.min_depth`), the
+    part's capacities. :meth:`usage` counts what the output's cone takes; :meth:`cost` prices
+    each resource as the fraction of the part's capacity it uses, products divided between the
+    ``interval`` targets a modulo-scheduled multiplier serves (tables, adders and registers
+    are not shared), and scales the sum so that one product on one DSP block at interval 1
+    costs 1 (the unit of :class:`MultiplierCount` and of the search's bounds; a constant
+    factor, so structures are ordered as by the device fraction).
+
+    A product takes one DSP block if its operands fit the family's DSP size, else one per limb
+    pair of the split the cores make, plus an adder per extra pair. A table of at least the
+    table primitive's ``min_depth`` words (the ECP5's DP16KD; the rule of
+    :func:`ikseries.hdl.tables.table_registered` and of the family's own synthesis of a
+    registered ROM) takes blocks of it, every ``lut`` node read at one index side by side
+    (:func:`ikseries.fit.plan.lut_groups`); a shallower table, or any table on a family without
+    a table primitive in the registry, is a LUT ROM: per bit ``ceil(words / 2**lut_inputs)``
+    LUTs (an estimate: the multiplexers above the first LUT are free on the ECP5, LUTs on the
+    iCE40; constant bits cost none). The iCE40 has none: its modulo and folded cores keep
+    their tables in the fabric, but Yosys may put a deep table of the pipelined core (a
+    ``Memory`` read port) on SB_RAM40_4K, which this model prices as LUTs. The
+    iCE40UP5K's SPRAM is not priced as table memory: the bitstream cannot initialise it
+    (SB_SPRAM256KA has no initial-value parameters, unlike SB_RAM40_4K's INIT_0..F; Yosys's
+    ``ice40/cells_sim.v`` model leaves its contents undefined at power-up), so a ROM there
+    needs a loader writing it after configuration, which no core has.
+
+    It prices area, not timing: a table moved from block RAM to a LUT ROM, or a longer
+    path, costs it nothing in clock rate. Measured on the ECP5 one-per-clock core
+    (``bench/pareto.py --designs modulo1dt --cost device``), it chose for one servo a grid of
+    16 x 6 cells (96-word tables: LUT ROMs) over one of 32 x 21 (block RAM): 3 EBR fewer (10),
+    472 LUTs more, Fmax 110.9 instead of 198.8 MHz, latency 171 instead of 96 ns. And the fitter
+    prices a structure on its trial plan (:func:`ikseries.fit.lowering.structure_cost`:
+    coefficients at 16 fractional bits, before any is fitted), whose operand widths are not the
+    fitted plan's: with exact products (``fit.products = "exact"``) the fitted coefficients are
+    wider and take more blocks than priced. On the default cylinder-leg the device model's plan
+    (one servo on another structure, priced 0.1 % cheaper on its trial plan) took more of the
+    part than the multiplier count's: 60 products, 112 ECP5 DSP blocks and 4376 LUTs against
+    57, 103 and 4088. So it is not the default (``hardware.cost = "multipliers"``).
+
+    Parameters
+    ----------
+    part : str
+        A part of :data:`ikseries.constraints.devices.PARTS` with DSP, LUT and FF capacities
+        (and BRAM if its family has a table primitive).
+    interval : int
+        Targets each multiplier serves (the modulo core's initiation interval; 1 for the
+        pipelined core).
+    """
+    part: str
+    interval: int = 1
+    name: ClassVar[str] = "device"
+    objective: ClassVar[str] = "taking the least of the device (DSP blocks, block RAM, LUTs, FFs)"
+
+    def __post_init__(self):
+        dev: Part = part(self.part)
+        if isinstance(self.interval, bool) or not isinstance(self.interval, int) or self.interval < 1:
+            raise ValueError(f"interval must be an integer >= 1, not {self.interval!r}")
+        need = ("DSP", "LUT", "FF") + (("BRAM",) if self._table_primitive else ())
+        missing = [k for k in need if dev.capacities.get(k, 0) <= 0]
+        if missing:
+            raise ValueError(f"part must have {', '.join(need)} capacities (the resources priced), not "
+                             f"{self.part!r} (no {', '.join(missing)})")
+
+    @property
+    def _family(self):
+        return family(part(self.part).family)
+
+    @property
+    def _table_primitive(self):
+        return next(iter(family_primitives(part(self.part).family, "table")), None)
+
+    def record(self) -> dict:
+        return {"cost_model": self.name, "part": self.part, "interval": self.interval}
+
+    def label(self, cost: float) -> str:
+        return f"cost {cost:.4g} ({self.part}, in DSP blocks)"
+
+    def cost(self, plan, output: str) -> float:
+        u = self.usage(plan, output)
+        cap = part(self.part).capacities
+        fabric = u.lut / cap["LUT"] + u.ff / cap["FF"] + (u.bram / cap["BRAM"] if u.bram else 0.0)
+        return u.dsp / self.interval + fabric * cap["DSP"]
+
+    def usage(self, plan: Plan, output: str | None = None) -> Usage:
+        """What the cone of output ``output`` of ``plan`` takes (:class:`Usage`), unshared; None:
+        every output's (:meth:`~ikseries.fit.plan.Plan.live`, what the core evaluates)."""
+        cone = plan.live() if output is None else plan.cone(next(o.node for o in plan.outputs if o.name == output))
+        fam, nodes, shared = self._family, plan.nodes, self.interval > 1
+        products = dsp = lut = ff = 0
+        for i in sorted(cone):
+            n = nodes[i]
+            kind = OPS[n.op].kind
+            if kind in ("logic", "product", "port"):
+                ff += n.width          # the node's own register
+            if kind == "product":
+                wa, wb = (nodes[a].signed_width for a in n.args)
+                blocks = fam.dsp_blocks(wa, wb)
+                products, dsp = products + 1, dsp + blocks
+                lut += (blocks - 1) * (wa + wb) + (wa + wb if shared else 0)   # partial sums; operand selection
+            elif n.op == "add":
+                lut += n.width          # one LUT per bit (a sum LUT beside a carry cell, or a CCU2C half)
+            elif n.op == "clamp":
+                lut += 3 * n.width      # two comparisons and the selection
+        bram, ports, table_lut, table_ff = self._tables(plan, cone)
+        return Usage(products, dsp, bram, ports, lut + table_lut, ff + table_ff)
+
+    def _tables(self, plan: Plan, cone: set) -> tuple[int, int, int, int]:
+        """(block RAM blocks, read ports, LUTs, FFs) of the tables read in ``cone``: per index,
+        one ROM of its ``lut`` nodes side by side, ``index.hi + 1`` words."""
+        prim, bram, lut, ff = self._table_primitive, 0, 0, 0
+        for index, luts in lut_groups(plan).items():
+            luts = [i for i in luts if i in cone]
+            if not luts:
+                continue
+            depth, width = plan.nodes[index].hi + 1, sum(plan.nodes[i].width for i in luts)
+            if prim is not None and prim.min_depth <= depth <= prim.shapes[-1][1]:
+                bram += prim.blocks(depth, width)      # its output register is in the block
+            else:
+                lut += width * -(-depth // (1 << self._family.lut_inputs))
+                ff += width
+        return bram, bram, lut, ff
+
+
 DEFAULT_COST_MODEL = MultiplierCount()
+#: the models a robot description chooses by name (``hardware.cost``), the default first
+COSTS = (MultiplierCount.name, DeviceCost.name)

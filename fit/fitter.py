@@ -159,7 +159,9 @@ def _plan_meta(ctx: FitContext, fits: list[ServoFit], fv: int, mults: dict) -> d
         "budget_pu": vars(ctx.budget),
         "method": {"fit": "discrete minimax (exchange on active points) over the fit and check samples; "
                           "per servo the variable set "
-                          "and total degree with the fewest multipliers, then pruned",
+                          f"and total degree {ctx.cost_model.objective}, then pruned",
+                   # the model only where it is not the default: default plans stay byte-identical
+                   **({"cost_model": ctx.cost_model.record()} if ctx.cost_model != DEFAULT_COST_MODEL else {}),
                    "lowering": robot.fit.lowering,
                    "operand_bits": list(ctx.operand_bits) if ctx.operand_bits else None,
                    "seed": FIT_SEED, "fit_samples": FIT_SAMPLES, "check_samples": CHECK_SAMPLES,

@@ -7,7 +7,7 @@ from .plan import Plan, PlanBuilder, PlanOutput
 from .structure import FeatureSet, ServoFit, input_norms
 
 __all__ = ["FeatureNodes", "parity_variable", "poly_inputs", "servo_nodes", "build_plan", "trial_plan",
-           "output_multipliers", "structure_cost", "MIX_EXTRA_MULTIPLIERS"]
+           "output_multipliers", "structure_cost", "structure_multipliers", "MIX_EXTRA_MULTIPLIERS"]
 
 MIX_EXTRA_MULTIPLIERS = 2       # fit.lowering = "mixed": extra multiplications allowed per servo
 
@@ -111,6 +111,16 @@ def structure_cost(ctx, fs: FeatureSet, terms: list, servo: str | None = None) -
     """Cost (``ctx.cost_model``) of the evaluation of ``servo`` (its output clamp; None: the
     first servo's) with the coordinate stage for ``terms``, known before fitting: the
     structure alone decides it (kept in ``ctx.structure_costs``)."""
+    return _priced(ctx, fs, terms, servo)[0]
+
+
+def structure_multipliers(ctx, fs: FeatureSet, terms: list, servo: str | None = None) -> int:
+    """Multiplications of the same evaluation as :func:`structure_cost` (its trial plan): what
+    bounds the search's effort (:data:`ikseries.fit.search.MAX_COST`) whatever the cost model."""
+    return _priced(ctx, fs, terms, servo)[1]
+
+
+def _priced(ctx, fs: FeatureSet, terms: list, servo: str | None) -> tuple[float, int]:
     limits = ctx.robot.pulse_limits_ticks()[servo or ctx.robot.servos[0]]
     key = (fs, tuple(terms), tuple(limits))
     if key not in ctx.structure_costs:
@@ -118,10 +128,10 @@ def structure_cost(ctx, fs: FeatureSet, terms: list, servo: str | None = None) -
     return ctx.structure_costs[key]
 
 
-def _trial_cost(ctx, fs: FeatureSet, terms: list, limits) -> float:
+def _trial_cost(ctx, fs: FeatureSet, terms: list, limits) -> tuple[float, int]:
     # distinct coefficients: equal ones would share Horner sub-expressions
     cells = fs.cut.cells if fs.cut else 0
     sf = ServoFit("cost", fs, 0, {e: (1.0 + k / 4096,) * cells if cells else 1.0 + k / 4096
                                   for k, e in enumerate(terms)}, 0.0, frac=16)
     plan = trial_plan(ctx, sf, 16, mixed=False, limits={"cost": limits})
-    return ctx.cost_model.cost(plan, "cost")
+    return ctx.cost_model.cost(plan, "cost"), output_multipliers(plan)["cost"]

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 from .ops import OPS, operation
 
-__all__ = ["quantize", "extend_stages", "under", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for",
+__all__ = ["quantize", "extend_stages", "under", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for", "lut_groups",
            "signed_bits", "PLAN_FORMAT",
            "PLAN_VERSION", "READABLE_VERSIONS", "REGISTERED_OPS"]
 
@@ -55,6 +55,17 @@ def under(nodes: list["Node"], a: int, ops: tuple[str, ...]) -> int:
     while nodes[a].op in ops:
         a = nodes[a].args[0]
     return a
+
+
+def lut_groups(plan: "Plan") -> dict[int, list[int]]:
+    """The live (:meth:`Plan.live`) ``lut`` nodes by index node (in plan order): the tables
+    one ROM holds side by side."""
+    groups: dict[int, list[int]] = {}
+    live = plan.live()
+    for idx, n in enumerate(plan.nodes):
+        if OPS[n.op].kind == "table" and idx in live:
+            groups.setdefault(n.args[0], []).append(idx)
+    return groups
 
 
 def bits_for(lo: int, hi: int) -> tuple[int, bool]:

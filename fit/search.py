@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .context import FitError
-from .lowering import structure_cost
+from .lowering import structure_cost, structure_multipliers
 from .minimax import minimax, region_ids
 from .polyfit import Basis
 from .features import FEATURE_GRID_ENTRIES
@@ -25,7 +25,8 @@ __all__ = ["Cells", "CellsFit", "Rows", "fit_servo", "prune", "MAX_DEGREE", "MAX
            "PRUNE_REJECTS", "FINALISTS", "FINALIST_MARGIN"]
 
 MAX_DEGREE = 12
-MAX_COST = 100                   # no structure costing more is tried (issue 3: <= 100 multiply-adds per servo):
+MAX_COST = 100                   # no structure of more multiplications is tried, whatever the cost model
+                                 # (issue 3: <= 100 multiply-adds per servo):
                                  # where no whole polynomial fits, the climb to MAX_DEGREE of a tensor set of three
                                  # variables reaches 1183 terms, a minimax fit of minutes each, all futile
 PRUNE_REJECTS = 5                # refused removals in a row that end pruning (a refusal is cheap: a lower bound)
@@ -260,12 +261,12 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     def search(fs, data):
         for deg in range(1, MAX_DEGREE + 1):
             terms = fs.terms(deg)
-            cost = structure_cost(ctx, fs, terms, name)
-            if cost >= _ceiling(found):
+            cost = _affordable(ctx, fs, terms, name, found)
+            if cost is None:
                 return
             fit = data.fit_terms(terms, budget_ticks, settle=False)
             progress(f"  {name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
-                     f"{len(terms)} terms, {cost} multipliers, {_fit_note(fit)}")
+                     f"{len(terms)} terms, {ctx.cost_model.label(cost)}, {_fit_note(fit)}")
             if not fit.refused and fit.error <= budget_ticks:
                 found.append((cost, ServoFit(name, fs, deg, data.poly(terms, fit.coef), fit.error), fit.states, data))
                 return
@@ -306,10 +307,14 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     return min(pruned, key=lambda p: p[0])[1]
 
 
-def _ceiling(found: list) -> float:
-    """The cost a structure must stay below to be tried: the best found so far, else just above
-    ``MAX_COST``."""
-    return found[-1][0] if found else MAX_COST + 1
+def _affordable(ctx, fs, terms, name: str, found: list) -> float | None:
+    """The cost of structure ``fs`` with ``terms`` for servo ``name`` if it is to be tried: at
+    most ``MAX_COST`` multiplications (the effort bound, whatever the cost model) and cheaper
+    than the best found so far; else None."""
+    cost = structure_cost(ctx, fs, terms, name)
+    if structure_multipliers(ctx, fs, terms, name) > MAX_COST or (found and cost >= found[-1][0]):
+        return None
+    return cost
 
 
 class _Grids:
@@ -333,8 +338,8 @@ class _Grids:
         downwards on the pool until refused."""
         degrees = []
         for deg in range(1, MAX_DEGREE + 1):
-            cost = structure_cost(self.ctx, fs, fs.terms(deg), self.name)
-            if cost >= _ceiling(found):
+            cost = _affordable(self.ctx, fs, fs.terms(deg), self.name, found)
+            if cost is None:
                 break
             degrees.append((deg, cost))
         if not degrees:
@@ -355,7 +360,8 @@ class _Grids:
         terms = fs.terms(deg)
         fit = data.fit_terms(terms, self.budget, settle=False)
         self.progress(f"  {self.name}: {fs.label()}, {'degree per variable' if fs.tensor else 'degree'} {deg}, "
-                      f"{len(terms)} terms, {cost} multipliers{', ' + note if note else ''}, {_fit_note(fit)}")
+                      f"{len(terms)} terms, {self.ctx.cost_model.label(cost)}{', ' + note if note else ''}, "
+                      f"{_fit_note(fit)}")
         return None if fit.refused or fit.error > self.budget else fit
 
 
@@ -466,7 +472,7 @@ def prune(ctx, sf: ServoFit, cost: int, data: Cells, state, budget_ticks, progre
     if not all(st.optimal for st in state):     # the trials only needed to know they fit
         fit = data.fit_terms(terms, budget_ticks, warm=state)
         sf, state = dataclasses.replace(sf, poly=data.poly(terms, fit.coef), fit_error_ticks=fit.error), fit.states
-    progress(f"  {sf.name}: pruned to {len(terms)} terms, {cost} multipliers, "
+    progress(f"  {sf.name}: pruned to {len(terms)} terms, {ctx.cost_model.label(cost)}, "
              f"max fit error {sf.fit_error_ticks:.4g} ticks")
     data.forget_columns()
     return cost, dataclasses.replace(sf, refit=(data, state, budget_ticks))

@@ -7,21 +7,10 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..fit.ops import OPS, node_shape
-from ..fit.plan import Plan
+from ..fit.plan import Plan, lut_groups
 
 __all__ = ["PlanEvaluator", "input_layout", "lut_fields", "lut_groups", "lut_rom_init", "node_expression",
            "output_layout", "stored_field"]
-
-
-def lut_groups(plan: Plan) -> dict[int, list[int]]:
-    """The live (:meth:`~ikseries.fit.plan.Plan.live`) ``lut`` nodes by index node (in plan
-    order): the tables one ROM holds side by side."""
-    groups: dict[int, list[int]] = {}
-    live = plan.live()
-    for idx, n in enumerate(plan.nodes):
-        if OPS[n.op].kind == "table" and idx in live:
-            groups.setdefault(n.args[0], []).append(idx)
-    return groups
 
 
 def stored_field(plan: Plan, li: int) -> tuple[int, int]:

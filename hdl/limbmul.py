@@ -1,13 +1,12 @@
 """Multi-cycle signed multiplier built from one DSP-sized product (limb by limb)."""
 from __future__ import annotations
 
-import math
-
 from amaranth.hdl import Cat, Const, Module, Signal, signed
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from ..constraints.devices import Primitive, dsp_size, family_primitives, multiplier_families
+from ..constraints.facts import dsp_limbs
 
 __all__ = ["LimbMultiplier", "check_dsp", "check_dsp_registers", "limb_split"]
 
@@ -54,7 +53,7 @@ def limb_split(a_width: int, b_width: int, dsp: tuple[int, int] | None):
     if dsp is None:
         return (a_width - 1, b_width - 1), (1, 1), (a_width, b_width)
     bits = (dsp[0] - 1, dsp[1] - 1)
-    limbs = tuple(max(1, math.ceil((w - 1) / l)) for w, l in zip((a_width, b_width), bits))
+    limbs = tuple(dsp_limbs(w, d) for w, d in zip((a_width, b_width), dsp))
     return bits, limbs, tuple(l * n + 1 for l, n in zip(bits, limbs))
 
 

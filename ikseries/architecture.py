@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Callable
 
 from .constraints.devices import part as device_part
-from .fit.cost import CostModel
+from .fit.cost import DEFAULT_COST_MODEL, CostModel
 from .hdl.architectures import Architecture, BuildTarget
 from .hdl.architectures.folded import Folded
 from .hdl.architectures.modulo import Modulo
@@ -36,9 +36,10 @@ from .hdl.architectures.options import primitive_families
 from .hdl.architectures.pipelined import Pipelined
 from .hdl.architectures.shared import Shared
 from .channels import channel_table
+from .robot_parts import HardwareOptions
 
 __all__ = ["ArchitectureError", "Choice", "Tried", "AUTO_ORDER", "FASTEST_ORDER", "candidates",
-           "choose_architecture", "cost_model", "synth_candidate", "build_target"]
+           "choose_architecture", "cost_model", "recorded_cost_model", "synth_candidate", "build_target"]
 
 #: initiation intervals of the modulo-scheduled evaluator that "auto" and "fastest" try
 MODULO_INTERVALS = (16, 8, 4, 2)
@@ -103,44 +104,67 @@ def build_target(robot) -> BuildTarget:
     return BuildTarget(robot.hardware.pwm_period_ticks, robot.hardware.clock_hz)
 
 
-def _configuration(arch: str, k, robot) -> Architecture:
-    prim = robot.hardware.dsp_primitives and robot.hardware.dsp in primitive_families()
-    if robot.legs > 1:
-        return Shared(robot.legs, k, robot.hardware.dsp, channel_table(robot), primitives=prim)
+def _configuration(arch: str, k, hardware, legs: int, table: Callable[[], object]) -> Architecture:
+    """Configuration ``(arch, k)`` of :data:`AUTO_ORDER` / :data:`FASTEST_ORDER` for the hardware
+    options ``hardware`` of a robot of ``legs`` legs (``table()``: its channel table, read by
+    the shared core only)."""
+    prim = hardware.dsp_primitives and hardware.dsp in primitive_families()
+    if legs > 1:
+        return Shared(legs, k, hardware.dsp, table(), primitives=prim)
     if arch == "modulo":
-        return Modulo(k, robot.hardware.dsp, primitives=prim)
+        return Modulo(k, hardware.dsp, primitives=prim, cost=hardware.cost)
     if arch == "folded":
-        return Folded(k, robot.hardware.dsp, primitives=prim)
-    return Pipelined()
+        return Folded(k, hardware.dsp, primitives=prim)
+    # the DSP family is the pipelined core's only to price its products on (hardware.cost)
+    return Pipelined(hardware.dsp if hardware.cost != DEFAULT_COST_MODEL.name else None, cost=hardware.cost)
+
+
+def _candidates(hardware, legs: int, table: Callable[[], object]) -> list[Architecture]:
+    if hardware.architecture == "auto":
+        order = AUTO_ORDER
+    elif hardware.architecture == "fastest":
+        order = FASTEST_ORDER
+    elif hardware.architecture == "folded":
+        order = (("folded", hardware.multipliers),)
+    elif hardware.architecture == "modulo":
+        order = (("modulo", hardware.interval),)
+    else:
+        order = (("pipelined", None),)
+    if legs > 1:       # the legs share one folded evaluator
+        order = [o for o in order if o[0] == "folded"]
+    return [_configuration(arch, k, hardware, legs, table) for arch, k in order]
 
 
 def candidates(robot) -> list[Architecture]:
     """The configurations the robot description allows, in the order they are tried."""
-    if robot.hardware.architecture == "auto":
-        order = AUTO_ORDER
-    elif robot.hardware.architecture == "fastest":
-        order = FASTEST_ORDER
-    elif robot.hardware.architecture == "folded":
-        order = (("folded", robot.hardware.multipliers),)
-    elif robot.hardware.architecture == "modulo":
-        order = (("modulo", robot.hardware.interval),)
-    else:
-        order = (("pipelined", None),)
-    if robot.legs > 1:       # the legs share one folded evaluator
-        order = [o for o in order if o[0] == "folded"]
-    return [_configuration(arch, k, robot) for arch, k in order]
+    return _candidates(robot.hardware, robot.legs, lambda: channel_table(robot))
 
 
 def cost_model(robot) -> CostModel:
     """The cost model (:mod:`ikseries.fit.cost`) the fit of ``robot`` minimises: the one its
     candidate architectures (:func:`candidates`) offer. The plan is fitted before "auto" or
     "fastest" picks among them, so they must agree."""
-    models = {c.cost_model() for c in candidates(robot)}
+    return _agreed_model(candidates(robot), robot.hardware.architecture)
+
+
+def _agreed_model(cands: list[Architecture], architecture: str) -> CostModel:
+    models = {c.cost_model() for c in cands}
     if len(models) != 1:
-        raise ArchitectureError(f"hardware.architecture = {robot.hardware.architecture!r} tries architectures "
+        raise ArchitectureError(f"hardware.architecture = {architecture!r} tries architectures "
                                 f"that price a plan differently ({', '.join(sorted({m.name for m in models}))}); "
                                 "name one architecture")
     return models.pop()
+
+
+def recorded_cost_model(hardware: dict, legs: int) -> CostModel:
+    """The cost model of a robot record's hardware table ``hardware`` (``HardwareOptions.record``)
+    for ``legs`` legs, without the rest of the robot: the fit key's (:func:`ikseries.robot.fit_record`).
+    Only one leg's modulo-scheduled or pipelined core offers a model other than the default
+    (``hardware.cost``), so no channel table is read; with more legs, the default."""
+    if legs > 1:
+        return DEFAULT_COST_MODEL
+    options = HardwareOptions(**hardware)
+    return _agreed_model(_candidates(options, legs, lambda: None), options.architecture)
 
 
 def _size_rank(cand: Architecture) -> tuple:

@@ -81,6 +81,7 @@ def _hardware_overrides(robot, args):
     (validated). --fit-device also sets the DSP size to the device's family unless --dsp is given;
     --architecture other than fastest drops the description's hardware.fit_device."""
     from .constraints.devices import FIT_DEVICES
+    from .fit.cost import COSTS
     from .robot import ARCHITECTURES, DSP_CHOICES, PRODUCTS, check_architecture_options, with_fit, with_hardware
     opts = {}
     if args.architecture is not None:
@@ -105,6 +106,10 @@ def _hardware_overrides(robot, args):
         opts["dsp"] = args.dsp
     if getattr(args, "dsp_primitives", False):
         opts["dsp_primitives"] = True
+    if getattr(args, "cost", None) is not None:
+        if args.cost not in COSTS:
+            raise CliError(f"--cost must be one of {', '.join(COSTS)}, not {args.cost!r}")
+        opts["cost"] = args.cost
     if getattr(args, "products", None) is not None:
         if args.products not in PRODUCTS:
             raise CliError(f"--products must be one of {', '.join(PRODUCTS)}, not {args.products!r}")
@@ -112,11 +117,13 @@ def _hardware_overrides(robot, args):
     if getattr(args, "table_entries", None) is not None:
         opts["table_entries"] = _table_entries(args.table_entries)
     labels = {"architecture": "--architecture", "multipliers": "--multipliers", "interval": "--interval",
-              "dsp": "--dsp", "fit_device": "--fit-device", "dsp_primitives": "--dsp-primitives"}
+              "dsp": "--dsp", "fit_device": "--fit-device", "dsp_primitives": "--dsp-primitives", "cost": "--cost"}
     given = {k for k in ("architecture", "multipliers", "interval", "dsp", "fit_device")
              if getattr(args, k, None) is not None}
     if "dsp_primitives" in opts:        # its error names --dsp too
         given |= {"dsp_primitives", "dsp"}
+    if "cost" in opts:                  # its errors name --architecture and --dsp too
+        given |= {"cost", "architecture", "dsp"}
     if given & {"architecture", "fit_device"}:   # either names the other in the error
         given |= {"architecture", "fit_device"}
     fit = {k: opts.pop(k) for k in ("products", "table_entries") if k in opts}
@@ -484,6 +491,11 @@ def _parser() -> argparse.ArgumentParser:
                                     for p in PRIMITIVES.values() if p.role == "table")
                         + " block RAMs with their output register (one more cycle per table read; needs --dsp "
                         + " or ".join(dict.fromkeys(p.family for p in PRIMITIVES.values())) + ")")
+    b.add_argument("--cost", metavar="MODEL",
+                   help="override hardware.cost: what the fit minimises per servo, multipliers (default) or device "
+                        "(the share of the --dsp family's reference part the plan takes: DSP blocks, block RAM, "
+                        "LUTs and FFs, each multiplier shared by --interval targets; needs architecture modulo "
+                        "or pipelined)")
     b.add_argument("--products", metavar="MODE",
                    help="override fit.products: exact (default: every product as wide as it needs, split "
                         "into DSP-sized limbs in hardware) or dsp (operands narrowed to one --dsp block each)")

@@ -39,7 +39,8 @@ def _dump(obj) -> str:
 
 
 def _ikseries(robot, progress, jobs) -> tuple[dict, dict]:
-    plan, fits = fit_robot(robot, progress, jobs=jobs)
+    from .architecture import cost_model       # the plan records the robot: fitted as its build would be
+    plan, fits = fit_robot(robot, progress, cost_model=cost_model(robot), jobs=jobs)
     plan.meta["robot_description"] = robot_record(robot)
     progress("measuring the error on >= 10^6 points")
     acc = measure(robot, plan)

@@ -25,6 +25,7 @@ from .chain.parse import CHAIN_TYPES, parse_chain
 from .reach import ReachUnprovenError, check_no_wrap, prove_box_reachable
 from .body import Body
 from .channels import check_channels
+from .fit.cost import COSTS
 from .robot_parts import (ARCHITECTURES, DSP_CHOICES, HARDWARE_LABELS, LOWERINGS, PRODUCTS, CalibrationSpec,
                           FitOptions, HardwareOptions, InputSpec, RobotError, Workspace, field_number, field_table,
                           refuse_extra)
@@ -341,10 +342,12 @@ def nested_record(d: dict) -> dict:
 def fit_record(record: dict) -> dict:
     """The part of a robot record (either layout, :func:`nested_record`) that decides the
     fitted plan: the geometry, the workspace, the calibration, the fit options and the one
-    hardware option the fit reads, the clock (it sets the PWM ticks per pulse unit), and the DSP
-    family too when ``fit.products = "dsp"`` sizes the products by it. Flat, and without
-    ``products`` when it is "exact", so that records written before the parts (and before
-    fit.products) give the same record and the same plan-cache key."""
+    hardware option the fit reads, the clock (it sets the PWM ticks per pulse unit), the DSP
+    family too when ``fit.products = "dsp"`` sizes the products by it, and the record of the
+    cost model the fit minimises (:func:`ikseries.architecture.recorded_cost_model`) when
+    ``hardware.cost`` chooses another than the default. Flat, and without ``products`` when it
+    is "exact" nor a cost model by default, so that records written before the parts (and
+    before fit.products and hardware.cost) give the same record and the same plan-cache key."""
     r = nested_record(record)
     if not isinstance(r, dict):
         return {}
@@ -357,6 +360,9 @@ def fit_record(record: dict) -> dict:
         fit.pop("products", None)
     elif "dsp" in hardware:
         key["dsp"] = hardware["dsp"]   # the DSP family sizes the products
+    if hardware.get("cost", COSTS[0]) != COSTS[0]:     # the structures chosen are the model's
+        from .architecture import recorded_cost_model
+        key["cost_model"] = recorded_cost_model(hardware, r.get("legs", 1)).record()
     return {**key, **fit}
 
 

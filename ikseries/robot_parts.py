@@ -14,12 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from .constraints.devices import FAMILIES, FIT_DEVICES, PRIMITIVES
+from .fit.cost import COSTS
 from .calibration import Calibration, LinearMap, ServoOverride, TableMap, first_failure
 from .kinematics import format_point
 
 __all__ = ["RobotError", "InputSpec", "Workspace", "CalibrationSpec", "FitOptions", "HardwareOptions",
            "field_number", "field_table", "refuse_extra", "HARDWARE_LABELS", "ARCHITECTURE_OPTIONS",
-           "LOWERINGS", "PRODUCTS", "ARCHITECTURES", "DSP_CHOICES"]
+           "LOWERINGS", "PRODUCTS", "ARCHITECTURES", "DSP_CHOICES",
+           "DEVICE_COST_ARCHITECTURES"]
 
 #: fit.lowering values: "mixed" = per servo the Horner/Estrin mix of least pipeline depth (a few
 #: more multiplications), "horner" = nested Horner (fewest multiplications, deepest)
@@ -35,12 +37,15 @@ ARCHITECTURES = ("auto", "pipelined", "folded", "modulo", "fastest")
 #: hardware.dsp values: the FPGA family whose DSP multiplier size the folded evaluator uses
 #: (see ikseries.constraints.devices.FAMILIES), or "none" for full-width products
 DSP_CHOICES = (*FAMILIES, "none")
+#: the architectures that offer the device cost model (hardware.cost = "device", one of
+#: ikseries.fit.cost.COSTS: the share of the DSP family's reference part the plan takes)
+DEVICE_COST_ARCHITECTURES = ("modulo", "pipelined")
 
 #: option -> how errors name it (TOML field names; the CLI passes its option names)
 HARDWARE_LABELS = {"legs": "legs", "architecture": "hardware.architecture",
                    "multipliers": "hardware.multipliers", "interval": "hardware.interval", "dsp": "hardware.dsp",
                    "min_refresh_hz": "hardware.min_refresh_hz", "fit_device": "hardware.fit_device",
-                   "dsp_primitives": "hardware.dsp_primitives"}
+                   "dsp_primitives": "hardware.dsp_primitives", "cost": "hardware.cost"}
 
 #: options that only one architecture takes: option -> (architecture, why the others don't)
 ARCHITECTURE_OPTIONS = {"multipliers": ("folded", "auto picks 1 or 2 multipliers itself"),
@@ -424,6 +429,7 @@ class HardwareOptions:
     min_refresh_hz: float = 1000.0  # every leg's servos re-evaluated at least this often
     fit_device: str | None = None   # one of FIT_DEVICES: the device "fastest" must fit
     dsp_primitives: bool = False    # modulo, folded, shared cores: products on DSP primitives with their registers
+    cost: str = COSTS[0]            # one of ikseries.fit.cost.COSTS: what the fitter minimises
 
     @property
     def pwm_period_ticks(self) -> int:
@@ -459,6 +465,20 @@ class HardwareOptions:
             raise RobotError(f"{lab['min_refresh_hz']} must be a number > 0, not {r!r}")
         self._validate_dsp_primitives(lab)
         self._validate_fit_device(lab)
+        self._validate_cost(lab)
+
+    def _validate_cost(self, lab: dict) -> None:
+        if self.cost not in COSTS:
+            raise RobotError(f"{lab['cost']} must be one of {', '.join(COSTS)}, not {self.cost!r}")
+        if self.cost == COSTS[0]:         # the default
+            return
+        if self.architecture not in DEVICE_COST_ARCHITECTURES:
+            raise RobotError(f"{lab['architecture']} must be {' or '.join(DEVICE_COST_ARCHITECTURES)} when "
+                             f"{lab['cost']} is {self.cost!r} (the cores that price a plan on the device), "
+                             f"not {self.architecture!r}")
+        if self.dsp not in FAMILIES:
+            raise RobotError(f"{lab['dsp']} must be one of {', '.join(FAMILIES)} when {lab['cost']} is "
+                             f"{self.cost!r} (the family whose reference part prices the plan), not {self.dsp!r}")
 
     def _validate_dsp_primitives(self, lab: dict) -> None:
         prim = self.dsp_primitives
@@ -492,4 +512,9 @@ class HardwareOptions:
                                  f"not {self.architecture!r}")
 
     def record(self) -> dict:
-        return dataclasses.asdict(self)
+        """The fields; ``cost`` only where it is not the default (records written before it stay
+        the same)."""
+        rec = dataclasses.asdict(self)
+        if rec["cost"] == COSTS[0]:
+            del rec["cost"]
+        return rec

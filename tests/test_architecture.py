@@ -66,8 +66,8 @@ def test_defaults_and_hexapod_preset():
     ({"legs": 6}, {"architecture": "pipelined"},
      "hardware.architecture must be auto, folded or fastest for legs = 6 (the legs share one folded evaluator), "
      "not 'pipelined'"),
-    ({}, {"colour": 1}, "unknown field hardware.colour (expected one of: architecture, clock_hz, dsp, "
-                        "dsp_primitives, fit_device, interval, min_refresh_hz, multipliers, pwm_period_us)"),
+    ({}, {"colour": 1}, "unknown field hardware.colour (expected one of: architecture, clock_hz, cost, "
+                        "dsp, dsp_primitives, fit_device, interval, min_refresh_hz, multipliers, pwm_period_us)"),
     ({}, {"dsp_primitives": "yes"}, "hardware.dsp_primitives must be true or false, not 'yes'"),
     ({}, {"dsp_primitives": True, "dsp": "xc7"}, "hardware.dsp must be ice40 or ecp5 when hardware.dsp_primitives "
                                                  "is true (the DSP primitives instantiated: iCE40 SB_MAC16, ECP5 "
@@ -263,6 +263,12 @@ def test_flat_robot_top_ports_match_the_manifest(auto_robot, small_plan):
                                    "(the device the fastest configuration must fit), not 'pipelined'"),
     (["--architecture", "fastest"], "--fit-device must be one of ice40-up5k, ecp5-25f, xc7a35t when "
                                     "--architecture is fastest (the device to fit), not None"),
+    (["--cost", "area"], "--cost must be one of multipliers, device, not 'area'"),
+    (["--cost", "device", "--architecture", "folded"],
+     "--architecture must be modulo or pipelined when --cost is 'device' (the cores that price a plan on the "
+     "device), not 'folded'"),
+    (["--cost", "device", "--dsp", "none"], "--dsp must be one of ice40, ecp5, xc7 when --cost is 'device' (the "
+                                            "family whose reference part prices the plan), not 'none'"),
 ])
 def test_build_option_errors(capsys, tmp_path, argv, message):
     out = tmp_path / "out"

@@ -97,13 +97,17 @@ def test_records_and_equality():
 
 
 def test_every_architecture_offers_the_multiplier_count():
-    """The fit's cache key does not name the cost model (see ikseries.fit.cost): an architecture
-    offering another model must first add it to Robot.fit_record, then change this test."""
-    from ikseries.fit.cost import DEFAULT_COST_MODEL, MultiplierCount
+    """By default every architecture offers the multiplier count, the model the fit's cache key
+    does not name (see ikseries.fit.cost); only modulo and pipelined offer another, the device
+    model with cost="device", and the key then names it (tests/test_cost.py)."""
+    from ikseries.fit.cost import DEFAULT_COST_MODEL, DeviceCost, MultiplierCount
+    offering = {"modulo", "pipelined"}
     for name in architecture_names():
-        assert architecture_class(name).cost_model is Architecture.cost_model, name
+        assert (architecture_class(name).cost_model is Architecture.cost_model) == (name not in offering), name
     for arch in POLYNOMIAL:
         assert arch.cost_model() == DEFAULT_COST_MODEL == MultiplierCount()
+    assert Modulo(4, "ecp5", cost="device").cost_model() == DeviceCost("ecp5-25f", 4)
+    assert Pipelined("ice40", cost="device").cost_model() == DeviceCost("ice40-up5k", 1)
 
 
 def test_cost_model_of_a_robot_is_its_candidates(robot, monkeypatch):

@@ -4,8 +4,9 @@ from __future__ import annotations
 from ..leg import LegCore
 from ..modulo import ModuloEvaluator, modulo_latency, modulo_schedule, modulo_stream_rule
 from ..tables import default_registered_depth
+from ...fit.cost import COSTS
 from . import Architecture, BuildTarget, Timing
-from .options import check_primitives, dsp_label, dsp_size, positive_int
+from .options import check_cost, check_primitives, dsp_label, dsp_size, offered_cost_model, positive_int
 
 __all__ = ["Modulo"]
 
@@ -27,14 +28,20 @@ class Modulo(Architecture):
         block RAM primitive (the ECP5's DP16KD), the tables deep enough for it on it with its
         output register: one more cycle per such table read (:class:`~ikseries.hdl.modulo.ModuloEvaluator`,
         ``registered_tables``).
+    cost : str
+        What the fitter minimises for it (:data:`ikseries.fit.cost.COSTS`):
+        "multipliers", or "device" (needs a ``dsp`` family): the share of the family's reference
+        part the plan takes, each multiplier shared by ``interval`` targets
+        (:class:`~ikseries.fit.cost.DeviceCost`).
     """
 
     name = "modulo"
 
-    def __init__(self, interval: int, dsp: str | None = None, primitives: bool = False):
+    def __init__(self, interval: int, dsp: str | None = None, primitives: bool = False, cost: str = COSTS[0]):
         self.interval = positive_int(interval, "interval")
         dsp_size(dsp)
         self.dsp, self.primitives = dsp, check_primitives(primitives, dsp)
+        self.cost = check_cost(cost, dsp)
 
     @property
     def _registers(self) -> str | None:
@@ -63,8 +70,13 @@ class Modulo(Architecture):
     def multiplier_units(self, plan) -> int:
         return modulo_schedule(plan, self.interval, self._size, self._registered_depth).units
 
+    def cost_model(self):
+        return offered_cost_model(self.cost, self.dsp, self.interval)
+
     def describe(self) -> str:
         return f"modulo-scheduled pipeline, one target per {self.interval} cycles ({dsp_label(self.dsp)})"
 
     def record(self) -> dict:
-        return {**super().record(), "primitives": self.primitives}
+        # cost only where it is not the default: records of cores before it stay the same
+        return {**super().record(), "primitives": self.primitives,
+                **({"cost": self.cost} if self.cost != COSTS[0] else {})}
