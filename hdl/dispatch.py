@@ -10,7 +10,7 @@ from amaranth.lib.memory import Memory
 from . import protocol as P
 from .answers import answer_bytes, answer_constant
 from .bram import falling_edge_write_port
-from .dispatch_microcode import (CODED, CONDS, MOVE_TIME_WORD, SOURCES, STROBES, Geometry, assemble, encode, fields,
+from .dispatch_microcode import (CONDS, MOVE_TIME_WORD, OPS, SOURCES, STROBES, Geometry, assemble, encode, fields,
                                  program)
 
 __all__ = ["Dispatcher"]
@@ -18,8 +18,6 @@ __all__ = ["Dispatcher"]
 _C = {c.name: c for c in P.COMMANDS}
 #: answers the dispatcher builds in its memory
 _BUILT = (_C["status"].answer, _C["channel_status"].answer, P.NACK_FIELDS)
-_OPS = {"ra": ("inc", "set", "clear"), "ch": ("inc", "load", "clear"), "lm": ("rot", "mask", "one"),
-        "s": ("shift", "load"), "wm": ("ans", "width", "pulse")}
 
 
 class _Regs:
@@ -216,8 +214,6 @@ class Dispatcher(wiring.Component):
         for name, bits in fields(len(self._asm.words)):
             u[name] = rp.data[off:off + bits]
             off += bits
-        for k, name in enumerate(CODED):
-            u[name] = u["code"] == k + 1
         # sz and bsel are the immediate's low bits (dispatch_microcode.encode)
         u["sz"], u["bsel"] = u["imm"][1], u["imm"][0]
         m.d.sync += r.boot.eq(0)
@@ -236,7 +232,7 @@ class Dispatcher(wiring.Component):
 
     def _op(self, m, u, name, fire):
         """One-cycle enables of the operations of ROM field ``name``."""
-        return {op: (u[name] == i + 1) & fire for i, op in enumerate(_OPS[name])}
+        return {op: u[f"{name}_{op}"] & fire for op in OPS[name]}
 
     # -- conditions and the next address
     def _sequencer(self, m, r, u, rp):
@@ -271,13 +267,15 @@ class Dispatcher(wiring.Component):
         # a wait's effects happen as it ends; the waits that have effects are those assemble
         # allows, each ended by one stream's handshake: fire sees only that, not the whole
         # condition multiplexer
-        ends = ((u["TGV"] & self.target.ready) | ((u["wm"] == 2) & self.ik_o.valid)
+        ends = ((u["TGV"] & self.target.ready) | (u["wm_width"] & self.ik_o.valid)
                 | (u["IKV"] & self.ik_i.ready) | (u["HDR"] & self.answer.ready))
         fire = ~r.boot & (~u["hold"] | ends)
         cmd = r.cmd
         # the dispatch index of the command code (dispatch_microcode.command_index)
         index = Cat(cmd[:2], cmd[2] ^ ~cmd[5], cmd[3] ^ cmd[4])
-        nxt = Mux(u["DISP"], Cat(index, u["imm"][:4]), u["nxt"])
+        # a dispatch's nxt field holds its table's address (encode): only the entry's index is
+        # chosen here
+        nxt = Cat(Mux(u["DISP"], index, u["nxt"][:4]), u["nxt"][4:])
         m.d.comb += rp.addr.eq(Mux(r.boot, 0, Mux(take, u["to"], nxt)))
         return take, fire
 
@@ -371,13 +369,12 @@ class Dispatcher(wiring.Component):
             m.d.sync += r.b.eq(r.b + 1)
         with m.If(go & u["BSET"]):
             m.d.sync += r.b.eq(u["imm"])
-        # the address and data follow the ROM's wm field alone (codes 1 ans, 2 width, 3 pulse; a
-        # pulse's low byte comes as X = F0): they matter only with the enable, so neither waits
-        # for fire; an answer byte's bits above 8 are never read
-        op = u["wm"]
+        # the address and data follow the ROM's wm bits alone (a pulse's low byte comes as X =
+        # F0): they matter only with the enable, so neither waits for fire; an answer byte's
+        # bits above 8 are never read
         m.d.comb += [wr.en.eq(wm["ans"] | wm["width"] | wm["pulse"]),
-                     wr.addr.eq(Mux(op[1], r.ch, self._region_addr(1, r.b))),
-                     wr.data.eq(Mux(op == 2, widths, Cat(x, r.f[8:self._w])))]
+                     wr.addr.eq(Mux(u["wm_ans"], self._region_addr(1, r.b), r.ch)),
+                     wr.data.eq(Mux(u["wm_width"], widths, Cat(x, r.f[8:self._w])))]
         # the read port serves the answer being sent or else the staging of widths; a byte is
         # valid once the memory shows the one the link names (the index just moved, as the
         # link's answer_moved says: not yet)
