@@ -64,6 +64,11 @@ class UARTRx(wiring.Component):
         A one-cycle pulse, registered, every ``divisor`` cycles while the receiver waits for a
         start bit (the first one bit time after a stop bit's middle; none during a break): a
         pause between bytes in bit times, for :class:`~ikseries.hdl.link.FrameReceiver`'s timeout.
+    bit_strobe, bit_value : Out(1)
+        ``bit_strobe`` is high (combinationally) in the cycle a data bit is sampled, least
+        significant first, eight a byte, ``bit_value`` that bit: a CRC taken a bit at a time
+        (:class:`~ikseries.hdl.link.SerialCRC`) has a byte's bits before the byte is on ``o``.
+        A byte dropped for its stop bit has had its bits sampled too.
 
     Latency
     -------
@@ -80,7 +85,8 @@ class UARTRx(wiring.Component):
         _check_divisor(divisor)
         self._divisor = divisor
         super().__init__({"rx": In(1, init=1), "o": Out(stream.Signature(8)),
-                          "framing_error": Out(1), "overrun": Out(1), "idle_tick": Out(1)})
+                          "framing_error": Out(1), "overrun": Out(1), "idle_tick": Out(1),
+                          "bit_strobe": Out(1), "bit_value": Out(1)})
 
     @property
     def divisor(self) -> int:
@@ -96,6 +102,7 @@ class UARTRx(wiring.Component):
         pins = Signal(2, init=0b11)     # the synchroniser: idle high from reset
         m.d.sync += pins.eq(Cat(self.rx, pins[0]))
         line = pins[1]
+        m.d.comb += self.bit_value.eq(line)
         timer = Signal(range(d))
         tick = timer == 0
         bit = Signal(range(8))
@@ -118,6 +125,7 @@ class UARTRx(wiring.Component):
                     with m.If(line):        # the start bit did not last half a bit: a glitch
                         m.next = "idle"
             with m.State("data"):
+                m.d.comb += self.bit_strobe.eq(tick)
                 with m.If(tick):
                     m.d.sync += [shift.eq(Cat(shift[1:], line)), bit.eq(bit + 1)]
                     with m.If(bit == 7):
@@ -156,6 +164,10 @@ class UARTTx(wiring.Component):
         Bytes to send; a byte is taken in the first cycle of its stop bit.
     tx : Out(1)
         The serial output, registered; high (idle) from reset.
+    bit_strobe, bit_value : Out(1)
+        ``bit_strobe`` is high (combinationally) in the cycle a data bit goes onto ``tx`` (it is
+        there from the next cycle), least significant first, eight a byte, ``bit_value`` that
+        bit: a byte's bits have all been strobed when it is taken.
 
     Latency
     -------
@@ -171,7 +183,8 @@ class UARTTx(wiring.Component):
     def __init__(self, divisor: int):
         _check_divisor(divisor)
         self._divisor = divisor
-        super().__init__({"i": In(stream.Signature(8)), "tx": Out(1, init=1)})
+        super().__init__({"i": In(stream.Signature(8)), "tx": Out(1, init=1), "bit_strobe": Out(1),
+                          "bit_value": Out(1)})
 
     @property
     def divisor(self) -> int:
@@ -194,7 +207,9 @@ class UARTTx(wiring.Component):
                 with m.Elif(bit == 9):
                     m.d.sync += busy.eq(0)
                 with m.Else():
-                    m.d.sync += self.tx.eq(self.i.payload.bit_select(bit, 1))
+                    m.d.comb += self.bit_strobe.eq(1)
+                    m.d.sync += self.tx.eq(self.bit_value)
+        m.d.comb += self.bit_value.eq(self.i.payload.bit_select(bit, 1))
         # the next byte starts right where the stop bit ends (or at once on an idle line)
         with m.If(self.i.valid & (~busy | (tick & (bit == 9)))):
             m.d.sync += [busy.eq(1), timer.eq(d - 1), bit.eq(0), self.tx.eq(0)]
