@@ -558,7 +558,8 @@ class Link(wiring.Component):
     """
 
     def __init__(self, shape: P.Shape, divisor: int, counter_bits: int = P.COUNTER_BITS):
-        self._rx, self._tx = UARTRx(divisor), UARTTx(divisor)
+        # the frame receiver takes every byte within 2 cycles, a UART bit is at least 4
+        self._rx, self._tx = UARTRx(divisor, buffered=False), UARTTx(divisor)
         self._receiver, self._transmitter = FrameReceiver(shape, counter_bits), FrameTransmitter()
         r, t = self._receiver, self._transmitter
         super().__init__({

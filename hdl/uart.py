@@ -50,14 +50,21 @@ class UARTRx(wiring.Component):
     ----------
     divisor : int
         Clock cycles per bit (>= :data:`MIN_DIVISOR`); see :func:`uart_divisor`.
+    buffered : bool
+        Default True: a received byte waits in an output register of its own while the next one
+        comes in. False: ``o.payload`` is the shift register itself (eight flip-flops less, each a
+        logic cell of its own), for a consumer that takes every byte within a bit time.
 
     Attributes
     ----------
     rx : In(1)
         The serial input (idle high).
     o : Out(stream.Signature(8))
-        Received bytes. A byte stays valid until taken; a byte completed while the previous one
-        is still not taken is lost and pulses ``overrun``.
+        Received bytes. Buffered, a byte stays valid until taken; a byte completed while the
+        previous one is still not taken is lost and pulses ``overrun``. Unbuffered, a byte must be
+        taken before the middle of the next start bit (at least one bit time after it came): if
+        not, it is dropped there (the shift register takes the next byte's bits) and ``overrun``
+        pulses.
     framing_error, overrun : Out(1)
         One-cycle pulses, registered.
     idle_tick : Out(1)
@@ -81,9 +88,10 @@ class UARTRx(wiring.Component):
     :data:`BAUD_TOLERANCE` rate error).
     """
 
-    def __init__(self, divisor: int):
+    def __init__(self, divisor: int, buffered: bool = True):
         _check_divisor(divisor)
         self._divisor = divisor
+        self._buffered = bool(buffered)
         super().__init__({"rx": In(1, init=1), "o": Out(stream.Signature(8)),
                           "framing_error": Out(1), "overrun": Out(1), "idle_tick": Out(1),
                           "bit_strobe": Out(1), "bit_value": Out(1)})
@@ -112,6 +120,8 @@ class UARTRx(wiring.Component):
                      self.idle_tick.eq(0)]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
+        if not self._buffered:
+            m.d.comb += self.o.payload.eq(shift)
         with m.FSM():
             with m.State("idle"):
                 m.d.sync += self.idle_tick.eq(tick)
@@ -124,6 +134,9 @@ class UARTRx(wiring.Component):
                     m.next = "data"
                     with m.If(line):        # the start bit did not last half a bit: a glitch
                         m.next = "idle"
+                    if not self._buffered:
+                        with m.Elif(self.o.valid & ~self.o.ready):     # the shift register is needed
+                            m.d.sync += [self.overrun.eq(1), self.o.valid.eq(0)]
             with m.State("data"):
                 m.d.comb += self.bit_strobe.eq(tick)
                 with m.If(tick):
@@ -135,11 +148,14 @@ class UARTRx(wiring.Component):
                     with m.If(~line):
                         m.d.sync += self.framing_error.eq(1)
                         m.next = "break"
-                    with m.Elif(self.o.valid & ~self.o.ready):
-                        m.d.sync += self.overrun.eq(1)
-                        m.next = "idle"
+                    if self._buffered:
+                        with m.Elif(self.o.valid & ~self.o.ready):
+                            m.d.sync += self.overrun.eq(1)
+                            m.next = "idle"
                     with m.Else():
-                        m.d.sync += [self.o.valid.eq(1), self.o.payload.eq(shift)]
+                        m.d.sync += self.o.valid.eq(1)
+                        if self._buffered:
+                            m.d.sync += self.o.payload.eq(shift)
                         m.next = "idle"
             with m.State("break"):
                 with m.If(line):

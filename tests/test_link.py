@@ -239,8 +239,8 @@ def _line_levels(data: bytes, cycles_per_bit: float, idle: int, stop_bits=None, 
     return bits + levels + [1] * (3 * int(cycles_per_bit) + 4)
 
 
-def _run_rx(divisor, levels, ready=True):
-    dut = UARTRx(divisor)
+def _run_rx(divisor, levels, ready=True, buffered=True):
+    dut = UARTRx(divisor, buffered)
     got, pulses = [], {"framing_error": 0, "overrun": 0}
     sim = Simulator(dut)
     sim.add_clock(1e-6)
@@ -279,6 +279,16 @@ def test_uart_rx_flags_a_low_stop_bit_a_break_and_an_overrun():
     assert bytes(got) == data[2:] and pulses == {"framing_error": 1, "overrun": 0}     # a break counts once
     got, pulses = _run_rx(5, _line_levels(data, 5, idle=3), ready=False)
     assert got == [0x55] and pulses == {"framing_error": 0, "overrun": 2}
+
+
+@pytest.mark.parametrize("rate", [1 - BAUD_TOLERANCE, 1 + BAUD_TOLERANCE])
+def test_unbuffered_uart_rx_receives_and_drops_a_byte_not_taken_by_the_next_start_bit(rate):
+    data = bytes((0x55, 0xA5, 0x0F, 0x00, 0xFF))
+    got, pulses = _run_rx(MIN_DIVISOR, _line_levels(data, MIN_DIVISOR / rate, idle=3), buffered=False)
+    assert bytes(got) == data and pulses == {"framing_error": 0, "overrun": 0}
+    # never taken: each byte is dropped at the next one's start bit, the last stays
+    got, pulses = _run_rx(5, _line_levels(data[:3], 5, idle=3), ready=False, buffered=False)
+    assert got == [0x0F] and pulses == {"framing_error": 0, "overrun": 2}
 
 
 def test_uart_rx_latency_is_as_documented():
