@@ -3,7 +3,7 @@ and the servo controller, its answer back to the link. A microcoded byte-serial 
 program and assembler are ``hdl/dispatch_microcode.py``."""
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, ResetSignal, Signal, unsigned
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 
@@ -24,7 +24,6 @@ class _Regs:
     """The machine's registers."""
 
     def __init__(self, d):
-        self.boot = Signal(init=1)
         self.cmd = Signal(8)
         self.f = Signal(32)                                 # the field register
         self.b_ = Signal()                                  # the borrow
@@ -105,7 +104,9 @@ class Dispatcher(wiring.Component):
 
     Reset state: idle, no answer pending, move time 0 (the status answer's counters are the
     link's: its error counters, the uptime in words ``UPTIME_WORD`` and the next, and
-    ``clamped`` in word ``CLAMPED_WORD`` of its counter memory).
+    ``clamped`` in word ``CLAMPED_WORD`` of its counter memory). The reset is the ``sync``
+    domain's own (not a ``ResetInserter``'s): the program ROM reads its first word in every reset
+    cycle, so its output is an instruction from the first cycle after it.
 
     Latency
     -------
@@ -216,23 +217,21 @@ class Dispatcher(wiring.Component):
             off += bits
         # sz and bsel are the immediate's low bits (dispatch_microcode.encode)
         u["sz"], u["bsel"] = u["imm"][1], u["imm"][0]
-        m.d.sync += r.boot.eq(0)
         take, fire = self._sequencer(m, r, u, rp)
         # a wait's register effects wait for its condition (assemble allows a wait only the
         # channel, memory, CLI and HDR effects): the others need not see the condition, whose
         # path from the servo controller, core and link is the longest of the design
-        go = ~r.boot
-        s = {name: u[name] & go for name in STROBES}
-        e = {name: s[name] & (fire if name in ("CLI", "HDR") else go) for name in STROBES}
+        s = {name: u[name] for name in STROBES}
+        e = {name: u[name] & fire if name in ("CLI", "HDR") else u[name] for name in STROBES}
         x = self._source(m, r, u)
-        self._datapath(m, r, u, x, go, fire, e)
-        self._memory(m, r, u, x, go, fire, wr, rd)
+        self._datapath(m, r, u, x, fire, e)
+        self._memory(m, r, u, x, fire, wr, rd)
         self._ports(m, r, u, s, e, rd)
         return m
 
-    def _op(self, m, u, name, fire):
-        """One-cycle enables of the operations of ROM field ``name``."""
-        return {op: u[f"{name}_{op}"] & fire for op in OPS[name]}
+    def _op(self, m, u, name, fire=None):
+        """One-cycle enables of the operations of ROM field ``name`` (as a wait ends: ``fire``)."""
+        return {op: u[f"{name}_{op}"] if fire is None else u[f"{name}_{op}"] & fire for op in OPS[name]}
 
     # -- conditions and the next address
     def _sequencer(self, m, r, u, rp):
@@ -269,14 +268,18 @@ class Dispatcher(wiring.Component):
         # condition multiplexer
         ends = ((u["TGV"] & self.target.ready) | (u["wm_width"] & self.ik_o.valid)
                 | (u["IKV"] & self.ik_i.ready) | (u["HDR"] & self.answer.ready))
-        fire = ~r.boot & (~u["hold"] | ends)
+        fire = ~u["hold"] | ends
         cmd = r.cmd
         # the dispatch index of the command code (dispatch_microcode.command_index)
         index = Cat(cmd[:2], cmd[2] ^ ~cmd[5], cmd[3] ^ cmd[4])
         # a dispatch's nxt field holds its table's address (encode): only the entry's index is
         # chosen here
         nxt = Cat(Mux(u["DISP"], index, u["nxt"][:4]), u["nxt"][4:])
-        m.d.comb += rp.addr.eq(Mux(r.boot, 0, Mux(take, u["to"], nxt)))
+        # every reset cycle reads word 0 (IDLE), so the ROM's output is an instruction from the
+        # first cycle after a reset, and no effect needs gating in that cycle; without a reset
+        # (after configuration) the output register is 0: a no-op (condition never, next 0)
+        rst = ResetSignal(allow_reset_less=True)
+        m.d.comb += rp.addr.eq(Mux(rst, 0, Mux(take, u["to"], nxt)))
         return take, fire
 
     # -- the byte X: payload, field register, answer sources
@@ -288,7 +291,7 @@ class Dispatcher(wiring.Component):
                "STB": st.pulse[:8]}
         # STB's byte is the low byte of the status's pulse; the servo controller then shifts
         # it a byte down
-        m.d.comb += self.status_shift.eq(~r.boot & (u["src"] == SOURCES.index("STB")))
+        m.d.comb += self.status_shift.eq(u["src"] == SOURCES.index("STB"))
         x = Signal(8)
         with m.Switch(u["src"]):
             for name, sig in src.items():
@@ -297,7 +300,7 @@ class Dispatcher(wiring.Component):
         self._flag = flag
         return x
 
-    def _datapath(self, m, r, u, x, go, fire, e):
+    def _datapath(self, m, r, u, x, fire, e):
         imm = u["imm"]
         y = Mux(u["ysel"], r.f[:8], imm)
         # X - Y - borrow, bit 7 of both flipped for a signed comparison's top byte
@@ -306,15 +309,15 @@ class Dispatcher(wiring.Component):
         cin = Mux(u["first"], u["sz"] & u["ysel"], r.b_)
         total = Signal(9)
         m.d.comb += total.eq(xb + (~yb)[:8] + ~cin)
-        with m.If(u["alu"] & go):
+        with m.If(u["alu"]):
             m.d.sync += r.b_.eq(~total[8])
         with m.If(e["LATCH"]):
             m.d.sync += r.bl.eq(r.b_)
-        with m.If(u["shf"] & go):
+        with m.If(u["shf"]):
             m.d.sync += r.f.eq(Cat(r.f[8:], x))
-        with m.If(u["tg"] & go):
+        with m.If(u["tg"]):
             m.d.sync += r.tg.eq(Cat(r.tg[8:], y))
-        ra = self._op(m, u, "ra", go)
+        ra = self._op(m, u, "ra")
         with m.If(ra["inc"]):
             m.d.sync += r.ra.eq(r.ra + 1)
         with m.If(ra["set"]):
@@ -326,7 +329,7 @@ class Dispatcher(wiring.Component):
             m.d.sync += r.ch.eq(r.ch + 1)
         with m.If(ch["load"]):
             m.d.sync += r.ch.eq(r.f[:len(r.ch)])
-        lm = self._op(m, u, "lm", go)
+        lm = self._op(m, u, "lm")
         with m.If(lm["rot"]):
             m.d.sync += [r.lm.eq(Cat(r.lm[1:], r.lm[0])), r.leg.eq(r.leg + 1)]
         with m.If(lm["mask"]):
@@ -336,7 +339,7 @@ class Dispatcher(wiring.Component):
                          r.leg.eq(0)]
         with m.If(ch["clear"]):
             m.d.sync += [r.ch.eq(0), r.leg.eq(0)]
-        sh = self._op(m, u, "s", go)
+        sh = self._op(m, u, "s")
         with m.If(sh["shift"]):
             m.d.sync += r.s.eq(Cat(r.s[1:], self._flag & ~u["sz"]))
         with m.If(sh["load"]):
@@ -359,7 +362,7 @@ class Dispatcher(wiring.Component):
     def _region_addr(self, region: int, offset):
         return Cat(offset[:(self._region - 1).bit_length()], Const(region, 2))
 
-    def _memory(self, m, r, u, x, go, fire, wr, rd):
+    def _memory(self, m, r, u, x, fire, wr, rd):
         wm = self._op(m, u, "wm", fire)
         # the core's output moves a servo on per width taken (RobotCore rotate_outputs): the
         # first servo's is every width in turn, no choice of three
@@ -367,7 +370,7 @@ class Dispatcher(wiring.Component):
         m.d.comb += self.ik_rotate.eq(wm["width"])
         with m.If(wm["ans"]):
             m.d.sync += r.b.eq(r.b + 1)
-        with m.If(go & u["BSET"]):
+        with m.If(u["BSET"]):
             m.d.sync += r.b.eq(u["imm"])
         # the address and data follow the ROM's wm bits alone (a pulse's low byte comes as X =
         # F0): they matter only with the enable, so neither waits for fire; an answer byte's
@@ -394,7 +397,7 @@ class Dispatcher(wiring.Component):
         # a write's value: one source for both in the servo controller's memory write); F's
         # low 24 bits shift in from F itself, so the load takes no cell of its own there; 0
         # until set_move_time wrote the word (the memory keeps it over a reset)
-        with m.If(go & u["FMT"]):
+        with m.If(u["FMT"]):
             m.d.sync += r.f[:self._time_bits].eq(rd.data[:self._time_bits] & r.mt.replicate(self._time_bits))
 
     def _ports(self, m, r, u, s, e, rd):
