@@ -124,7 +124,8 @@ class Dispatcher(wiring.Component):
     current), a cycle per answer byte. The widths reach the pins at the second period start after
     the commit at the latest (the servo controller's latency). An
     answer byte is on ``answer_data`` the cycle after ``answer_index`` names it. A request waits
-    in the link while the previous answer's payload is still being sent.
+    in the link until the previous answer's payload has been sent (an empty one's CMD byte: the
+    link's transmitter reads the answer code from here as it sends it).
 
     Throughput
     ----------
@@ -350,12 +351,12 @@ class Dispatcher(wiring.Component):
             with m.If(e[strobe]):
                 m.d.sync += reg.eq(value)
         # every cycle of the idle wait: the request's command is held while it is offered; the
-        # identity answer's region is kept while it is sent. The previous answer's header was
-        # taken before the wait (its code, from the command and NACK flag, is the link's now)
+        # previous answer's code (the command and NACK flag) and the identity answer's region
+        # are kept while it is sent (the link's transmitter reads the code as it sends it)
         with m.If(e["TAKE"]):
-            m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.b.eq(0), r.nack.eq(0), r.bl.eq(0)]
+            m.d.sync += [r.ra.eq(0), r.b.eq(0), r.bl.eq(0)]
             with m.If(~r.sending):
-                m.d.sync += r.ident.eq(0)
+                m.d.sync += [r.cmd.eq(self.request.payload.command), r.nack.eq(0), r.ident.eq(0)]
         # a leg target saturated: counted in the link's counter memory (registered: one pulse)
         m.d.sync += self.clamped.eq(e["CLI"] & r.out)
 
@@ -424,6 +425,8 @@ class Dispatcher(wiring.Component):
         m.d.comb += [self.ik_i.payload.target[inp.name].eq(r.tg[16 * k:16 * k + 16])
                      for k, inp in enumerate(self._plan.inputs)]
         # the header from the ROM, offered while its instruction waits (the link's transmitter
-        # registers it as it takes it: no copy here); its payload is then pulled from memory
+        # registers its length as it takes it, and reads its code, held here, when it sends
+        # it); its payload is then pulled from memory. Sending until the payload's end (at once
+        # after CMD for an empty one): the next request waits until then
         with m.If(e["HDR"]):
-            m.d.sync += r.sending.eq(imm != 0)
+            m.d.sync += r.sending.eq(1)

@@ -422,7 +422,9 @@ class FrameTransmitter(wiring.Component):
     Attributes
     ----------
     i : In(stream.Signature(frame_layout(max_payload)))
-        Answer headers; taken when the previous frame's last byte is on ``o``.
+        Answer headers; taken when the previous frame's last byte is on ``o``. The length is
+        registered as the header is taken; the code is read when CMD is sent: the source holds
+        ``i.payload.command`` from the header's transfer until ``done`` (no copy here).
     data : In(stream.Signature(8))
         Payload bytes of the answer being sent, byte ``index`` first.
     index : Out(range(max_payload))
@@ -472,7 +474,6 @@ class FrameTransmitter(wiring.Component):
         m = Module()
         m.submodules.crc = gen = SerialCRC()
         length = Signal(range(self._max + 1))
-        command = Signal(8)
         sent = Signal(range(self._max + 1))
         done = sent == length
         m.d.comb += [self.index.eq(sent), gen.step.eq(self.bit_strobe), gen.bit.eq(self.bit_value)]
@@ -490,7 +491,7 @@ class FrameTransmitter(wiring.Component):
                 m.d.comb += self.i.ready.eq(free)
                 with m.If(self.i.valid & free):
                     send(P.SYNC)
-                    m.d.sync += [command.eq(self.i.payload.command), length.eq(self.i.payload.length)]
+                    m.d.sync += length.eq(self.i.payload.length)
                     m.next = "len"
             with m.State("len"):
                 with m.If(free):
@@ -500,7 +501,7 @@ class FrameTransmitter(wiring.Component):
                     m.next = "cmd"
             with m.State("cmd"):
                 with m.If(free):
-                    send(command)
+                    send(self.i.payload.command)        # held by the source until ``done``
                     m.d.sync += [sent.eq(0), self.moved.eq(1)]
                     m.next = "payload"
             with m.State("payload"):        # until ``sent`` reaches the length (at once for an empty payload)

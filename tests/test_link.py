@@ -546,12 +546,11 @@ def _transmit(answers, rng):
             ctx.set(dut.i.valid, 1)
             await ctx.tick().until(dut.i.ready)
             ctx.set(dut.i.valid, 0)
-            taken = 0
+            done = False
             ctx.set(dut.data.valid, 1)
-            while taken < len(payload):     # the byte ``index`` asks for (it is stale until CMD is sent)
-                ctx.set(dut.data.payload, payload[min(ctx.get(dut.index), len(payload) - 1)])
-                *_, ready = await ctx.tick().sample(dut.data.ready)
-                taken += ready
+            while not done:     # the byte ``index`` asks for (it is stale until CMD is sent); the code held
+                ctx.set(dut.data.payload, payload[min(ctx.get(dut.index), len(payload) - 1)] if payload else 0)
+                *_, done = await ctx.tick().sample(dut.done)
             ctx.set(dut.data.valid, 0)
 
     async def sink(ctx):
