@@ -35,7 +35,8 @@ class _Regs:
         self.leg = Signal(range(d._legs + 1))
         self.s = Signal(8)
         self.out = Signal()                                 # a coordinate of this leg was saturated
-        self.b = Signal(range(d._region))                   # answer byte being built
+        # answer byte being built, then (as the link's answer_index) the count of those sent
+        self.b = Signal(range(max(d._region, d._max_answer + 1)))
         self.nack, self.ident, self.sending = Signal(), Signal(), Signal()
         self.pending, self.started = Signal(), Signal()     # a commit not yet applied; its pass began
         self.mt = Signal()                                  # the memory's move time word was written
@@ -90,7 +91,7 @@ class Dispatcher(wiring.Component):
 
     Attributes
     ----------
-    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index, answer_moved,
+    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index,
     answer_done
         To the link's ports of the same names.
     clamped
@@ -122,8 +123,9 @@ class Dispatcher(wiring.Component):
     commit has been applied by a pass (so its answer shows every earlier move) and in the
     staging window (so that no pass comes between them), the channel's two reads (target,
     current), a cycle per answer byte. The widths reach the pins at the second period start after
-    the commit at the latest (the servo controller's latency). An
-    answer byte is on ``answer_data`` the cycle after ``answer_index`` names it. A request waits
+    the commit at the latest (the servo controller's latency). The answer's bytes are offered
+    on ``answer_data`` in order, each the cycle after the previous one is taken (``answer_index``
+    counts them: the link's transmitter ends the payload at its length). A request waits
     in the link until the previous answer's payload has been sent (an empty one's CMD byte: the
     link's transmitter reads the answer code from here as it sends it).
 
@@ -143,6 +145,7 @@ class Dispatcher(wiring.Component):
         self._time_bits = len(servo.target.payload.time)
         self._shape = P.Shape(legs, self._coords, self._channels)
         self._max_request = P.max_request_payload(self._shape)
+        self._max_answer = link.transmitter.max_payload
         self._identity = answer_constant(_C["identity"].answer, identity)
         # three regions of one size in the memory: widths, the answer being built, identity;
         # an address is the region above the offset, so no adder
@@ -162,7 +165,7 @@ class Dispatcher(wiring.Component):
         ls, cs, ss = link.signature.members, core.signature.members, servo.signature.members
         super().__init__({
             **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counter_addr",
-                                         "counter_data", "answer", "answer_data", "answer_index", "answer_moved",
+                                         "counter_data", "answer", "answer_data", "answer_index",
                                          "answer_done",
                                          "clamped")},
             "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(), "ik_rotate": cs["rotate"].flip(),
@@ -354,9 +357,9 @@ class Dispatcher(wiring.Component):
         # previous answer's code (the command and NACK flag) and the identity answer's region
         # are kept while it is sent (the link's transmitter reads the code as it sends it)
         with m.If(e["TAKE"]):
-            m.d.sync += [r.ra.eq(0), r.b.eq(0), r.bl.eq(0)]
+            m.d.sync += [r.ra.eq(0), r.bl.eq(0)]
             with m.If(~r.sending):
-                m.d.sync += [r.cmd.eq(self.request.payload.command), r.nack.eq(0), r.ident.eq(0)]
+                m.d.sync += [r.cmd.eq(self.request.payload.command), r.b.eq(0), r.nack.eq(0), r.ident.eq(0)]
         # a leg target saturated: counted in the link's counter memory (registered: one pulse)
         m.d.sync += self.clamped.eq(e["CLI"] & r.out)
 
@@ -369,7 +372,9 @@ class Dispatcher(wiring.Component):
         # first servo's is every width in turn, no choice of three
         widths = self.ik_o.payload.widths[self._servo_names[0]]
         m.d.comb += self.ik_rotate.eq(wm["width"])
-        with m.If(wm["ans"]):
+        # B builds an answer, then counts its bytes as the link takes them (answer_index)
+        taken = self.answer_data.valid & self.answer_data.ready
+        with m.If(wm["ans"] | taken):
             m.d.sync += r.b.eq(r.b + 1)
         with m.If(u["BSET"]):
             m.d.sync += r.b.eq(u["imm"])
@@ -380,16 +385,15 @@ class Dispatcher(wiring.Component):
                      wr.addr.eq(Mux(u["wm_ans"], self._region_addr(1, r.b), r.ch)),
                      wr.data.eq(Mux(u["wm_width"], widths, Cat(x, r.f[8:self._w])))]
         # the read port serves the answer being sent or else the staging of widths; a byte is
-        # valid once the memory shows the one the link names (the index just moved, as the
-        # link's answer_moved says: not yet)
-        idx = self.answer_index
-        shown = Signal()
-        m.d.sync += shown.eq(r.sending)
+        # valid once the memory shows the one B names (not in the cycle after B moved on)
+        idx = r.b
+        shown, moved = Signal(), Signal()
+        m.d.sync += [shown.eq(r.sending), moved.eq(taken)]
         # MTRD addresses the move time's word (MOVE_TIME_WORD of the answer region) for FMT
         stage = Mux(u["MTRD"], self._region_addr(1, Const(MOVE_TIME_WORD, 8)), r.ch)
         m.d.comb += [rd.addr.eq(Mux(r.sending, Mux(r.ident, self._region_addr(2, idx), self._region_addr(1, idx)),
                                     stage)),
-                     self.answer_data.valid.eq(r.sending & shown & ~self.answer_moved),
+                     self.answer_data.valid.eq(r.sending & shown & ~moved), self.answer_index.eq(r.b),
                      self.answer_data.payload.eq(rd.data[:8])]
         # the link's transmitter has taken the last payload byte (it knows the length)
         with m.If(self.answer_done):
@@ -429,4 +433,4 @@ class Dispatcher(wiring.Component):
         # it); its payload is then pulled from memory. Sending until the payload's end (at once
         # after CMD for an empty one): the next request waits until then
         with m.If(e["HDR"]):
-            m.d.sync += r.sending.eq(1)
+            m.d.sync += [r.sending.eq(1), r.b.eq(0)]

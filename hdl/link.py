@@ -412,7 +412,8 @@ class FrameTransmitter(wiring.Component):
     """Answer frames onto a byte stream: ``SYNC LEN CMD PAYLOAD CRC_LO CRC_HI``.
 
     An answer is a header on ``i`` (answer code and payload length), then its payload bytes,
-    pulled one at a time: ``index`` says which byte ``data`` must carry next.
+    pulled one at a time from a source that counts them (``index``): it keeps the count the
+    transmitter would otherwise keep a copy of.
 
     Parameters
     ----------
@@ -426,12 +427,11 @@ class FrameTransmitter(wiring.Component):
         registered as the header is taken; the code is read when CMD is sent: the source holds
         ``i.payload.command`` from the header's transfer until ``done`` (no copy here).
     data : In(stream.Signature(8))
-        Payload bytes of the answer being sent, byte ``index`` first.
-    index : Out(range(max_payload))
-        Index of the payload byte wanted on ``data`` (while ``data.ready``).
-    moved : Out(1)
-        High in the cycle after ``index`` was set (registered): a source that shows the byte of
-        an index a cycle later (a block RAM read) has it on ``data`` while this is low.
+        Payload bytes of the answer being sent, in order.
+    index : In(range(max_payload + 1))
+        The source's count of payload bytes taken on ``data`` since the header was taken (0
+        then, one more the cycle after each transfer): the payload ends when it reaches the
+        length.
     done : Out(1)
         High for one cycle as the payload ends (its last byte taken; at once for an empty one):
         a source that stops offering then needs no count of its own.
@@ -462,7 +462,7 @@ class FrameTransmitter(wiring.Component):
         self._max = top
         super().__init__({
             "i": In(stream.Signature(frame_layout(top))), "data": In(stream.Signature(8)),
-            "index": Out(range(top)), "moved": Out(1), "done": Out(1), "o": Out(stream.Signature(8)),
+            "index": In(range(top + 1)), "done": Out(1), "o": Out(stream.Signature(8)),
             "bit_strobe": In(1), "bit_value": In(1),
         })
 
@@ -474,9 +474,8 @@ class FrameTransmitter(wiring.Component):
         m = Module()
         m.submodules.crc = gen = SerialCRC()
         length = Signal(range(self._max + 1))
-        sent = Signal(range(self._max + 1))
-        done = sent == length
-        m.d.comb += [self.index.eq(sent), gen.step.eq(self.bit_strobe), gen.bit.eq(self.bit_value)]
+        done = self.index == length
+        m.d.comb += [gen.step.eq(self.bit_strobe), gen.bit.eq(self.bit_value)]
         free = ~self.o.valid | self.o.ready     # the output register can take a byte
 
         def send(value):
@@ -484,7 +483,6 @@ class FrameTransmitter(wiring.Component):
 
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
-        m.d.sync += self.moved.eq(0)
         crc_states = [f"crc{k}" for k in range(P.CRC.width // 8)]
         with m.FSM():
             with m.State("idle"):
@@ -502,16 +500,14 @@ class FrameTransmitter(wiring.Component):
             with m.State("cmd"):
                 with m.If(free):
                     send(self.i.payload.command)        # held by the source until ``done``
-                    m.d.sync += [sent.eq(0), self.moved.eq(1)]
                     m.next = "payload"
-            with m.State("payload"):        # until ``sent`` reaches the length (at once for an empty payload)
+            with m.State("payload"):        # until ``index`` reaches the length (at once for an empty payload)
                 m.d.comb += self.data.ready.eq(free & ~done)
                 with m.If(done):
                     m.d.comb += self.done.eq(1)
                     m.next = crc_states[0]
                 with m.Elif(self.data.valid & free):
                     send(self.data.payload)
-                    m.d.sync += [sent.eq(sent + 1), self.moved.eq(1)]
             # the CRC's low byte first; taking its bits shifts the CRC a byte down (a reflected
             # CRC takes its own low bit with no feedback), so the high byte is then its low byte
             for name, after in zip(crc_states, crc_states[1:] + ["idle"]):
@@ -545,8 +541,8 @@ class Link(wiring.Component):
     request, rd_addr, rd_data, counter_addr, counter_data, period, clamped
         The receiver's ``o``, ``rd_addr``, ``rd_data``, ``counter_addr``, ``counter_data``,
         ``period`` and ``clamped``.
-    answer, answer_data, answer_index, answer_moved, answer_done
-        The transmitter's ``i``, ``data``, ``index``, ``moved`` and ``done``.
+    answer, answer_data, answer_index, answer_done
+        The transmitter's ``i``, ``data``, ``index`` and ``done``.
 
     Latency
     -------
@@ -568,7 +564,7 @@ class Link(wiring.Component):
             "request": Out(stream.Signature(frame_layout(r.max_payload))), "rd_addr": In(r.addr_bits), "rd_data": Out(8),
             "counter_addr": In(range(CLAMPED_WORD + 1)), "counter_data": Out(counter_bits), "period": In(1),
             "clamped": In(1), "answer": In(stream.Signature(frame_layout(t.max_payload))), "answer_data": In(stream.Signature(8)),
-            "answer_index": Out(range(t.max_payload)), "answer_moved": Out(1), "answer_done": Out(1),
+            "answer_index": In(range(t.max_payload + 1)), "answer_done": Out(1),
         })
 
     @property
@@ -600,5 +596,5 @@ class Link(wiring.Component):
                      r.overrun.eq(rx.overrun), r.tick.eq(rx.idle_tick), r.rd_addr.eq(self.rd_addr),
                      self.rd_data.eq(r.rd_data), r.counter_addr.eq(self.counter_addr),
                      self.counter_data.eq(r.counter_data), r.period.eq(self.period), r.clamped.eq(self.clamped),
-                     self.answer_index.eq(t.index), self.answer_moved.eq(t.moved), self.answer_done.eq(t.done)]
+                     t.index.eq(self.answer_index), self.answer_done.eq(t.done)]
         return m

@@ -546,12 +546,15 @@ def _transmit(answers, rng):
             ctx.set(dut.i.valid, 1)
             await ctx.tick().until(dut.i.ready)
             ctx.set(dut.i.valid, 0)
-            done = False
+            done, taken = False, 0
             ctx.set(dut.data.valid, 1)
-            while not done:     # the byte ``index`` asks for (it is stale until CMD is sent); the code held
-                ctx.set(dut.data.payload, payload[min(ctx.get(dut.index), len(payload) - 1)] if payload else 0)
-                *_, done = await ctx.tick().sample(dut.done)
+            while not done:     # the bytes in order, counted on ``index``; the code held until done
+                ctx.set(dut.index, taken)
+                ctx.set(dut.data.payload, payload[min(taken, len(payload) - 1)] if payload else 0)
+                *_, ready, done = await ctx.tick().sample(dut.data.ready, dut.done)
+                taken += ready
             ctx.set(dut.data.valid, 0)
+            ctx.set(dut.index, 0)
 
     async def sink(ctx):
         """A UART's way: a byte's bits (its CRC steps), a random pause, then it is taken."""
@@ -608,10 +611,12 @@ def test_transmitter_throughput_is_as_documented():
             ctx.set(dut.i.valid, 1)
             await ctx.tick().until(dut.i.ready)
             ctx.set(dut.i.valid, 0)
-            taken = count = 0
+            taken = count = sent = 0
             while taken < n + 5:
-                *_, valid = await ctx.tick().sample(dut.o.valid)
-                taken, count = taken + valid, count + 1
+                ctx.set(dut.index, sent)        # the source's count of payload bytes taken
+                *_, valid, ready = await ctx.tick().sample(dut.o.valid, dut.data.ready)
+                taken, count, sent = taken + valid, count + 1, sent + ready
+            ctx.set(dut.index, 0)
             cycles.append(count)
     sim.add_testbench(bench)
     sim.run()
@@ -668,9 +673,11 @@ def test_link_answers_a_request_end_to_end():
         await ctx.tick().until(dut.answer.ready)
         ctx.set(dut.answer.valid, 0)
         ctx.set(dut.answer_data.valid, 1)
-        for _ in body:
-            ctx.set(dut.answer_data.payload, body[ctx.get(dut.answer_index)])
+        for k, b in enumerate(body):
+            ctx.set(dut.answer_index, k)
+            ctx.set(dut.answer_data.payload, b)
             await ctx.tick().until(dut.answer_data.ready)
+        ctx.set(dut.answer_index, len(body))
         ctx.set(dut.answer_data.valid, 0)
     sim.add_testbench(host)
     sim.add_testbench(controller)
