@@ -178,8 +178,7 @@ class RobotController(wiring.Component):
         m.d.comb += [link.rx.eq(self.rx), self.tx.eq(link.tx), self.pwm.eq(servo.pwm),
                      link.rd_addr.eq(d.rd_addr), d.rd_data.eq(link.rd_data),
                      link.counter_addr.eq(d.counter_addr), d.counter_data.eq(link.counter_data), link.clamped.eq(d.clamped),
-                     d.answer_index.eq(link.answer_index), d.answer_moved.eq(link.answer_moved),
-                     d.answer_done.eq(link.answer_done),
+                     link.answer_index.eq(d.answer_index), d.answer_done.eq(link.answer_done),
                      servo.commit.eq(d.commit), servo.keepalive.eq(d.keepalive), servo.status_shift.eq(d.status_shift),
                      d.busy.eq(servo.busy), d.period_start.eq(servo.period_start), d.phase.eq(servo.phase),
                      link.period.eq(servo.period_start)]

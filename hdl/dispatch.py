@@ -3,14 +3,14 @@ and the servo controller, its answer back to the link. A microcoded byte-serial 
 program and assembler are ``hdl/dispatch_microcode.py``."""
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, ResetSignal, Signal, unsigned
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 
 from . import protocol as P
 from .answers import answer_bytes, answer_constant
 from .bram import falling_edge_write_port
-from .dispatch_microcode import (CODED, CONDS, MOVE_TIME_WORD, SOURCES, STROBES, Geometry, assemble, encode, fields,
+from .dispatch_microcode import (CONDS, MOVE_TIME_WORD, OPS, SOURCES, STROBES, Geometry, assemble, encode, fields,
                                  program)
 
 __all__ = ["Dispatcher"]
@@ -18,15 +18,12 @@ __all__ = ["Dispatcher"]
 _C = {c.name: c for c in P.COMMANDS}
 #: answers the dispatcher builds in its memory
 _BUILT = (_C["status"].answer, _C["channel_status"].answer, P.NACK_FIELDS)
-_OPS = {"ra": ("inc", "set", "clear"), "ch": ("inc", "load", "clear"), "lm": ("rot", "mask", "one"),
-        "s": ("shift", "load"), "wm": ("ans", "width", "pulse")}
 
 
 class _Regs:
     """The machine's registers."""
 
     def __init__(self, d):
-        self.boot = Signal(init=1)
         self.cmd = Signal(8)
         self.f = Signal(32)                                 # the field register
         self.b_ = Signal()                                  # the borrow
@@ -38,7 +35,8 @@ class _Regs:
         self.leg = Signal(range(d._legs + 1))
         self.s = Signal(8)
         self.out = Signal()                                 # a coordinate of this leg was saturated
-        self.b = Signal(range(d._region))                   # answer byte being built
+        # answer byte being built, then (as the link's answer_index) the count of those sent
+        self.b = Signal(range(max(d._region, d._max_answer + 1)))
         self.nack, self.ident, self.sending = Signal(), Signal(), Signal()
         self.pending, self.started = Signal(), Signal()     # a commit not yet applied; its pass began
         self.mt = Signal()                                  # the memory's move time word was written
@@ -93,7 +91,7 @@ class Dispatcher(wiring.Component):
 
     Attributes
     ----------
-    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index, answer_moved,
+    request, rd_addr, rd_data, counter_addr, counter_data, answer, answer_data, answer_index,
     answer_done
         To the link's ports of the same names.
     clamped
@@ -107,7 +105,9 @@ class Dispatcher(wiring.Component):
 
     Reset state: idle, no answer pending, move time 0 (the status answer's counters are the
     link's: its error counters, the uptime in words ``UPTIME_WORD`` and the next, and
-    ``clamped`` in word ``CLAMPED_WORD`` of its counter memory).
+    ``clamped`` in word ``CLAMPED_WORD`` of its counter memory). The reset is the ``sync``
+    domain's own (not a ``ResetInserter``'s): the program ROM reads its first word in every reset
+    cycle, so its output is an instruction from the first cycle after it.
 
     Latency
     -------
@@ -123,9 +123,11 @@ class Dispatcher(wiring.Component):
     commit has been applied by a pass (so its answer shows every earlier move) and in the
     staging window (so that no pass comes between them), the channel's two reads (target,
     current), a cycle per answer byte. The widths reach the pins at the second period start after
-    the commit at the latest (the servo controller's latency). An
-    answer byte is on ``answer_data`` the cycle after ``answer_index`` names it. A request waits
-    in the link while the previous answer's payload is still being sent.
+    the commit at the latest (the servo controller's latency). The answer's bytes are offered
+    on ``answer_data`` in order, each the cycle after the previous one is taken (``answer_index``
+    counts them: the link's transmitter ends the payload at its length). A request waits
+    in the link until the previous answer's payload has been sent (an empty one's CMD byte: the
+    link's transmitter reads the answer code from here as it sends it).
 
     Throughput
     ----------
@@ -143,6 +145,7 @@ class Dispatcher(wiring.Component):
         self._time_bits = len(servo.target.payload.time)
         self._shape = P.Shape(legs, self._coords, self._channels)
         self._max_request = P.max_request_payload(self._shape)
+        self._max_answer = link.transmitter.max_payload
         self._identity = answer_constant(_C["identity"].answer, identity)
         # three regions of one size in the memory: widths, the answer being built, identity;
         # an address is the region above the offset, so no adder
@@ -162,7 +165,7 @@ class Dispatcher(wiring.Component):
         ls, cs, ss = link.signature.members, core.signature.members, servo.signature.members
         super().__init__({
             **{n: ls[n].flip() for n in ("request", "rd_addr", "rd_data", "counter_addr",
-                                         "counter_data", "answer", "answer_data", "answer_index", "answer_moved",
+                                         "counter_data", "answer", "answer_data", "answer_index",
                                          "answer_done",
                                          "clamped")},
             "ik_i": cs["i"].flip(), "ik_o": cs["o"].flip(), "ik_rotate": cs["rotate"].flip(),
@@ -216,27 +219,23 @@ class Dispatcher(wiring.Component):
         for name, bits in fields(len(self._asm.words)):
             u[name] = rp.data[off:off + bits]
             off += bits
-        for k, name in enumerate(CODED):
-            u[name] = u["code"] == k + 1
         # sz and bsel are the immediate's low bits (dispatch_microcode.encode)
         u["sz"], u["bsel"] = u["imm"][1], u["imm"][0]
-        m.d.sync += r.boot.eq(0)
         take, fire = self._sequencer(m, r, u, rp)
         # a wait's register effects wait for its condition (assemble allows a wait only the
         # channel, memory, CLI and HDR effects): the others need not see the condition, whose
         # path from the servo controller, core and link is the longest of the design
-        go = ~r.boot
-        s = {name: u[name] & go for name in STROBES}
-        e = {name: s[name] & (fire if name in ("CLI", "HDR") else go) for name in STROBES}
+        s = {name: u[name] for name in STROBES}
+        e = {name: u[name] & fire if name in ("CLI", "HDR") else u[name] for name in STROBES}
         x = self._source(m, r, u)
-        self._datapath(m, r, u, x, go, fire, e)
-        self._memory(m, r, u, x, go, fire, wr, rd)
+        self._datapath(m, r, u, x, fire, e)
+        self._memory(m, r, u, x, fire, wr, rd)
         self._ports(m, r, u, s, e, rd)
         return m
 
-    def _op(self, m, u, name, fire):
-        """One-cycle enables of the operations of ROM field ``name``."""
-        return {op: (u[name] == i + 1) & fire for i, op in enumerate(_OPS[name])}
+    def _op(self, m, u, name, fire=None):
+        """One-cycle enables of the operations of ROM field ``name`` (as a wait ends: ``fire``)."""
+        return {op: u[f"{name}_{op}"] if fire is None else u[f"{name}_{op}"] & fire for op in OPS[name]}
 
     # -- conditions and the next address
     def _sequencer(self, m, r, u, rp):
@@ -271,14 +270,20 @@ class Dispatcher(wiring.Component):
         # a wait's effects happen as it ends; the waits that have effects are those assemble
         # allows, each ended by one stream's handshake: fire sees only that, not the whole
         # condition multiplexer
-        ends = ((u["TGV"] & self.target.ready) | ((u["wm"] == 2) & self.ik_o.valid)
+        ends = ((u["TGV"] & self.target.ready) | (u["wm_width"] & self.ik_o.valid)
                 | (u["IKV"] & self.ik_i.ready) | (u["HDR"] & self.answer.ready))
-        fire = ~r.boot & (~u["hold"] | ends)
+        fire = ~u["hold"] | ends
         cmd = r.cmd
         # the dispatch index of the command code (dispatch_microcode.command_index)
         index = Cat(cmd[:2], cmd[2] ^ ~cmd[5], cmd[3] ^ cmd[4])
-        nxt = Mux(u["DISP"], Cat(index, u["imm"][:4]), u["nxt"])
-        m.d.comb += rp.addr.eq(Mux(r.boot, 0, Mux(take, u["to"], nxt)))
+        # a dispatch's nxt field holds its table's address (encode): only the entry's index is
+        # chosen here
+        nxt = Cat(Mux(u["DISP"], index, u["nxt"][:4]), u["nxt"][4:])
+        # every reset cycle reads word 0 (IDLE), so the ROM's output is an instruction from the
+        # first cycle after a reset, and no effect needs gating in that cycle; without a reset
+        # (after configuration) the output register is 0: a no-op (condition never, next 0)
+        rst = ResetSignal(allow_reset_less=True)
+        m.d.comb += rp.addr.eq(Mux(rst, 0, Mux(take, u["to"], nxt)))
         return take, fire
 
     # -- the byte X: payload, field register, answer sources
@@ -290,7 +295,7 @@ class Dispatcher(wiring.Component):
                "STB": st.pulse[:8]}
         # STB's byte is the low byte of the status's pulse; the servo controller then shifts
         # it a byte down
-        m.d.comb += self.status_shift.eq(~r.boot & (u["src"] == SOURCES.index("STB")))
+        m.d.comb += self.status_shift.eq(u["src"] == SOURCES.index("STB"))
         x = Signal(8)
         with m.Switch(u["src"]):
             for name, sig in src.items():
@@ -299,7 +304,7 @@ class Dispatcher(wiring.Component):
         self._flag = flag
         return x
 
-    def _datapath(self, m, r, u, x, go, fire, e):
+    def _datapath(self, m, r, u, x, fire, e):
         imm = u["imm"]
         y = Mux(u["ysel"], r.f[:8], imm)
         # X - Y - borrow, bit 7 of both flipped for a signed comparison's top byte
@@ -308,15 +313,15 @@ class Dispatcher(wiring.Component):
         cin = Mux(u["first"], u["sz"] & u["ysel"], r.b_)
         total = Signal(9)
         m.d.comb += total.eq(xb + (~yb)[:8] + ~cin)
-        with m.If(u["alu"] & go):
+        with m.If(u["alu"]):
             m.d.sync += r.b_.eq(~total[8])
         with m.If(e["LATCH"]):
             m.d.sync += r.bl.eq(r.b_)
-        with m.If(u["shf"] & go):
+        with m.If(u["shf"]):
             m.d.sync += r.f.eq(Cat(r.f[8:], x))
-        with m.If(u["tg"] & go):
+        with m.If(u["tg"]):
             m.d.sync += r.tg.eq(Cat(r.tg[8:], y))
-        ra = self._op(m, u, "ra", go)
+        ra = self._op(m, u, "ra")
         with m.If(ra["inc"]):
             m.d.sync += r.ra.eq(r.ra + 1)
         with m.If(ra["set"]):
@@ -328,7 +333,7 @@ class Dispatcher(wiring.Component):
             m.d.sync += r.ch.eq(r.ch + 1)
         with m.If(ch["load"]):
             m.d.sync += r.ch.eq(r.f[:len(r.ch)])
-        lm = self._op(m, u, "lm", go)
+        lm = self._op(m, u, "lm")
         with m.If(lm["rot"]):
             m.d.sync += [r.lm.eq(Cat(r.lm[1:], r.lm[0])), r.leg.eq(r.leg + 1)]
         with m.If(lm["mask"]):
@@ -338,7 +343,7 @@ class Dispatcher(wiring.Component):
                          r.leg.eq(0)]
         with m.If(ch["clear"]):
             m.d.sync += [r.ch.eq(0), r.leg.eq(0)]
-        sh = self._op(m, u, "s", go)
+        sh = self._op(m, u, "s")
         with m.If(sh["shift"]):
             m.d.sync += r.s.eq(Cat(r.s[1:], self._flag & ~u["sz"]))
         with m.If(sh["load"]):
@@ -349,46 +354,46 @@ class Dispatcher(wiring.Component):
             with m.If(e[strobe]):
                 m.d.sync += reg.eq(value)
         # every cycle of the idle wait: the request's command is held while it is offered; the
-        # identity answer's region is kept while it is sent. The previous answer's header was
-        # taken before the wait (its code, from the command and NACK flag, is the link's now)
+        # previous answer's code (the command and NACK flag) and the identity answer's region
+        # are kept while it is sent (the link's transmitter reads the code as it sends it)
         with m.If(e["TAKE"]):
-            m.d.sync += [r.cmd.eq(self.request.payload.command), r.ra.eq(0), r.b.eq(0), r.nack.eq(0), r.bl.eq(0)]
+            m.d.sync += [r.ra.eq(0), r.bl.eq(0)]
             with m.If(~r.sending):
-                m.d.sync += r.ident.eq(0)
+                m.d.sync += [r.cmd.eq(self.request.payload.command), r.b.eq(0), r.nack.eq(0), r.ident.eq(0)]
         # a leg target saturated: counted in the link's counter memory (registered: one pulse)
         m.d.sync += self.clamped.eq(e["CLI"] & r.out)
 
     def _region_addr(self, region: int, offset):
         return Cat(offset[:(self._region - 1).bit_length()], Const(region, 2))
 
-    def _memory(self, m, r, u, x, go, fire, wr, rd):
+    def _memory(self, m, r, u, x, fire, wr, rd):
         wm = self._op(m, u, "wm", fire)
         # the core's output moves a servo on per width taken (RobotCore rotate_outputs): the
         # first servo's is every width in turn, no choice of three
         widths = self.ik_o.payload.widths[self._servo_names[0]]
         m.d.comb += self.ik_rotate.eq(wm["width"])
-        with m.If(wm["ans"]):
+        # B builds an answer, then counts its bytes as the link takes them (answer_index)
+        taken = self.answer_data.valid & self.answer_data.ready
+        with m.If(wm["ans"] | taken):
             m.d.sync += r.b.eq(r.b + 1)
-        with m.If(go & u["BSET"]):
+        with m.If(u["BSET"]):
             m.d.sync += r.b.eq(u["imm"])
-        # the address and data follow the ROM's wm field alone (codes 1 ans, 2 width, 3 pulse; a
-        # pulse's low byte comes as X = F0): they matter only with the enable, so neither waits
-        # for fire; an answer byte's bits above 8 are never read
-        op = u["wm"]
+        # the address and data follow the ROM's wm bits alone (a pulse's low byte comes as X =
+        # F0): they matter only with the enable, so neither waits for fire; an answer byte's
+        # bits above 8 are never read
         m.d.comb += [wr.en.eq(wm["ans"] | wm["width"] | wm["pulse"]),
-                     wr.addr.eq(Mux(op[1], r.ch, self._region_addr(1, r.b))),
-                     wr.data.eq(Mux(op == 2, widths, Cat(x, r.f[8:self._w])))]
+                     wr.addr.eq(Mux(u["wm_ans"], self._region_addr(1, r.b), r.ch)),
+                     wr.data.eq(Mux(u["wm_width"], widths, Cat(x, r.f[8:self._w])))]
         # the read port serves the answer being sent or else the staging of widths; a byte is
-        # valid once the memory shows the one the link names (the index just moved, as the
-        # link's answer_moved says: not yet)
-        idx = self.answer_index
-        shown = Signal()
-        m.d.sync += shown.eq(r.sending)
+        # valid once the memory shows the one B names (not in the cycle after B moved on)
+        idx = r.b
+        shown, moved = Signal(), Signal()
+        m.d.sync += [shown.eq(r.sending), moved.eq(taken)]
         # MTRD addresses the move time's word (MOVE_TIME_WORD of the answer region) for FMT
         stage = Mux(u["MTRD"], self._region_addr(1, Const(MOVE_TIME_WORD, 8)), r.ch)
         m.d.comb += [rd.addr.eq(Mux(r.sending, Mux(r.ident, self._region_addr(2, idx), self._region_addr(1, idx)),
                                     stage)),
-                     self.answer_data.valid.eq(r.sending & shown & ~self.answer_moved),
+                     self.answer_data.valid.eq(r.sending & shown & ~moved), self.answer_index.eq(r.b),
                      self.answer_data.payload.eq(rd.data[:8])]
         # the link's transmitter has taken the last payload byte (it knows the length)
         with m.If(self.answer_done):
@@ -397,7 +402,7 @@ class Dispatcher(wiring.Component):
         # a write's value: one source for both in the servo controller's memory write); F's
         # low 24 bits shift in from F itself, so the load takes no cell of its own there; 0
         # until set_move_time wrote the word (the memory keeps it over a reset)
-        with m.If(go & u["FMT"]):
+        with m.If(u["FMT"]):
             m.d.sync += r.f[:self._time_bits].eq(rd.data[:self._time_bits] & r.mt.replicate(self._time_bits))
 
     def _ports(self, m, r, u, s, e, rd):
@@ -424,6 +429,8 @@ class Dispatcher(wiring.Component):
         m.d.comb += [self.ik_i.payload.target[inp.name].eq(r.tg[16 * k:16 * k + 16])
                      for k, inp in enumerate(self._plan.inputs)]
         # the header from the ROM, offered while its instruction waits (the link's transmitter
-        # registers it as it takes it: no copy here); its payload is then pulled from memory
+        # registers its length as it takes it, and reads its code, held here, when it sends
+        # it); its payload is then pulled from memory. Sending until the payload's end (at once
+        # after CMD for an empty one): the next request waits until then
         with m.If(e["HDR"]):
-            m.d.sync += r.sending.eq(imm != 0)
+            m.d.sync += [r.sending.eq(1), r.b.eq(0)]

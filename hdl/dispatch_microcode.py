@@ -25,7 +25,7 @@ from .answers import answer_bytes, scalar_offsets
 from .link import CLAMPED_WORD, UPTIME_WORD
 from .servo_fields import ChannelField, FailsafeAction
 
-__all__ = ["CONDS", "SOURCES", "STROBES", "BITS", "CODED", "Ins", "Assembled", "Geometry", "command_index", "program",
+__all__ = ["CONDS", "SOURCES", "STROBES", "OPS", "Ins", "Assembled", "Geometry", "command_index", "program",
            "assemble", "encode", "ROM_DEPTH", "ROM_DEPTHS", "fields"]
 
 #: ROM depths tried in turn: 256 words of up to 80 bits are five iCE40 block RAMs; a program of
@@ -37,18 +37,19 @@ CONDS = ("0", "B", "BL", "reqok", "ik_ready", "ik_valid", "wr_ready", "tg_ready"
          "ans_ready", "window", "LM0", "S0", "leglast", "chlast", "chlow0", "applied")
 #: the byte sources of ``X`` (``ZERO`` is the default)
 SOURCES = ("ZERO", "IMM", "RD", "F0", "SEXT", "CNT", "S", "FLAG", "CMD", "STB")
-#: one ROM bit each (the stream strobes, decoded by nothing)
-BITS = ("ACC", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV", "MTRD")
-#: at most one of these an instruction: a 4-bit code (0: none)
-CODED = ("IDENT", "NACK", "TAKE", "DISP", "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET", "FMT")
-STROBES = BITS + CODED
+#: the strobes, one ROM bit each, decoded by nothing (a 4-bit code of twelve of them took a
+#: LUT or two each to decode, more than the ROM's fifth block RAM saves: 80 bits are five)
+STROBES = ("ACC", "RDV", "STR", "IKV", "IKR", "HDR", "TGV", "WRV", "MTRD", "IDENT", "NACK", "TAKE", "DISP",
+           "COMMIT", "CLRO", "OUTS", "CLI", "MT", "LATCH", "BSET", "FMT")
 #: strobes whose effects do not wait for a wait's condition (the dispatcher gates only the others)
 _UNHELD = frozenset(STROBES) - {"CLI", "HDR", "TAKE", "RDV", "IKV", "IKR", "TGV", "WRV"}
 #: the waits whose effects happen as they end, and what ends them (Dispatcher: ``fire``)
 _HELD = {"~ik_valid": lambda s: s.wm == "width", "~tg_ready": lambda s: "TGV" in s.sp,
          "~ik_ready": lambda s: "IKV" in s.sp, "~ans_ready": lambda s: "HDR" in s.sp}
-_OPS = {"ra": (None, "inc", "set", "clear"), "ch": (None, "inc", "load", "clear"), "lm": (None, "rot", "mask", "one"),
-        "s": (None, "shift", "load"), "wm": (None, "ans", "width", "pulse")}
+#: the operations of the counters, the leg mask, S and the memory write: one ROM bit each
+#: (``<field>_<op>``, at most one a field), decoded by nothing
+OPS = {"ra": ("inc", "set", "clear"), "ch": ("inc", "load", "clear"), "lm": ("rot", "mask", "one"),
+       "s": ("shift", "load"), "wm": ("ans", "width", "pulse")}
 _REASON_BAD = 1 + [n for n, _ in P.NACK_REASONS].index("bad_value")
 _C = {c.name: c for c in P.COMMANDS}
 #: the word of the answer region (after every answer built there) that holds the move time:
@@ -62,9 +63,9 @@ _NAMES = {c.code: c.name for c in P.COMMANDS}
 def fields(depth: int = ROM_DEPTH) -> tuple:
     """ROM word fields of a ROM of ``depth`` words, low bits first: (name, bits)."""
     a = (depth - 1).bit_length()
-    return (("cond", 5), ("inv", 1), ("to", a), ("nxt", a), ("imm", 8), ("src", 4),
-            ("shf", 1), ("alu", 1), ("first", 1), ("ysel", 1), ("bias", 1), ("ra", 2), ("ch", 2), ("tg", 1),
-            ("lm", 2), ("s", 2), ("wm", 2), ("hold", 1), ("code", 4)) + tuple((s, 1) for s in BITS)
+    return ((("cond", 5), ("inv", 1), ("to", a), ("nxt", a), ("imm", 8), ("src", 4),
+             ("shf", 1), ("alu", 1), ("first", 1), ("ysel", 1), ("bias", 1), ("tg", 1), ("hold", 1))
+            + tuple((f"{k}_{op}", 1) for k, ops in OPS.items() for op in ops) + tuple((s, 1) for s in STROBES))
 
 
 def command_index(code: int) -> int:
@@ -494,10 +495,8 @@ def encode(asm: Assembled) -> list[int]:
              "imm": s.imm, "src": SOURCES.index(s.src), "shf": int(s.shf), "alu": int(s.alu is not None),
              "first": int(s.alu == "first"), "ysel": int(s.ysel), "bias": int(s.bias), "tg": int(s.tg),
              "hold": int(s.hold)}
-        coded = [k for k in CODED if k in s.sp]
-        if len(coded) > 1:
-            raise ValueError(f"instruction at {a} {s!r}: at most one of {CODED}, not {coded}")
-        v["code"] = CODED.index(coded[0]) + 1 if coded else 0
+        if "DISP" in s.sp:      # the table's address (16 words from 16 * imm) in nxt, free in a dispatch
+            v["nxt"] = s.imm << 4
         # the S input's zero and the first borrow (sz), the flag (bsel): immediate bits 1 and 0
         if s.sz and s.alu == "first" and not s.ysel:
             raise ValueError(f"instruction at {a} {s!r}: a first borrow (sz) needs Y = F (ysel)")
@@ -510,8 +509,11 @@ def encode(asm: Assembled) -> list[int]:
             if "RDV" not in s.sp or s.alu is not None or s.bias:
                 raise ValueError(f"instruction at {a} {s!r}: current is a choice of a read outside comparisons")
             v["bias"] = 1
-        v.update({k: ops.index(getattr(s, k)) for k, ops in _OPS.items()})
-        v.update({k: int(k in s.sp) for k in BITS})
+        for k, ops in OPS.items():
+            if getattr(s, k) not in (None, *ops):
+                raise ValueError(f"instruction at {a} {s!r}: {k} must be one of {ops}, not {getattr(s, k)!r}")
+            v.update({f"{k}_{op}": int(getattr(s, k) == op) for op in ops})
+        v.update({k: int(k in s.sp) for k in STROBES})
         word, off = 0, 0
         for name, bits in fields(len(asm.words)):
             assert 0 <= v[name] < 1 << bits, (name, v[name], s)

@@ -17,66 +17,60 @@ __all__ = ["SerialCRC", "FrameReceiver", "FrameTransmitter", "Link", "frame_layo
 
 
 class SerialCRC(wiring.Component):
-    """The protocol's CRC a bit per cycle: a byte on ``byte`` takes :attr:`cycles_per_byte` steps.
+    """The protocol's CRC a bit per step, least significant bit of each byte first: the order
+    the UART's bits cross the line, so it steps on the UART's own bit strobes
+    (:class:`~ikseries.hdl.uart.UARTRx` and :class:`~ikseries.hdl.uart.UARTTx` ``bit_strobe``).
 
-    Sixteen flip-flops and a few XORs instead of a byte-wide XOR matrix: a UART byte lasts at
-    least ``10 * MIN_DIVISOR`` = 40 cycles, far more than the 8 steps.
+    Sixteen flip-flops, each with the LUT of its next value: no byte multiplexer, no count of
+    the steps of a byte, and a frame byte is taken the cycle it comes.
 
     Parameters
     ----------
     params : ikseries.hdl.protocol.CRCParameters
-        An MSB-first CRC of whole bytes without output reflection or xor (so that the CRC over a
-        message and its CRC, sent high byte first, is 0).
+        A reflected CRC (input and output) of whole bytes without output xor (so that the CRC
+        over a message and its CRC, sent low byte first, is 0).
 
     Attributes
     ----------
     start : In(1)
-        Load the initial value and restart at the byte's first bit (wins over ``step``).
-    byte : In(8)
-        The byte being taken; held for its 8 steps.
+        Load the initial value (wins over ``step``).
     step : In(1)
-        Take the next bit of ``byte`` (most significant first).
-    last : Out(1)
-        This step takes the byte's last bit.
-    bit : Out(3)
-        Steps taken of this byte (``last``: 7).
+        Take ``bit``.
+    bit : In(1)
+        The next bit of the message.
     crc : Out(width)
-        The register: the CRC of the bytes taken so far.
+        The register: the CRC of the bits taken so far (for whole bytes, the protocol's).
 
     Latency
     -------
-    ``crc`` includes a byte one cycle after its last step.
+    ``crc`` includes a bit one cycle after its step.
 
     Throughput
     ----------
-    One byte per 8 steps.
+    One bit per cycle.
     """
 
-    cycles_per_byte = 8
-
     def __init__(self, params: P.CRCParameters = P.CRC):
-        if params.reflect_input or params.reflect_output or params.xor_output or params.width % 8:
-            raise ValueError("params must be an MSB-first CRC of whole bytes without output reflection or xor, "
+        if not (params.reflect_input and params.reflect_output) or params.xor_output or params.width % 8:
+            raise ValueError("params must be a reflected CRC of whole bytes without output xor, "
                              f"not {params.name!r}")
         self._params = params
-        super().__init__({"start": In(1), "byte": In(8), "step": In(1), "last": Out(1), "bit": Out(3),
-                          "crc": Out(params.width, init=params.initial)})
+        super().__init__({"start": In(1), "step": In(1), "bit": In(1), "crc": Out(params.width, init=params.initial)})
 
     def elaborate(self, platform):
         m = Module()
         p = self._params
-        # start always comes before the first step: no reset needed, which keeps the register 0 LUTs
+        # start always comes before the first step: no reset needed
         r = Signal(p.width, init=p.initial, reset_less=True)
-        bit = Signal(3, reset_less=True)
-        m.d.comb += [self.crc.eq(r), self.bit.eq(bit)]
-        feedback = r[-1] ^ self.byte.bit_select(~bit, 1)        # ~bit = 7 - bit: MSB first
-        shifted = Cat(*((r[i - 1] if i else 0) ^ (feedback if (p.polynomial >> i) & 1 else 0)
+        m.d.comb += self.crc.eq(r)
+        poly = int(f"{p.polynomial:0{p.width}b}"[::-1], 2)      # the polynomial reflected
+        feedback = r[0] ^ self.bit
+        shifted = Cat(*((r[i + 1] if i + 1 < p.width else 0) ^ (feedback if (poly >> i) & 1 else 0)
                         for i in range(p.width)))
-        m.d.comb += self.last.eq(bit == 7)
         with m.If(self.start):
-            m.d.sync += [r.eq(p.initial), bit.eq(0)]
+            m.d.sync += r.eq(p.initial)
         with m.Elif(self.step):
-            m.d.sync += [r.eq(shifted), bit.eq(bit + 1)]
+            m.d.sync += r.eq(shifted)
         return m
 
 
@@ -169,9 +163,11 @@ class FrameReceiver(wiring.Component):
     pulses of ``tick`` without a byte) abandons the frame. Payload bytes go into a two-bank
     block RAM: the bank of the frame on ``o`` is read through ``rd_addr``/``rd_data`` while the
     next frame fills the other, so a frame is offered only once its CRC is good (an atomic
-    multi-leg move is never half applied). The command/length check is a block RAM table and the
-    error counters live in a block RAM too, with the controller's uptime (``period`` pulses) (Yosys gives it two copies, one a read port): four
-    iCE40 block RAMs in all, written on the falling clock edge.
+    multi-leg move is never half applied). The CRC is taken a bit at a time from the UART's bit
+    strobes (``bit_strobe``, ``bit_value``), so a byte's bits are in it when the byte comes. The
+    command/length check is a block RAM table and the error counters live in a block RAM too,
+    with the controller's uptime (``period`` pulses) (Yosys gives it two copies, one a read
+    port): four iCE40 block RAMs in all, written on the falling clock edge.
 
     Parameters
     ----------
@@ -184,8 +180,14 @@ class FrameReceiver(wiring.Component):
     Attributes
     ----------
     i : In(stream.Signature(8))
-        Received bytes. While hunting a byte is taken at once; inside a frame it is held for the
-        CRC's 8 steps and taken in the last.
+        Received bytes. While hunting a byte is taken at once; inside a frame in its second cycle
+        (the length table's read). Bytes must come at least 4 cycles apart (a UART's come 40
+        and more), so that no counter's events come closer than the counter engine serves them.
+    bit_strobe, bit_value : In(1)
+        The bits of the bytes on ``i`` as the UART samples them
+        (:class:`~ikseries.hdl.uart.UARTRx` ``bit_strobe`` and ``bit_value``), least significant
+        first: a byte's bits come before the byte, and the bits of the frame's next byte after
+        it is taken. The CRC starts with the byte after SYNC.
     framing_error, overrun : In(1)
         The UART's error pulses, counted; at most one per 8 cycles each (a UART gives one per byte).
     tick : In(1)
@@ -219,16 +221,16 @@ class FrameReceiver(wiring.Component):
 
     Throughput
     ----------
-    One byte per cycle while hunting, one per 8 cycles inside a frame, plus two cycles after each
-    frame's last byte.
+    One byte per cycle while hunting, one per 2 cycles inside a frame (but see ``i``), plus two
+    cycles after each frame's last byte.
     """
 
     #: pulses of ``tick`` that abandon a frame: with one per idle bit time, a pause of at most
     #: RX_TIMEOUT_BYTES byte times never does and one of a byte time more always does
     timeout_ticks = P.BYTE_BITS * P.RX_TIMEOUT_BYTES + P.BYTE_BITS // 2
-    #: cycles from the frame's last byte valid on ``i`` to ``o.valid`` (the CRC's steps through
-    #: it, the check, the offer)
-    latency = SerialCRC.cycles_per_byte + 2
+    #: cycles from the frame's last byte valid on ``i`` to ``o.valid`` (the byte taken in its
+    #: second cycle, the CRC checked as it is taken, the offer)
+    latency = 3
 
     def __init__(self, shape: P.Shape, counter_bits: int = P.COUNTER_BITS):
         if not isinstance(shape, P.Shape):
@@ -242,7 +244,8 @@ class FrameReceiver(wiring.Component):
         self._max = P.max_request_payload(shape)
         self._addr_bits = max(1, (self._max - 1).bit_length())
         super().__init__({
-            "i": In(stream.Signature(8)), "framing_error": In(1), "overrun": In(1), "tick": In(1),
+            "i": In(stream.Signature(8)), "bit_strobe": In(1), "bit_value": In(1),
+            "framing_error": In(1), "overrun": In(1), "tick": In(1),
             "o": Out(stream.Signature(frame_layout(self._max))),
             "rd_addr": In(self._addr_bits), "rd_data": Out(8),
             "counter_addr": In(range(CLAMPED_WORD + 1)), "counter_data": Out(counter_bits), "period": In(1),
@@ -313,7 +316,8 @@ class FrameReceiver(wiring.Component):
                                    self.clamped, self._counter_bits, write)
         m.d.comb += [counters.addr.eq(self.counter_addr), self.counter_data.eq(counters.data)]
         m.d.comb += [rd.addr.eq(Cat(self.rd_addr, rbank)), self.rd_data.eq(rd.data),
-                     wr.addr.eq(Cat(index[:self._addr_bits], wbank)), wr.data.eq(byte), check.byte.eq(byte)]
+                     wr.addr.eq(Cat(index[:self._addr_bits], wbank)), wr.data.eq(byte),
+                     check.step.eq(self.bit_strobe), check.bit.eq(self.bit_value)]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
         good = self._frame_fsm(m, check, wr, events, (known, length_ok), length, index, take_command)
@@ -329,9 +333,12 @@ class FrameReceiver(wiring.Component):
         known, length_ok = command_check
         byte, good = self.i.payload, Signal()
         hunting = Signal()
+        # inside a frame a byte is taken in its second cycle: the length table's read of it is
+        # out then, and the payload write comes from a register (set in the byte's first cycle)
+        second = Signal()
         take = self.i.valid & self.i.ready
-        m.d.comb += self.i.ready.eq(hunting | check.last)
-        m.d.sync += wr.en.eq(0)
+        m.d.comb += self.i.ready.eq(hunting | second)
+        m.d.sync += [second.eq(self.i.valid & ~take), wr.en.eq(0)]
         expired = self._timeout(m, take)
 
         def refuse(counter):
@@ -342,13 +349,13 @@ class FrameReceiver(wiring.Component):
                 m.next = "len"
 
         def frame_state():
-            """A state inside a frame: the CRC steps through the byte, which is taken at the last."""
-            m.d.comb += check.step.eq(self.i.valid)
+            """A state inside a frame: its byte is taken in its second cycle."""
             with m.If(expired):
                 m.next = "hunt"
             return m.If(~expired & take)
 
-        # the body state takes the first CRC byte too (index == length); these take the rest
+        # the body state takes the first CRC byte too (index == length); these take the rest,
+        # the last checked as it is taken (its bits are in the CRC already)
         crc_states = [f"crc{k}" for k in range(1, P.CRC.width // 8)]
         with m.FSM():
             with m.State("hunt"):
@@ -374,23 +381,22 @@ class FrameReceiver(wiring.Component):
                         m.d.sync += index.eq(0)
                         m.next = "body"
             with m.State("body"):
-                # registered a step ahead: the write (half a cycle after the edge) then comes
-                # straight from flip-flops, in the cycle the byte is taken
-                with m.If(self.i.valid & (check.bit == SerialCRC.cycles_per_byte - 2) & (index != length)):
+                # registered in the byte's first cycle: the write (half a cycle after the edge)
+                # then comes straight from flip-flops, in the cycle the byte is taken
+                with m.If(self.i.valid & ~second & (index != length)):
                     m.d.sync += wr.en.eq(1)
                 with frame_state():
                     m.d.sync += index.eq(index + 1)
                     with m.If(index == length):
-                        m.next = (crc_states + ["check"])[0]
-            for name, after in zip(crc_states, crc_states[1:] + ["check"]):
+                        m.next = crc_states[0]
+            for name, after in zip(crc_states, crc_states[1:] + ["offer"]):
                 with m.State(name):
                     with frame_state():
                         m.next = after
-            with m.State("check"):      # the CRC register has taken the last byte
-                m.next = "offer"
-                with m.If(check.crc != 0):
-                    m.d.comb += events["crc"].eq(1)
-                    m.next = "hunt"
+                        if after == "offer":        # the CRC register has taken the last byte
+                            with m.If(check.crc != 0):
+                                m.d.comb += events["crc"].eq(1)
+                                m.next = "hunt"
             # a cycle later, so that whether the previous frame is still offered is a register
             # (o.valid, cleared by a transfer in the check cycle), not the dispatcher's ready
             with m.State("offer"):
@@ -403,10 +409,11 @@ class FrameReceiver(wiring.Component):
 
 
 class FrameTransmitter(wiring.Component):
-    """Answer frames onto a byte stream: ``SYNC LEN CMD PAYLOAD CRC_HI CRC_LO``.
+    """Answer frames onto a byte stream: ``SYNC LEN CMD PAYLOAD CRC_LO CRC_HI``.
 
     An answer is a header on ``i`` (answer code and payload length), then its payload bytes,
-    pulled one at a time: ``index`` says which byte ``data`` must carry next.
+    pulled one at a time from a source that counts them (``index``): it keeps the count the
+    transmitter would otherwise keep a copy of.
 
     Parameters
     ----------
@@ -416,31 +423,36 @@ class FrameTransmitter(wiring.Component):
     Attributes
     ----------
     i : In(stream.Signature(frame_layout(max_payload)))
-        Answer headers; taken when the previous frame's last byte is on ``o``.
+        Answer headers; taken when the previous frame's last byte is on ``o``. The length is
+        registered as the header is taken; the code is read when CMD is sent: the source holds
+        ``i.payload.command`` from the header's transfer until ``done`` (no copy here).
     data : In(stream.Signature(8))
-        Payload bytes of the answer being sent, byte ``index`` first.
-    index : Out(range(max_payload))
-        Index of the payload byte wanted on ``data`` (while ``data.ready``).
-    moved : Out(1)
-        High in the cycle after ``index`` was set (registered): a source that shows the byte of
-        an index a cycle later (a block RAM read) has it on ``data`` while this is low.
+        Payload bytes of the answer being sent, in order.
+    index : In(range(max_payload + 1))
+        The source's count of payload bytes taken on ``data`` since the header was taken (0
+        then, one more the cycle after each transfer): the payload ends when it reaches the
+        length.
     done : Out(1)
         High for one cycle as the payload ends (its last byte taken; at once for an empty one):
         a source that stops offering then needs no count of its own.
     o : Out(stream.Signature(8))
         Frame bytes, registered.
+    bit_strobe, bit_value : In(1)
+        The bits of the bytes on ``o`` as the UART sends them (:class:`~ikseries.hdl.uart.UARTTx`
+        ``bit_strobe`` and ``bit_value``), least significant first: the CRC takes every one
+        (it restarts with LEN), so a byte's bits must all have come when it is taken, as a
+        UART that takes a byte at its stop bit does.
 
     Latency
     -------
-    SYNC is on ``o`` one cycle after the header is taken; LEN one cycle after SYNC is taken; every
-    later byte one cycle after the previous one is taken and the CRC has taken it (8 cycles after
-    it came on ``o``), for payload bytes once ``data`` is valid.
+    SYNC is on ``o`` one cycle after the header is taken; every later byte one cycle after the
+    previous one is taken, for payload bytes once ``data`` is valid.
 
     Throughput
     ----------
-    A frame of LEN payload bytes takes 9 * (LEN + 3) + 2 cycles from the header taken to CRC_LO
-    taken when ``o`` is always ready and ``data`` always valid (a UART byte lasts at least 40);
-    the next header is taken in the cycle CRC_LO is taken.
+    A frame of LEN payload bytes takes LEN + 6 cycles from the header taken to CRC_HI taken when
+    ``o`` is always ready and ``data`` always valid (a UART byte lasts at least 40); the next
+    header is taken in the cycle CRC_HI is taken.
     """
 
     def __init__(self, max_payload: int | None = None):
@@ -450,7 +462,8 @@ class FrameTransmitter(wiring.Component):
         self._max = top
         super().__init__({
             "i": In(stream.Signature(frame_layout(top))), "data": In(stream.Signature(8)),
-            "index": Out(range(top)), "moved": Out(1), "done": Out(1), "o": Out(stream.Signature(8)),
+            "index": In(range(top + 1)), "done": Out(1), "o": Out(stream.Signature(8)),
+            "bit_strobe": In(1), "bit_value": In(1),
         })
 
     @property
@@ -461,54 +474,46 @@ class FrameTransmitter(wiring.Component):
         m = Module()
         m.submodules.crc = gen = SerialCRC()
         length = Signal(range(self._max + 1))
-        command = Signal(8)
-        sent = Signal(range(self._max + 1))
-        done = sent == length
-        m.d.comb += self.index.eq(sent)
-        busy = Signal()         # the CRC is stepping through the byte on o (which stays put until it is done)
-        m.d.comb += [gen.byte.eq(self.o.payload), gen.step.eq(busy)]
-        with m.If(gen.last):
-            m.d.sync += busy.eq(0)
-        free = (~self.o.valid | self.o.ready) & ~busy      # the output register can take a byte
+        done = self.index == length
+        m.d.comb += [gen.step.eq(self.bit_strobe), gen.bit.eq(self.bit_value)]
+        free = ~self.o.valid | self.o.ready     # the output register can take a byte
 
-        def send(value, covered=True):
-            m.d.sync += [self.o.valid.eq(1), self.o.payload.eq(value), busy.eq(covered)]
+        def send(value):
+            m.d.sync += [self.o.valid.eq(1), self.o.payload.eq(value)]
 
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
-        m.d.sync += self.moved.eq(0)
-        crc_top = gen.crc[-8:]
         crc_states = [f"crc{k}" for k in range(P.CRC.width // 8)]
         with m.FSM():
             with m.State("idle"):
                 m.d.comb += self.i.ready.eq(free)
                 with m.If(self.i.valid & free):
-                    send(P.SYNC, covered=False)
-                    m.d.comb += gen.start.eq(1)
-                    m.d.sync += [command.eq(self.i.payload.command), length.eq(self.i.payload.length)]
+                    send(P.SYNC)
+                    m.d.sync += length.eq(self.i.payload.length)
                     m.next = "len"
             with m.State("len"):
                 with m.If(free):
+                    # SYNC's bits are out (it was taken): the CRC starts with LEN's
                     send(length)
+                    m.d.comb += gen.start.eq(1)
                     m.next = "cmd"
             with m.State("cmd"):
                 with m.If(free):
-                    send(command)
-                    m.d.sync += [sent.eq(0), self.moved.eq(1)]
+                    send(self.i.payload.command)        # held by the source until ``done``
                     m.next = "payload"
-            with m.State("payload"):        # until ``sent`` reaches the length (at once for an empty payload)
+            with m.State("payload"):        # until ``index`` reaches the length (at once for an empty payload)
                 m.d.comb += self.data.ready.eq(free & ~done)
                 with m.If(done):
                     m.d.comb += self.done.eq(1)
                     m.next = crc_states[0]
                 with m.Elif(self.data.valid & free):
                     send(self.data.payload)
-                    m.d.sync += [sent.eq(sent + 1), self.moved.eq(1)]
-            # the CRC takes each CRC byte but the last: that shifts the next one to its top byte
-            for k, (name, after) in enumerate(zip(crc_states, crc_states[1:] + ["idle"])):
+            # the CRC's low byte first; taking its bits shifts the CRC a byte down (a reflected
+            # CRC takes its own low bit with no feedback), so the high byte is then its low byte
+            for name, after in zip(crc_states, crc_states[1:] + ["idle"]):
                 with m.State(name):
                     with m.If(free):
-                        send(crc_top, covered=after != "idle")
+                        send(gen.crc[:8])
                         m.next = after
         return m
 
@@ -536,8 +541,8 @@ class Link(wiring.Component):
     request, rd_addr, rd_data, counter_addr, counter_data, period, clamped
         The receiver's ``o``, ``rd_addr``, ``rd_data``, ``counter_addr``, ``counter_data``,
         ``period`` and ``clamped``.
-    answer, answer_data, answer_index, answer_moved, answer_done
-        The transmitter's ``i``, ``data``, ``index``, ``moved`` and ``done``.
+    answer, answer_data, answer_index, answer_done
+        The transmitter's ``i``, ``data``, ``index`` and ``done``.
 
     Latency
     -------
@@ -550,7 +555,8 @@ class Link(wiring.Component):
     """
 
     def __init__(self, shape: P.Shape, divisor: int, counter_bits: int = P.COUNTER_BITS):
-        self._rx, self._tx = UARTRx(divisor), UARTTx(divisor)
+        # the frame receiver takes every byte within 2 cycles, a UART bit is at least 4
+        self._rx, self._tx = UARTRx(divisor, buffered=False), UARTTx(divisor)
         self._receiver, self._transmitter = FrameReceiver(shape, counter_bits), FrameTransmitter()
         r, t = self._receiver, self._transmitter
         super().__init__({
@@ -558,7 +564,7 @@ class Link(wiring.Component):
             "request": Out(stream.Signature(frame_layout(r.max_payload))), "rd_addr": In(r.addr_bits), "rd_data": Out(8),
             "counter_addr": In(range(CLAMPED_WORD + 1)), "counter_data": Out(counter_bits), "period": In(1),
             "clamped": In(1), "answer": In(stream.Signature(frame_layout(t.max_payload))), "answer_data": In(stream.Signature(8)),
-            "answer_index": Out(range(t.max_payload)), "answer_moved": Out(1), "answer_done": Out(1),
+            "answer_index": In(range(t.max_payload + 1)), "answer_done": Out(1),
         })
 
     @property
@@ -580,6 +586,9 @@ class Link(wiring.Component):
         m.submodules.receiver, m.submodules.transmitter = r, t
         wiring.connect(m, rx.o, r.i)
         wiring.connect(m, t.o, tx.i)
+        # the CRCs take the bits as they cross the line
+        m.d.comb += [r.bit_strobe.eq(rx.bit_strobe), r.bit_value.eq(rx.bit_value),
+                     t.bit_strobe.eq(tx.bit_strobe), t.bit_value.eq(tx.bit_value)]
         wiring.connect(m, r.o, wiring.flipped(self.request))
         wiring.connect(m, wiring.flipped(self.answer), t.i)
         wiring.connect(m, wiring.flipped(self.answer_data), t.data)
@@ -587,5 +596,5 @@ class Link(wiring.Component):
                      r.overrun.eq(rx.overrun), r.tick.eq(rx.idle_tick), r.rd_addr.eq(self.rd_addr),
                      self.rd_data.eq(r.rd_data), r.counter_addr.eq(self.counter_addr),
                      self.counter_data.eq(r.counter_data), r.period.eq(self.period), r.clamped.eq(self.clamped),
-                     self.answer_index.eq(t.index), self.answer_moved.eq(t.moved), self.answer_done.eq(t.done)]
+                     t.index.eq(self.answer_index), self.answer_done.eq(t.done)]
         return m

@@ -4,9 +4,10 @@ The one home of every protocol fact. Pure Python with no Amaranth import: the ha
 (:mod:`ikseries.hdl.link`), the host library (:mod:`ikseries.host.protocol`) and the spec
 (``docs/protocol.md``, whose tables :func:`markdown_tables` renders) all read it.
 
-A frame is ``SYNC LEN CMD PAYLOAD[LEN] CRC_HI CRC_LO``: LEN counts the payload bytes only; the
-CRC (:data:`CRC`) covers LEN, CMD and the payload and is sent high byte first, so the CRC over
-LEN .. CRC_LO is 0. Fields are little-endian two's complement (signed) or unsigned integers.
+A frame is ``SYNC LEN CMD PAYLOAD[LEN] CRC_LO CRC_HI``: LEN counts the payload bytes only; the
+CRC (:data:`CRC`) covers LEN, CMD and the payload and is sent low byte first, so the CRC over
+LEN .. CRC_HI is 0. It is a reflected CRC (least significant bit first, as the UART sends a
+byte's bits): both ends may compute it a bit at a time as the bits cross the line. Fields are little-endian two's complement (signed) or unsigned integers.
 Requests go host -> controller; every good request is answered by a frame whose CMD is the
 request's :func:`answer_code` (its answer fields, or none: an acknowledgement) or by a
 :data:`NACK` frame. Answer layouts do not depend on the robot; request layouts depend on its
@@ -23,7 +24,9 @@ __all__ = ["PROTOCOL_VERSION", "SYNC", "MAX_PAYLOAD", "ANSWER_BIT", "NACK", "CRC
            "FAILSAFE_ACTIONS", "KINDS", "Field", "Command", "Shape", "COMMANDS", "NACK_FIELDS", "command", "answer_code",
            "request_lengths", "answer_lengths", "max_request_payload", "markdown_tables"]
 
-PROTOCOL_VERSION = 1
+#: 2: the CRC is reflected (CRC-16/MCRF4XX, sent low byte first; 1 had CRC-16/CCITT-FALSE, high
+#: byte first)
+PROTOCOL_VERSION = 2
 #: first byte of every frame; never a valid LEN (> MAX_PAYLOAD) nor a command or answer code,
 #: so a receiver that rejects a LEN or CMD byte equal to SYNC takes it as the next frame's start
 SYNC = 0xA5
@@ -57,9 +60,10 @@ class CRCParameters:
     check: int      #: the CRC of the ASCII bytes "123456789"
 
 
-CRC = CRCParameters("CRC-16/CCITT-FALSE (CRC-16/IBM-3740)", width=16, polynomial=0x1021, initial=0xFFFF,
-                    reflect_input=False, reflect_output=False, xor_output=0x0000, check=0x29B1)
-CRC_BYTE_ORDER = "big"
+#: least significant bit first, as the UART's bits: the hardware steps it a bit per bit on the line
+CRC = CRCParameters("CRC-16/MCRF4XX", width=16, polynomial=0x1021, initial=0xFFFF,
+                    reflect_input=True, reflect_output=True, xor_output=0x0000, check=0x6F91)
+CRC_BYTE_ORDER = "little"
 
 #: error counters of the status answer, in its order, with their meaning
 ERROR_COUNTERS = (
@@ -294,7 +298,7 @@ def markdown_tables() -> str:
         ("CRC", f"{CRC.name}: width {CRC.width}, polynomial 0x{CRC.polynomial:04X}, initial 0x{CRC.initial:04X}, "
                 f"reflect input {CRC.reflect_input}, reflect output {CRC.reflect_output}, "
                 f"xor output 0x{CRC.xor_output:04X}, check 0x{CRC.check:04X}"),
-        ("CRC byte order", f"{CRC_BYTE_ORDER}-endian (high byte first)"),
+        ("CRC byte order", f"{CRC_BYTE_ORDER}-endian ({'low' if CRC_BYTE_ORDER == 'little' else 'high'} byte first)"),
         ("error counters", f"{COUNTER_BITS}-bit, saturating"),
         ("receive timeout", f"a pause of more than {RX_TIMEOUT_BYTES} byte times "
                             f"({RX_TIMEOUT_BYTES * BYTE_BITS} bit times) inside a frame abandons it")])

@@ -132,8 +132,9 @@ class ServoController(wiring.Component):
     Latency
     -------
     A write, target or commit accepted before a pass is applied by that pass and shows on the
-    pins at the next period start (one to two periods). After reset the engine initialises
-    the memory for ``init_cycles = 16 * channels + 1`` cycles. A status answer is valid 6
+    pins at the next period start (one to two periods). After reset (the ``sync`` domain's own,
+    not a ``ResetInserter``'s: the engine's ROM reads its first word in every reset cycle) the
+    engine initialises the memory for ``init_cycles = 16 * channels + 1`` cycles. A status answer is valid 6
     cycles after its request.
 
     Throughput

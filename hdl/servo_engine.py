@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import enum
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, ResetSignal, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -195,16 +195,13 @@ class ServoEngine(wiring.Component):
         return m
 
     def _decode(self, m, word, g):
-        """The fields of the instruction in hand (one bit per special strobe: no decoder); in
-        the cycle after reset the ROM's output is not yet an instruction."""
+        """The fields of the instruction in hand (one bit per special strobe: no decoder); the
+        sequencer reads word 0 (INIT) in every reset cycle, so they are an instruction's from
+        the first cycle after a reset (after configuration without one, 0: a no-op to INIT)."""
         u, off = {}, 0
         for name, bits in _fields(self._to_bits):
             u[name] = word[off:off + bits]
             off += bits
-        m.d.sync += g.boot.eq(0)
-        # strobes seen outside; the others only change what INIT sets again
-        for name in ("FIRE", "CLAMPED", "ACCEPT", "ST_E"):
-            u[name] = u[name] & ~g.boot
         u["is"] = lambda name: u[name]  # noqa: E731
         return u
 
@@ -213,7 +210,7 @@ class ServoEngine(wiring.Component):
         aw = self._aw
         second = Signal()                   # a timed target's second word (its time)
         host_idle = ~second
-        m.d.comb += g.free.eq(u["idle"] & ~g.boot & ~g.pass_pending & host_idle)
+        m.d.comb += g.free.eq(u["idle"] & ~g.pass_pending & host_idle)
         wp, tp, ip = self.write.payload, self.target.payload, self.ik.payload
         staged = Const(1 << (aw - 1), aw)
         we, addr, value = Signal(), Signal(len(wr.addr)), Signal(aw)
@@ -284,7 +281,7 @@ class ServoEngine(wiring.Component):
         uses_n, uses_z = on["n"] | on["le"], on["z"] | on["le"] | on["nocount"]
         m.d.comb += g.take.eq((level[0] | (uses_n & g.n) | (uses_z & g.z)) ^ u["cond"][4])
         # the fall-through address is a ROM field too: no program counter, no incrementer
-        m.d.comb += rp.addr.eq(Mux(g.boot, 0, Mux(g.take, u["to"], u["nxt"])))
+        m.d.comb += rp.addr.eq(Mux(ResetSignal(allow_reset_less=True), 0, Mux(g.take, u["to"], u["nxt"])))
         # the last instruction of a channel already reads the next channel's first operand
         ch_next = Mux(u["is"]("LOADNEXT") | u["is"]("INITNEXT"), g.ch + 1, g.ch)
         # both successors' addresses, then the branch's choice: take (the adder's flags through
@@ -384,7 +381,6 @@ class _Globals:
 
     def __init__(self, eng):
         w, aw, c = eng._w, eng._aw, eng._c
-        self.boot = Signal(init=1)
         self.ch = Signal(range(c + 1))
         self.acc, self.q = Signal(aw), Signal(w)
         self.n, self.z, self.take = Signal(), Signal(), Signal()

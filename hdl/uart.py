@@ -50,20 +50,32 @@ class UARTRx(wiring.Component):
     ----------
     divisor : int
         Clock cycles per bit (>= :data:`MIN_DIVISOR`); see :func:`uart_divisor`.
+    buffered : bool
+        Default True: a received byte waits in an output register of its own while the next one
+        comes in. False: ``o.payload`` is the shift register itself (eight flip-flops less, each a
+        logic cell of its own), for a consumer that takes every byte within a bit time.
 
     Attributes
     ----------
     rx : In(1)
         The serial input (idle high).
     o : Out(stream.Signature(8))
-        Received bytes. A byte stays valid until taken; a byte completed while the previous one
-        is still not taken is lost and pulses ``overrun``.
+        Received bytes. Buffered, a byte stays valid until taken; a byte completed while the
+        previous one is still not taken is lost and pulses ``overrun``. Unbuffered, a byte must be
+        taken before the middle of the next start bit (at least one bit time after it came): if
+        not, it is dropped there (the shift register takes the next byte's bits) and ``overrun``
+        pulses.
     framing_error, overrun : Out(1)
         One-cycle pulses, registered.
     idle_tick : Out(1)
         A one-cycle pulse, registered, every ``divisor`` cycles while the receiver waits for a
         start bit (the first one bit time after a stop bit's middle; none during a break): a
         pause between bytes in bit times, for :class:`~ikseries.hdl.link.FrameReceiver`'s timeout.
+    bit_strobe, bit_value : Out(1)
+        ``bit_strobe`` is high (combinationally) in the cycle a data bit is sampled, least
+        significant first, eight a byte, ``bit_value`` that bit: a CRC taken a bit at a time
+        (:class:`~ikseries.hdl.link.SerialCRC`) has a byte's bits before the byte is on ``o``.
+        A byte dropped for its stop bit has had its bits sampled too.
 
     Latency
     -------
@@ -76,11 +88,13 @@ class UARTRx(wiring.Component):
     :data:`BAUD_TOLERANCE` rate error).
     """
 
-    def __init__(self, divisor: int):
+    def __init__(self, divisor: int, buffered: bool = True):
         _check_divisor(divisor)
         self._divisor = divisor
+        self._buffered = bool(buffered)
         super().__init__({"rx": In(1, init=1), "o": Out(stream.Signature(8)),
-                          "framing_error": Out(1), "overrun": Out(1), "idle_tick": Out(1)})
+                          "framing_error": Out(1), "overrun": Out(1), "idle_tick": Out(1),
+                          "bit_strobe": Out(1), "bit_value": Out(1)})
 
     @property
     def divisor(self) -> int:
@@ -96,6 +110,7 @@ class UARTRx(wiring.Component):
         pins = Signal(2, init=0b11)     # the synchroniser: idle high from reset
         m.d.sync += pins.eq(Cat(self.rx, pins[0]))
         line = pins[1]
+        m.d.comb += self.bit_value.eq(line)
         timer = Signal(range(d))
         tick = timer == 0
         bit = Signal(range(8))
@@ -105,6 +120,8 @@ class UARTRx(wiring.Component):
                      self.idle_tick.eq(0)]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += self.o.valid.eq(0)
+        if not self._buffered:
+            m.d.comb += self.o.payload.eq(shift)
         with m.FSM():
             with m.State("idle"):
                 m.d.sync += self.idle_tick.eq(tick)
@@ -117,7 +134,11 @@ class UARTRx(wiring.Component):
                     m.next = "data"
                     with m.If(line):        # the start bit did not last half a bit: a glitch
                         m.next = "idle"
+                    if not self._buffered:
+                        with m.Elif(self.o.valid & ~self.o.ready):     # the shift register is needed
+                            m.d.sync += [self.overrun.eq(1), self.o.valid.eq(0)]
             with m.State("data"):
+                m.d.comb += self.bit_strobe.eq(tick)
                 with m.If(tick):
                     m.d.sync += [shift.eq(Cat(shift[1:], line)), bit.eq(bit + 1)]
                     with m.If(bit == 7):
@@ -127,11 +148,14 @@ class UARTRx(wiring.Component):
                     with m.If(~line):
                         m.d.sync += self.framing_error.eq(1)
                         m.next = "break"
-                    with m.Elif(self.o.valid & ~self.o.ready):
-                        m.d.sync += self.overrun.eq(1)
-                        m.next = "idle"
+                    if self._buffered:
+                        with m.Elif(self.o.valid & ~self.o.ready):
+                            m.d.sync += self.overrun.eq(1)
+                            m.next = "idle"
                     with m.Else():
-                        m.d.sync += [self.o.valid.eq(1), self.o.payload.eq(shift)]
+                        m.d.sync += self.o.valid.eq(1)
+                        if self._buffered:
+                            m.d.sync += self.o.payload.eq(shift)
                         m.next = "idle"
             with m.State("break"):
                 with m.If(line):
@@ -156,6 +180,10 @@ class UARTTx(wiring.Component):
         Bytes to send; a byte is taken in the first cycle of its stop bit.
     tx : Out(1)
         The serial output, registered; high (idle) from reset.
+    bit_strobe, bit_value : Out(1)
+        ``bit_strobe`` is high (combinationally) in the cycle a data bit goes onto ``tx`` (it is
+        there from the next cycle), least significant first, eight a byte, ``bit_value`` that
+        bit: a byte's bits have all been strobed when it is taken.
 
     Latency
     -------
@@ -171,7 +199,8 @@ class UARTTx(wiring.Component):
     def __init__(self, divisor: int):
         _check_divisor(divisor)
         self._divisor = divisor
-        super().__init__({"i": In(stream.Signature(8)), "tx": Out(1, init=1)})
+        super().__init__({"i": In(stream.Signature(8)), "tx": Out(1, init=1), "bit_strobe": Out(1),
+                          "bit_value": Out(1)})
 
     @property
     def divisor(self) -> int:
@@ -194,7 +223,9 @@ class UARTTx(wiring.Component):
                 with m.Elif(bit == 9):
                     m.d.sync += busy.eq(0)
                 with m.Else():
-                    m.d.sync += self.tx.eq(self.i.payload.bit_select(bit, 1))
+                    m.d.comb += self.bit_strobe.eq(1)
+                    m.d.sync += self.tx.eq(self.bit_value)
+        m.d.comb += self.bit_value.eq(self.i.payload.bit_select(bit, 1))
         # the next byte starts right where the stop bit ends (or at once on an idle line)
         with m.If(self.i.valid & (~busy | (tick & (bit == 9)))):
             m.d.sync += [busy.eq(1), timer.eq(d - 1), bit.eq(0), self.tx.eq(0)]

@@ -11,19 +11,23 @@ import random
 from amaranth.sim import Simulator
 
 from .hdl import protocol as P
-from .hdl.link import FrameReceiver, SerialCRC
+from .hdl.link import FrameReceiver
 from .host.protocol import encode, field_bounds, request_parser
 
-__all__ = ["random_values", "random_request", "corrupt", "mixed_stream", "random_pauses", "model_receiver",
+__all__ = ["BIT_STEPS", "random_values", "random_request", "corrupt", "mixed_stream", "random_pauses", "model_receiver",
            "simulate_receiver", "frame_gap"]
+
+
+#: cycles the bench spends on a byte's bits before the byte (one each, as a UART samples them)
+BIT_STEPS = 8
 
 
 def frame_gap(shape: P.Shape) -> int:
     """Cycles between bytes fed to the receiver so that the bench's consumer (reading a payload
     byte a cycle, then taking the frame) is done before the shortest next frame (5 bytes) ends;
-    the receiver itself holds each byte after SYNC for the CRC's steps. A UART delivers a byte
-    only every 10 bit times, far slower."""
-    held = 4 * (SerialCRC.cycles_per_byte - 1)
+    each byte's bits take :data:`BIT_STEPS` cycles before it and the receiver takes each byte
+    after SYNC in its second cycle. A UART delivers a byte only every 10 bit times, far slower."""
+    held = 5 * BIT_STEPS + 4
     return max(1, -(-(P.max_request_payload(shape) + 4 - held) // 5))
 
 
@@ -104,9 +108,10 @@ def model_receiver(shape: P.Shape, data: bytes, pauses=()) -> tuple[list[tuple[i
 def simulate_receiver(shape: P.Shape, data: bytes, gap: int | None = None, framing_pulses: int = 0,
                       overrun_pulses: int = 0, hold: bool = False, counter_bits: int = P.COUNTER_BITS,
                       pauses=()) -> dict:
-    """Feed ``data`` to a :class:`~ikseries.hdl.link.FrameReceiver` one byte every ``gap``
-    cycles (default :func:`frame_gap`) while a consumer reads each frame's payload through
-    ``rd_addr``/``rd_data`` and takes it (``hold``: never takes one). Before each byte position
+    """Feed ``data`` to a :class:`~ikseries.hdl.link.FrameReceiver`, each byte's bits on its
+    ``bit_strobe``/``bit_value`` (a cycle each, least significant first) then the byte, the
+    next ``gap`` cycles after it is taken (default :func:`frame_gap`), while a consumer reads
+    each frame's payload through ``rd_addr``/``rd_data`` and takes it (``hold``: never takes one). Before each byte position
     in ``pauses`` the receiver's ``tick`` is held high for its ``timeout_ticks`` cycles (a pause
     that ends a frame); it is low otherwise. Then pulses the UART error inputs as asked, 8
     cycles apart. ``counter_bits``: the receiver's counter width.
@@ -129,6 +134,12 @@ def simulate_receiver(shape: P.Shape, data: bytes, gap: int | None = None, frami
                 await ctx.tick().repeat(dut.timeout_ticks)
                 ctx.set(dut.tick, 0)
                 cycles += dut.timeout_ticks
+            ctx.set(dut.bit_strobe, 1)
+            for j in range(BIT_STEPS):      # the CRC takes the bits as a UART samples them
+                ctx.set(dut.bit_value, b >> j & 1)
+                await ctx.tick()
+            ctx.set(dut.bit_strobe, 0)
+            cycles += BIT_STEPS
             ctx.set(dut.i.payload, b)
             ctx.set(dut.i.valid, 1)
             while True:
