@@ -104,7 +104,6 @@ class FlatRobotTop(wiring.Component):
 MANIFEST_FORMAT = "ikseries.manifest"
 
 
-
 def stream_rule(core: LegCore | RobotCore) -> str:
     """The stream rule of ``core`` (one of :data:`ikseries.hdl.architectures.STREAM_RULES`, the
     rule its architecture's timing names): a leg core's architecture, ``"buffered"`` for a modulo

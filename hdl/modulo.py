@@ -608,10 +608,10 @@ class ModuloEvaluator(wiring.Component):
     def _output_buffer(self, m):
         """The outputs of a pipeline that never stalls, through an :class:`OutputBuffer` with a
         word for every target in flight: at one target a cycle a word is promised for the
-        pipeline's cycles, the buffer's, then the read's return to ``room``, so that many
-        keep ``i.ready`` high while ``o.ready`` is. Returns the stream (valid and payload) the
-        pipeline's last cycle drives."""
-        depth = self._schedule.latency + BUFFER_LATENCY + 1
+        latency (the pipeline's cycles and the buffer's), then for the read's return to
+        ``room``, so ``latency + 1`` words keep ``i.ready`` high while ``o.ready`` is. Returns
+        the stream (valid and payload) the pipeline's last cycle drives."""
+        depth = self.latency + 1
         m.submodules.buffer = buffer = OutputBuffer(output_layout(self._plan), depth)
         wiring.connect(m, wiring.flipped(self.o), buffer.o)
         m.d.comb += [self.i.ready.eq(buffer.room), buffer.promise.eq(self.i.valid & buffer.room)]
