@@ -9,7 +9,9 @@ budget: at most 600 logic cells on the iCE40UP5K for everything but the core).
 The core inside the controller leaves its own PWM bank unconnected (synthesis removes it), so
 the core's share is the RobotCore alone minus that bank (the plain core, with its own input
 register: the controller's reads the dispatcher's target register instead); the servo controller's share is
-given with and without its own bank. Two figures of what the controller adds: beyond the bare
+given with and without its own pins' PWM (``servo_bank``: its pulse counters, a
+:class:`~ikseries.hdl.pwmcounters.ServoPWMCounters`; the core's is a
+:class:`~ikseries.hdl.pwmbank.ServoPWMBank`). Two figures of what the controller adds: beyond the bare
 core (its servo PWM bank counted as added), and beyond the core with its own bank (what a
 plain IK core on a board has already: the servo pins' PWM; the rest is the UART, link,
 dispatcher and per-channel limiter and calibration).
@@ -35,6 +37,7 @@ from ikseries.constraints.devices import FAMILIES, PNR_DEVICES
 from ikseries.fit.fitter import fit_robot
 from ikseries.hdl.controller import RobotController
 from ikseries.hdl.pwmbank import ServoPWMBank
+from ikseries.hdl.pwmcounters import ServoPWMCounters
 from ikseries.pnr import nextpnr_command
 from ikseries.robot import load_preset
 from ikseries.synth import synth_counts
@@ -88,7 +91,7 @@ def main(argv=None):
     # controller's core reads the dispatcher's target register instead, see RobotCore.held_input)
     core, servo = ctl.core.registered(), ctl.servo
     parts = {"link": ctl.link, "dispatcher": ctl.dispatcher, "servo": servo, "core": core,
-             "servo_bank": ServoPWMBank(period, ctl.width_bits, servo.channels, 1, in_order=True),
+             "servo_bank": ServoPWMCounters(period, ctl.width_bits, servo.channels, servo.lead),
              "core_bank": ServoPWMBank(period, ctl.width_bits, a.legs, len(core.servos))}
     designs = {"controller": ctl, **parts}
     with tempfile.TemporaryDirectory() as tmp:
@@ -103,7 +106,8 @@ def main(argv=None):
                            "beyond_core_with_bank": minus(c["controller"], c["core"])}
     payload = {"legs": a.legs, "channels": servo.channels, "width_bits": ctl.width_bits,
                "period": period, "clock_hz": a.clock, "divisor": ctl.divisor,
-               "pass_cycles": servo.pass_cycles, "init_cycles": servo.init_cycles, "families": per_family}
+               "pass_cycles": servo.pass_cycles, "init_cycles": servo.init_cycles, "lead": servo.lead,
+               "max_width": servo.max_width, "families": per_family}
     for fam, c in per_family.items():
         cols = ((("LC", 6),) if fam == "ice40" else ()) + (("LUT", 6), ("FF", 6), ("carry", 6), ("DSP", 4), ("BRAM", 5))
         print(f"\n{fam}: {'design':<22} " + " ".join(f"{k:>{w}}" for k, w in cols))

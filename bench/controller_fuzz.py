@@ -1,7 +1,7 @@
 """The exported robot controller at its UART pin under a long seeded fuzz, on Verilator.
 
 Builds ``RobotController`` over the small test plan (the cylinder leg at 4 pu; two legs, PWM
-period 640 cycles, UART divisor 4) and runs the cocotb fuzz test
+period 820 cycles, UART divisor 4) and runs the cocotb fuzz test
 (``ikseries.sim.cocotb_controller.tests.test_fuzz``) with ``--bytes`` of good, corrupted and
 garbage traffic: every answer against the receiver model's good frames, every PWM period's
 widths against the model, the status counters against the model's. Prints a table and writes JSON.
@@ -28,7 +28,7 @@ from ikseries.robot import load_preset
 from ikseries.sim.controller_runner import run_controller
 
 FACTS = runpy.run_path(str(Path(__file__).with_name("facts.py")))   # run record, JSON writer
-LEGS, PERIOD, CLOCK_HZ, BAUD = 2, 640, 48_000_000, 12e6
+LEGS, PERIOD, CLOCK_HZ, BAUD = 2, 820, 48_000_000, 12e6
 
 
 def small_plan_file(workdir: Path) -> Path:

@@ -321,12 +321,17 @@ def controller_cells(res: dict) -> list[str]:
     """Lines of the ``bench/controller_cells.py`` section from its JSON ``res``: a table per family."""
     names = (("RobotController", "controller"), ("Link", "link"), ("Dispatcher", "dispatcher"),
              ("ServoController (with its PWM bank)", "servo"), ("ServoController without its bank", "servo_without_bank"),
+             ("its PWM bank alone", "servo_bank"), ("RobotCore's PWM bank alone", "core_bank"),
              ("RobotCore without its unused bank", "core_without_bank"), ("beyond the bare core", "beyond_core"),
              ("beyond the core with its own PWM bank", "beyond_core_with_bank"))
     lines = [f"{res['legs']} legs, {res['channels']} channels, {res['width_bits']}-bit widths, period "
              f"{res['period']:,} cycles, UART divisor {res['divisor']}; Yosys counts per family (`synth_ice40 "
              "-dsp`, `synth_ecp5`; the budget: 600 iCE40 logic cells beyond the core). LC: iCE40 logic cells of "
-             "the netlist packed by nextpnr (`--pack-only`), the budget's unit.", ""]
+             "the netlist packed by nextpnr (`--pack-only`), the budget's unit.",
+             *([f"The servo controller's pins are pulse counters loaded by its pass (`ServoPWMCounters`): "
+                f"pulses rise {res['lead']:,} cycles after each period start, at most {res['max_width']:,} "
+                "cycles wide; the core's own bank is a `ServoPWMBank` (a width register, a pending register "
+                "and a comparator per channel)."] if "lead" in res else []), ""]
     for fam, c in res["families"].items():
         # LC: the iCE40 netlist packed by nextpnr (older records have none)
         cols = (("LC",) if "LC" in c["controller"] else ()) + ("LUT", "FF", "carry", "DSP", "BRAM")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from amaranth.lib import data
 
-from ikseries.hdl.pwmbank import ServoPWMBank
+from ikseries.hdl.pwmcounters import ServoPWMCounters
 from ikseries.hdl.servo import ServoController
 from ikseries.synth import component_counts
 
@@ -39,8 +39,9 @@ def main(argv=None):
                             "widths": data.StructLayout({f"s{j}": a.width_bits for j in range(a.servos)})})
     with tempfile.TemporaryDirectory() as tmp:
         wd = a.workdir or Path(tmp)
-        ctl = counts(ServoController(a.channels, a.width_bits, a.period, ik_layout=ik), "controller", wd)
-        bank = counts(ServoPWMBank(a.period, a.width_bits, a.channels, 1, in_order=True), "bank", wd)
+        servo = ServoController(a.channels, a.width_bits, a.period, ik_layout=ik)
+        ctl = counts(servo, "controller", wd)
+        bank = counts(ServoPWMCounters(a.period, a.width_bits, a.channels, servo.lead), "bank", wd)
     payload = {"channels": a.channels, "width_bits": a.width_bits, "period": a.period,
                "controller": ctl, "pwm_bank": bank,
                "controller_without_bank": {k: ctl.get(k, 0) - bank.get(k, 0) for k in ctl}}

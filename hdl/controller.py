@@ -101,7 +101,8 @@ class RobotController(wiring.Component):
     -------
     A request is executed from ``link.latency`` cycles after the start edge of its last
     byte, as :class:`~ikseries.hdl.dispatch.Dispatcher` documents; its effect shows at the pins
-    at the second period start after its commit at the latest.
+    in the period after its commit, on the pulses that rise ``servo.lead`` cycles after that
+    period's start (:class:`~ikseries.hdl.servo.ServoController`).
 
     Throughput
     ----------

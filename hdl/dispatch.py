@@ -122,8 +122,9 @@ class Dispatcher(wiring.Component):
     per answer byte (the link's counters read as they are then); channel_status: once the last
     commit has been applied by a pass (so its answer shows every earlier move) and in the
     staging window (so that no pass comes between them), the channel's two reads (target,
-    current), a cycle per answer byte. The widths reach the pins at the second period start after
-    the commit at the latest (the servo controller's latency). The answer's bytes are offered
+    current), a cycle per answer byte. The widths reach the pins in the period after the commit
+    (its pass, then the pulses ``lead`` cycles after that period's start: the servo
+    controller's latency). The answer's bytes are offered
     on ``answer_data`` in order, each the cycle after the previous one is taken (``answer_index``
     counts them: the link's transmitter ends the payload at its length). A request waits
     in the link until the previous answer's payload has been sent (an empty one's CMD byte: the

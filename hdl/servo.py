@@ -1,12 +1,12 @@
 """Per-channel servo controller: trims, limits, speed and acceleration profiles, timed and
-atomic group moves, failsafe, between the IK widths and a :class:`ServoPWMBank`."""
+atomic group moves, failsafe, between the IK widths and the servo pins."""
 from __future__ import annotations
 
 from amaranth.hdl import Module, Shape, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from .pwmbank import ServoPWMBank
+from .pwmcounters import ServoPWMCounters
 from .servo_engine import ServoEngine
 from .servo_fields import ChannelField, FailsafeAction
 
@@ -38,10 +38,13 @@ class ServoController(wiring.Component):
     Parameters, staging and motion state of every channel live in one block RAM
     (16 words per channel, see :class:`~ikseries.hdl.servo_engine.Word`, and a scratch row);
     a microcoded single-adder engine (:class:`~ikseries.hdl.servo_engine.ServoEngine`, its
-    program in ``hdl/servo_microcode.py``) updates every channel once per PWM period and
-    loads the width of each into a :class:`ServoPWMBank` (one group per channel), so every
-    channel's new width appears at the same period start: a pulse is never cut or stretched
-    and channels committed together change in the same period.
+    program in ``hdl/servo_microcode.py``) updates every channel once per PWM period, in a
+    pass at the period start, and loads the width of each into a pulse counter
+    (:class:`~ikseries.hdl.pwmcounters.ServoPWMCounters`). The pins are low during the pass;
+    every channel's pulse then rises ``lead = pass_cycles + 2`` cycles after ``period_start``,
+    all together: a pulse is never cut or stretched and channels committed together change
+    in the same period. A pulse is at most ``max_width = period - lead`` cycles (a wider
+    width is shown as that).
     All units are clock ticks and PWM periods; ``W = width_bits``.
 
     Rules, per channel and pass (``sim/servo_model.py`` is their bit-exact model):
@@ -120,11 +123,12 @@ class ServoController(wiring.Component):
     clamped, bad_write : Out(1)
         One-cycle strobes (count them): a committed target changed by the clamp; a write refused.
     pwm : Out(channels)
-        The servo signals, registered; low for a relaxed channel.
+        The servo signals, registered; low for a relaxed channel. Pulses rise ``lead`` cycles
+        after ``period_start``.
     period_start : Out(1)
         High for one cycle when a PWM period starts; the engine pass starts then.
     phase : Out(range(2 ** bits))
-        The PWM bank's period counter (:class:`~ikseries.hdl.pwmbank.ServoPWMBank` ``phase``):
+        The period counter (:class:`~ikseries.hdl.pwmcounters.ServoPWMCounters` ``phase``):
         ``period_start`` is high while it is 1.
     busy : Out(1)
         The engine is initialising or in a pass (the host streams wait).
@@ -132,10 +136,12 @@ class ServoController(wiring.Component):
     Latency
     -------
     A write, target or commit accepted before a pass is applied by that pass and shows on the
-    pins at the next period start (one to two periods). After reset (the ``sync`` domain's own,
-    not a ``ResetInserter``'s: the engine's ROM reads its first word in every reset cycle) the
-    engine initialises the memory for ``init_cycles = 16 * channels + 1`` cycles. A status answer is valid 6
-    cycles after its request.
+    pins ``lead`` cycles after that pass's period start (within one period). After reset (the
+    ``sync`` domain's own, not a ``ResetInserter``'s: the engine's ROM reads its first word in
+    every reset cycle) the engine initialises the memory for ``init_cycles = 16 * channels + 1``
+    cycles, every pin low; the first period starts then (the first pulses, the home pose with
+    ``home_at_reset``, ``lead`` cycles later). A status answer is valid 6 cycles after its
+    request.
 
     Throughput
     ----------
@@ -180,9 +186,11 @@ class ServoController(wiring.Component):
         if period < least:
             raise ValueError(f"period must be >= {least} cycles for {channels} channels of "
                              f"{width_bits} bits, not {period!r}")
-        # a pass loads every channel once, in order, between two period starts (the
-        # microprogram's LOADNEXT ends each channel's path; period >= init + pass cycles)
-        self._bank = ServoPWMBank(period, width_bits, channels, 1, home_at_reset, in_order=True, phase=True)
+        # a pass loads every channel once, in order, within pass_cycles of its period start
+        # (the microprogram's LOADNEXT ends each channel's path); the first period starts
+        # once the memory is initialised (period >= init + pass cycles)
+        self._bank = ServoPWMCounters(period, width_bits, channels, lead=self._engine.pass_cycles + 2,
+                                      delay=self._engine.init_cycles)
         sig = {
             "write": In(stream.Signature(self._engine.write_layout)),
             "target": In(stream.Signature(self._engine.target_layout)),
@@ -204,6 +212,16 @@ class ServoController(wiring.Component):
     @property
     def period(self) -> int:
         return self._period
+
+    @property
+    def lead(self) -> int:
+        """Cycles from ``period_start`` to the rise of the pulses (the pass before them)."""
+        return self._bank.lead
+
+    @property
+    def max_width(self) -> int:
+        """The widest pulse shown, ``period - lead`` cycles."""
+        return self._bank.max_width
 
     @property
     def servos(self) -> list[str]:
@@ -241,8 +259,8 @@ class ServoController(wiring.Component):
                      eng.period_start.eq(bank.period_start),
                      self.failsafe.eq(eng.failsafe), self.clamped.eq(eng.clamped),
                      self.bad_write.eq(eng.bad_write), self.busy.eq(eng.busy),
-                     bank.i.valid.eq(eng.load.valid), bank.i.payload.group.eq(eng.load.payload.channel),
-                     bank.i.payload.widths[0].eq(eng.load.payload.width), eng.load.ready.eq(1),
+                     bank.i.valid.eq(eng.load.valid), bank.i.payload.width.eq(eng.load.payload.width),
+                     eng.load.ready.eq(1),
                      self.pwm.eq(bank.pwm), self.period_start.eq(bank.period_start),
                      self.phase.eq(bank.phase)]
         if self._servos:

@@ -9,7 +9,7 @@ through the leg bench's machinery (:func:`ikseries.sim.runner.simulate`).
 Example::
 
     from ikseries.sim.controller_runner import run_controller
-    res = run_controller("plan.json", 2, 640, 48_000_000, 12e6, "icarus", "build/ctl")
+    res = run_controller("plan.json", 2, 820, 48_000_000, 12e6, "icarus", "build/ctl")
     assert res.ok, res.summary()
 """
 from __future__ import annotations
@@ -77,7 +77,7 @@ def run_controller(plan_path, legs: int, period: int, clock_hz: int, baud: float
     vfile = build_dir / f"{TOPLEVEL}.v"
     _write_if_changed(vfile, verilog.convert(ctl, name=TOPLEVEL, emit_src=False))
     config = ControllerConfig(str(plan_path), legs, period, int(clock_hz), ctl.divisor, name, manifest.hex(),
-                              seed, fuzz_bytes, tests).write(build_dir / "bench.json")
+                              ctl.servo.lead, seed, fuzz_bytes, tests).write(build_dir / "bench.json")
     sim = simulate(simulator, build_dir, TOPLEVEL, vfile, TEST_MODULE, config, testcase, waves, verilator_opt,
                    icarus_args=ICARUS_ARGS)
     return ControllerResult(simulator, sim)

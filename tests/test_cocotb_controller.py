@@ -1,6 +1,6 @@
 """cocotb tests of the exported robot controller at its pins, on Icarus (and on Verilator with --long).
 
-One build per simulator of ``RobotController(small_plan, 2 legs, period 640, 48 MHz, divisor 4)``
+One build per simulator of ``RobotController(small_plan, 2 legs, period 820, 48 MHz, divisor 4)``
 runs every test of :mod:`ikseries.sim.cocotb_controller.tests` (identity and status, move_leg,
 move_legs, speed limit, timed move, failsafe, a 300-byte seeded fuzz); each checks every PWM
 period's widths against the model, one answer per request, and its own property.
@@ -14,7 +14,9 @@ from test_cocotb import _skip_unless_available
 from ikseries.sim.cocotb_controller.config import TESTS
 from ikseries.sim.controller_runner import run_controller
 
-CLOCK, BAUD, PERIOD = 48_000_000, 12e6, 640     # divisor 4; the shortest period for 2 legs of 3 servos
+# divisor 4; the period: the pass before the pulses (354 cycles for 2 legs of 3 servos) and the
+# test box's pulses after their trims (449 cycles)
+CLOCK, BAUD, PERIOD = 48_000_000, 12e6, 820
 
 
 # Verilator's run (a 40 s C++ build) with --long; bench/controller_fuzz.py runs it at length

@@ -9,7 +9,7 @@ from ikseries.host.protocol import encode, frame
 
 CLOCK = 48_000_000
 BAUD = 12e6          # divisor 4: the smallest the UART takes, for a short simulation
-PERIOD = 640         # >= init_cycles + pass_cycles + 2 for two legs of three servos
+PERIOD = 820         # the pass before the pulses (354 cycles, two legs of three servos) and the pulses
 MANIFEST = bytes(range(0xA0, 0xA8))
 REF = (240, 100, 160)        # a target inside the workspace; the others are near it
 T1, T2, T3 = REF, (242, 96, 161), (238, 104, 159)
@@ -21,19 +21,19 @@ def two_legs(small_plan):
     return RobotController(small_plan, 2, PERIOD, CLOCK, BAUD, name="two-leg test", manifest=MANIFEST)
 
 
-def _trims(plan, legs, targets):
-    """Per-channel trims that bring the golden pulses of ``targets`` into a short period."""
+def _trims(plan, legs, targets, max_width):
+    """Per-channel trims that bring the golden pulses of ``targets`` below ``max_width``."""
     g = [golden_widths(plan, t) for t in targets]
     low = [min(w[j] for w in g) for j in range(len(plan.outputs))]
     high = [max(w[j] for w in g) for j in range(len(plan.outputs))]
-    assert max(h - lo for h, lo in zip(high, low)) + MARGIN < PERIOD - 20, "targets too far apart for the period"
+    assert max(h - lo for h, lo in zip(high, low)) + MARGIN < max_width - 20, "targets too far apart for the period"
     return [MARGIN - lo for lo in low] * legs
 
 
 def test_identity_moves_pulses_trims_and_limits_reach_the_pins(two_legs, small_plan):
     dut, plan, shape = two_legs, small_plan, two_legs.shape
     k = len(plan.outputs)
-    trims = _trims(plan, 2, [T1, T2, T3])
+    trims = _trims(plan, 2, [T1, T2, T3], dut.servo.max_width)
     g1, g2, g3 = (golden_widths(plan, t) for t in (T1, T2, T3))
     assert all(a != b for a, b in zip(g1, g2)), "T1 and T2 must differ on every servo"
     seen = {}
@@ -74,11 +74,11 @@ def test_identity_moves_pulses_trims_and_limits_reach_the_pins(two_legs, small_p
     host = run(dut, script, probes=[commit_probe])
 
     def shown_by(sent, legs):
-        """The second period start after the request's commit (when its widths are on the pins
-        at the latest), the commit within the dispatcher's bound of the frame's end."""
+        """The rise of the pulses of the period after the request's commit (when its widths are
+        on the pins at the latest), the commit within the dispatcher's bound of the frame's end."""
         commit = next(c for c in commits if c >= sent)
         assert commit - sent <= dut.link.latency + dut.dispatcher.move_cycles(legs), (sent, commit)
-        return [p for p in host.period_starts if p > commit][1]
+        return [p for p in host.period_starts if p > commit][0] + dut.servo.lead
 
     ident = seen["identity"]
     assert ident.command == "identity" and ident.fields == {

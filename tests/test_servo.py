@@ -16,9 +16,15 @@ W = 8
 FULL = (1 << W) - 1
 
 
-def replay(model: ServoModel, schedule, periods, reset):
-    """What the pins, strobes and status answers must show (same indexing as ``run``)."""
-    exp = {"widths": [list(reset)], "clamped": [], "bad": [], "failsafe": [False], "status": [],
+def period_for(channels, **kw):
+    """The shortest period whose pulses show every ``W``-bit width (``max_width >= FULL``)."""
+    return ServoController(channels, W, 10 ** 6, time_bits=4, **kw).lead + FULL
+
+
+def replay(model: ServoModel, schedule, periods, max_width=FULL):
+    """What the pins, strobes and status answers must show (same indexing as ``run``): the
+    widths of pass k show in period k, after the pass, at most ``max_width``."""
+    exp = {"widths": [], "clamped": [], "bad": [], "failsafe": [False], "status": [],
            "fired": []}
     for k in range(periods - 1):
         widths, clamped = model.period()
@@ -38,16 +44,16 @@ def replay(model: ServoModel, schedule, periods, reset):
                 model.keepalive()
             else:
                 exp["status"].append(model.read(*args))
-        exp["widths"].append(widths)
+        exp["widths"].append([min(w, max_width) for w in widths])
         exp["clamped"].append(clamped)
         exp["bad"].append(bad)
         exp["failsafe"].append(model.failsafe)
     return exp
 
 
-def check(dut, model, schedule, periods, reset=None):
+def check(dut, model, schedule, periods):
     got = run(dut, schedule, periods)
-    exp = replay(model, schedule, periods, reset or [0] * dut.channels)
+    exp = replay(model, schedule, periods, dut.max_width)
     n = len(got["widths"])
     assert n >= periods - 2
     for k in range(n):
@@ -99,7 +105,7 @@ def test_random_commands_match_model_on_the_pins(seed, home):
                           ik_legs=2)
     model = ServoModel(4, W, 4, home_at_reset=home, ik_servos=2, ik_legs=2)
     schedule = random_schedule(rng, 70, 4, 2, 2)
-    widths, exp = check(dut, model, schedule, 70, home)
+    widths, exp = check(dut, model, schedule, 70)
     # the sequence exercises what it is meant to: moves, clamps, refusals, failsafe, status
     assert any(0 < w < FULL for ws in widths for w in ws)
     assert sum(exp["clamped"]) and sum(exp["bad"]) and any(exp["fired"]) and exp["status"]
@@ -118,7 +124,7 @@ def test_trusted_writes_of_values_in_range_match_model_on_the_pins():
     schedule = [[c for c in cmds if ok(c)] for cmds in random_schedule(rng, 70, 4, 2, 2)]
     dut = ServoController(4, W, 288, time_bits=4, ik_layout=ik_layout(2, 2), ik_legs=2, trusted_writes=True)
     model = ServoModel(4, W, 4, ik_servos=2, ik_legs=2)
-    widths, exp = check(dut, model, schedule, 70, None)
+    widths, exp = check(dut, model, schedule, 70)
     assert any(0 < w < FULL for ws in widths for w in ws) and sum(exp["clamped"])
 
 
@@ -128,12 +134,12 @@ def _enable_all(channels, **params):
 
 
 def test_speed_and_acceleration_limits_hold_on_the_pins():
-    dut = ServoController(2, W, 256, time_bits=4, home_at_reset=[10, 240])
+    dut = ServoController(2, W, period_for(2), time_bits=4, home_at_reset=[10, 240])
     model = ServoModel(2, W, 4, home_at_reset=[10, 240])
     setup = [("write", 0, F.SPEED, 7), ("write", 0, F.ACCEL, 2), ("write", 1, F.ACCEL, 3),
              ("target", 0, 200, 0), ("target", 1, 13, 0), ("commit",)]
     widths, _ = check(dut, model, [setup, [], [], [], [], [], [], [], [], [],
-                                [("target", 1, 100, 0), ("commit",)]], 40, [10, 240])
+                                [("target", 1, 100, 0), ("commit",)]], 40)
     for c, (speed, accel, end) in enumerate([(7, 2, 200), (FULL, 3, 100)]):
         track = [w[c] for w in widths]
         steps = [b - a for a, b in zip(track, track[1:])]
@@ -146,47 +152,47 @@ def test_speed_and_acceleration_limits_hold_on_the_pins():
 
 def test_timed_move_channels_arrive_together_after_exactly_T_periods():
     home = [50, 200, 120]
-    dut = ServoController(3, W, 256, time_bits=4, home_at_reset=home)
+    dut = ServoController(3, W, period_for(3), time_bits=4, home_at_reset=home)
     model = ServoModel(3, W, 4, home_at_reset=home)
     T = 9
     # channel 2 has a speed limit and an acceleration limit; a timed move overrides both
     sched = [[("write", 2, F.SPEED, 1), ("write", 2, F.ACCEL, 1),
               ("target", 0, 53, T), ("target", 1, 20, T), ("target", 2, 121, T), ("commit",)]]
-    widths, _ = check(dut, model, sched, 16, home)
+    widths, _ = check(dut, model, sched, 16)
     first = next(k for k, w in enumerate(widths) if w != home)
     goal = [53, 20, 121]
     for c in range(3):
         track = [w[c] for w in widths]
         arrive = next(k for k in range(len(track)) if track[k:] == [goal[c]] * (len(track) - k))
-        assert arrive == 2 + T - 1, (c, track)      # pass 1 makes the first step of T
-    assert first <= 2 + T - 1
+        assert arrive == 1 + T - 1, (c, track)      # pass 1 makes the first step of T
+    assert first <= 1 + T - 1
 
 
 def test_group_commit_changes_all_channels_in_the_same_period():
     home = [100, 100, 100, 100]
-    dut = ServoController(4, W, 256, time_bits=4, home_at_reset=home)
+    dut = ServoController(4, W, period_for(4), time_bits=4, home_at_reset=home)
     model = ServoModel(4, W, 4, home_at_reset=home)
     stage = [("target", c, 100 + 10 * (c + 1), 0) for c in range(4)]
     sched = [stage[:2], stage[2:], [], [("commit",)]]
-    widths, _ = check(dut, model, sched, 8, home)
+    widths, _ = check(dut, model, sched, 8)
     changed = [next(k for k, w in enumerate(widths) if w[c] != 100) for c in range(4)]
-    assert changed == [5, 5, 5, 5]      # committed after pass 3, applied by pass 4
+    assert changed == [4, 4, 4, 4]      # committed after pass 3, applied by pass 4
 
 
 def test_no_pulse_from_reset_until_enabled_then_first_target_at_once():
-    dut = ServoController(3, W, 256, time_bits=4)
+    dut = ServoController(3, W, period_for(3), time_bits=4)
     model = ServoModel(3, W, 4)
     sched = [[("write", 0, F.SPEED, 1), ("target", 0, 150, 0), ("target", 1, 90, 0), ("commit",)],
              [], [], [("write", 0, F.ENABLE, 1)], [], [("target", 0, 160, 0), ("commit",)]]
     widths, _ = check(dut, model, sched, 10)
-    assert widths[:5] == [[0, 0, 0]] * 5
-    assert [w[0] for w in widths[5:10]] == [150, 150, 151, 152, 153]   # then speed limited
+    assert widths[:4] == [[0, 0, 0]] * 4
+    assert [w[0] for w in widths[4:9]] == [150, 150, 151, 152, 153]   # then speed limited
     assert all(w[1:] == [0, 0] for w in widths)
 
 
 def test_failsafe_fires_at_its_timeout_and_takes_each_action():
     home = [100, 100, 100]
-    dut = ServoController(3, W, 256, time_bits=4, home_at_reset=home)
+    dut = ServoController(3, W, period_for(3), time_bits=4, home_at_reset=home)
     model = ServoModel(3, W, 4, home_at_reset=home)
     timeout = 4
     setup = [("write", 0, F.FAILSAFE, A.HOLD), ("write", 1, F.FAILSAFE, A.RELAX),
@@ -195,12 +201,12 @@ def test_failsafe_fires_at_its_timeout_and_takes_each_action():
              ("commit",), ("write", 0, F.TIMEOUT, timeout)]
     sched = [setup, [("keepalive",)], [("keepalive",)]]     # last keepalive after pass 2
     got = run(dut, sched, 14)
-    exp = replay(model, sched, 14, home)
+    exp = replay(model, sched, 14)
     n = len(got["widths"])
     assert got["widths"] == exp["widths"][:n]
     assert [bool(f) for f in got["failsafe"][:n]] == exp["failsafe"][:n]
-    fired = got["failsafe"].index(1)            # flag seen at the start of this period
-    assert abs((fired - 1) - (2 + timeout)) <= 1   # the pass that fired: timeout passes later
+    fired = got["failsafe"].index(1) - 1        # the flag is seen at the next period start
+    assert abs(fired - (2 + timeout)) <= 1      # the pass that fired: timeout passes later
     at = got["widths"][fired]
     assert at[1] == 0 and got["widths"][fired - 1][1] == 100           # relaxed
     assert all(w[0] == at[0] for w in got["widths"][fired:])           # held
@@ -222,13 +228,14 @@ def test_corners_trim_and_limits_at_full_scale_and_zero():
         [("write", 0, F.SPEED, -1), ("write", 0, F.ENABLE, 2), ("write", 0, 12, 0)],
     ]
     got = run(dut, sched, 12)
-    exp = replay(model, sched, 12, [FULL, 1, 128])
+    exp = replay(model, sched, 12, dut.max_width)
     n = len(got["widths"])
     assert got["widths"] == exp["widths"][:n]
     assert got["clamped"][:n - 1] == exp["clamped"][:n - 1]
     assert got["bad"][:n - 1] == exp["bad"][:n - 1]
     assert exp["clamped"][1:6] == [2, 1, 1, 0, 1] and exp["bad"][5] == 3
-    assert got["widths"][2][:2] == [FULL, 0]     # trims clamped to full scale and to 0
+    # trims clamped to full scale (shown as the widest pulse a period holds) and to 0
+    assert dut.max_width < FULL and got["widths"][1][:2] == [dut.max_width, 0]
 
 
 def test_profile_arrives_exactly_within_limits_without_overshoot():

@@ -16,15 +16,15 @@ def expected_widths(model: ControllerModel, acked: list, pwm, first: int, last: 
 
     ``acked``: [(cycle of the answer's first start bit, request Message)] in order. The pass at
     period start ``k`` sees every request answered before it and its widths show in period
-    ``k + 1`` (the servo controller's latency). Passes run from period ``first - 1``, the first
-    after reset."""
+    ``k``, after the pass, none wider than the period holds after it (``period - lead``).
+    Passes run from period ``first``, the first after reset."""
     out, i = {}, 0
-    for k in range(first - 1, last - 1):
+    for k in range(first, last):
         s = pwm.start(k)
         while i < len(acked) and acked[i][0] < s:
             model.request(acked[i][1])
             i += 1
-        out[k + 1] = model.period()
+        out[k] = [min(w, pwm.period - pwm.lead) for w in model.period()]
     return out
 
 

@@ -29,6 +29,9 @@ class ControllerConfig(ConfigFile):
         Path of the plan JSON the controller was built from (the golden model's input).
     legs, period, clock_hz, divisor : int
         The controller's legs, PWM period (cycles), identity clock and UART divisor.
+    lead : int
+        Cycles from a period start (the servo controller's pass) to the rise of the pulses
+        (:attr:`ikseries.hdl.servo.ServoController.lead`).
     name : str
         Robot name of the identity answer.
     manifest : str
@@ -47,6 +50,7 @@ class ControllerConfig(ConfigFile):
     divisor: int
     name: str
     manifest: str
+    lead: int
     seed: int = 1
     fuzz_bytes: int = 300
     tests: tuple[str, ...] | None = None
@@ -54,7 +58,7 @@ class ControllerConfig(ConfigFile):
     RUNNER = "ikseries.sim.controller_runner.run_controller"
 
     def __post_init__(self):
-        for what in ("legs", "period", "clock_hz", "divisor", "fuzz_bytes"):
+        for what in ("legs", "period", "clock_hz", "divisor", "lead", "fuzz_bytes"):
             v = getattr(self, what)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"{what} must be a positive integer, not {v!r}")

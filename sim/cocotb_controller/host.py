@@ -42,7 +42,7 @@ class Host:
         self.tb = Timebase(dut.clk)
         self.tx = UartDriver(dut.rx, self.tb, cfg.divisor)
         self.rx = UartMonitor(dut.tx, self.tb, cfg.divisor)
-        self.pwm = PwmMonitor(dut.pwm, self.tb, self.shape.channels, cfg.period)
+        self.pwm = PwmMonitor(dut.pwm, self.tb, self.shape.channels, cfg.period, cfg.lead)
         self.acked: list = []          # [(answer start cycle, request Message)]
         self.requests: list = []       # every request the receiver should find, in order
         self.reset_at = 0

@@ -11,10 +11,11 @@ __all__ = ["PwmMonitor"]
 
 class PwmMonitor:
     """Records (cycle, pwm word) at every change of ``pwm``; the period starts are the grid
-    ``phase + k * period`` of the first rising edge seen."""
+    ``phase + k * period``, ``lead`` cycles before the first rising edge seen (the pulses of
+    a period rise ``lead`` cycles after its start, the servo controller's pass)."""
 
-    def __init__(self, pwm, tb, channels: int, period: int):
-        self.pwm, self.tb, self.channels, self.period = pwm, tb, channels, period
+    def __init__(self, pwm, tb, channels: int, period: int, lead: int):
+        self.pwm, self.tb, self.channels, self.period, self.lead = pwm, tb, channels, period, lead
         self.changes: list[tuple[int, int]] = []
 
     async def run(self) -> None:
@@ -24,11 +25,12 @@ class PwmMonitor:
 
     @property
     def phase(self) -> int | None:
-        """Cycle of the first rising edge modulo the period (None before any pulse)."""
+        """Cycle of the period start before the first rising edge, modulo the period (None
+        before any pulse)."""
         prev = 0
         for cyc, v in self.changes:
             if v & ~prev:
-                return cyc % self.period
+                return (cyc - self.lead) % self.period
             prev = v
         return None
 
@@ -41,11 +43,11 @@ class PwmMonitor:
         return (cycle - self.phase) // self.period
 
     def off_grid_rises(self) -> list[tuple[int, int]]:
-        """(cycle, channel) of every rising edge not at a period start."""
+        """(cycle, channel) of every rising edge not ``lead`` cycles after a period start."""
         bad, prev = [], 0
         for cyc, v in self.changes:
             rose = v & ~prev
-            if rose and (cyc - self.phase) % self.period:
+            if rose and (cyc - self.lead - self.phase) % self.period:
                 bad += [(cyc, c) for c in range(self.channels) if rose >> c & 1]
             prev = v
         return bad

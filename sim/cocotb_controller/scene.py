@@ -18,18 +18,19 @@ MARGIN, ROOM = 30, 20
 class Scene:
     """Targets (corners of the box around :data:`REF`), per-servo golden range and trims."""
 
-    def __init__(self, plan, legs: int, period: int):
+    def __init__(self, plan, legs: int, max_width: int):
         self.plan, self.legs = plan, legs
         self.box = [(r - h, r + h) for r, h in zip(REF, HALF)]
         g = [golden_widths(plan, t) for t in itertools.product(*self.box)] + [golden_widths(plan, REF)]
         lo = [min(w[j] for w in g) for j in range(len(plan.outputs))]
         hi = [max(w[j] for w in g) for j in range(len(plan.outputs))]
-        assert max(h - l for h, l in zip(hi, lo)) + MARGIN < period - ROOM, "target box too wide for the period"
+        assert max(h - l for h, l in zip(hi, lo)) + MARGIN < max_width - ROOM, \
+            "target box too wide for the widest pulse of the period"
         self.trims = [MARGIN - l for l in lo] * legs
-        #: set_pulse values (before the trim) whose pins stay inside the period
+        #: set_pulse values (before the trim) whose pins stay below the widest pulse
         self.pulses = [(l, h) for l, h in zip(lo, hi)] * legs
-        #: whether every golden width of the box leaves room before the period's end untrimmed
-        self.fits_untrimmed = max(hi) + ROOM < period
+        #: whether every golden width of the box leaves room below the widest pulse untrimmed
+        self.fits_untrimmed = max(hi) + ROOM < max_width
 
     def corner(self, which: int):
         """Corner ``which`` (0 .. 7) of the box."""

@@ -20,7 +20,7 @@ from ikseries.host.protocol import encode
 from ..cocotb_leg.config import ENV_CONFIG
 from .checker import first_period_with
 from .host import Host, parse_requests
-from .scene import Scene, final_checks
+from .scene import ROOM, Scene, final_checks
 from .stream import fuzz_traffic
 
 
@@ -30,7 +30,7 @@ async def _ready(dut, test: str, trims: bool | None = True):
     host = Host(dut, test)
     await host.start()
     await host.find_phase(0, host.period // 4)
-    scene = Scene(host.plan, host.config.legs, host.period)
+    scene = Scene(host.plan, host.config.legs, host.period - host.config.lead)
     if trims or (trims is None and not scene.fits_untrimmed):
         await scene.set_trims(host)
     return host, scene
@@ -63,8 +63,8 @@ async def test_identity_and_status(dut):
 
 
 async def _move_and_check(host, scene, command: str, moved: list[int], **fields):
-    """Send a move, wait, and check its channels change together exactly at the second period
-    start after its answer began (the servo controller's pass, then its load) and stay."""
+    """Send a move, wait, and check its channels change together exactly in the period after
+    its answer began (its pass, at that period's start) and stay."""
     await host.request(command, **fields)
     ack = host.acked[-1][0]
     await host.periods(4)
@@ -72,7 +72,7 @@ async def _move_and_check(host, scene, command: str, moved: list[int], **fields)
     targets = [fields["target"]] if "target" in fields else fields["targets"]
     chans = [c for leg in moved for c in _leg(host, leg)]
     want = [w for leg, t in zip(moved, targets) for w in scene.pins(leg, t)]
-    k = host.pwm.index(ack) + 2
+    k = host.pwm.index(ack) + 1
     assert first_period_with(measured, chans, want, host.pwm.index(ack) - 1) == k, (k, measured)
     assert all([measured[j][c] for c in chans] == want for j in measured if j >= k), measured
     return measured, k
@@ -105,7 +105,7 @@ async def _long_move(host, scene, setting: str, **fields):
     for c in _leg(host, 0) if "channel" in fields else [None]:
         await host.request(setting, **({**fields, "channel": c} if c is not None else fields))
     await host.request("move_leg", leg=0, target=b)
-    return scene.pins(0, a), scene.pins(0, b), host.pwm.index(host.acked[-1][0]) + 2
+    return scene.pins(0, a), scene.pins(0, b), host.pwm.index(host.acked[-1][0]) + 1
 
 
 @cocotb.test()
@@ -146,7 +146,7 @@ async def test_failsafe(dut):
     timeout = 5
     t = scene.corner(2)
     await host.request("move_legs", legs=0b11, targets=[t, t])
-    home = [w + 40 for w in scene.pins(1, t)]
+    home = [w + ROOM // 2 for w in scene.pins(1, t)]      # in the room below the widest pulse
     for c, h in zip(_leg(host, 1), home):
         await host.request("set_home", channel=c, pulse=h)
         await host.request("set_failsafe_action", channel=c, action="home")
