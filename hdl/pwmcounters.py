@@ -45,22 +45,20 @@ class ServoPWMCounters(wiring.Component):
         Cycles of the load window, ``1 <= lead < period``. Widths are shown up to
         ``max_width = period - lead`` cycles; a larger one is shown as ``max_width`` (the pulses
         end before the next window, so every counter is at rest there).
-    delay : int
-        Cycles from reset to the first period start (default 0), ``0 <= delay < period``: the
-        counter starts at phase ``period - delay``. Every pin is low until the first pulses,
-        those of the first window's loads.
 
     Attributes
     ----------
     i : In(stream.Signature(StructLayout({"width": unsigned(width_bits)})))
-        The next channel's width, ``i.ready`` high in the window only (phases ``0 .. lead - 1``;
-        not during the ``delay`` after reset): the ``k``-th transfer of a window is channel
+        The next channel's width, ``i.ready`` high in the window only (phases ``0 .. lead - 1``
+        after the first period start): the ``k``-th transfer of a window is channel
         ``k``'s; transfers beyond ``channels`` are ignored. A channel not loaded in a window
         shows no pulse in that period.
     pwm : Out(channels)
         The servo signals, registered (glitch-free); bit ``c`` is channel ``c``.
     period_start : Out(1)
-        High for one cycle when a period starts (while ``phase`` is 1).
+        High for one cycle when a period starts (while ``phase`` is 1). From reset a quiet
+        period passes first: no loads, no pulses, no ``period_start`` (the caller initialises
+        meanwhile); the first period starts ``period + 1`` cycles after reset.
     phase : Out(range(2 ** bits))
         The period counter, 0 .. ``period - 1`` (``bits`` those of ``period - 1``).
 
@@ -74,17 +72,14 @@ class ServoPWMCounters(wiring.Component):
     One width per cycle in the window; every channel once per period.
     """
 
-    def __init__(self, period: int, width_bits: int, channels: int, lead: int, delay: int = 0):
+    def __init__(self, period: int, width_bits: int, channels: int, lead: int):
         _int("period", period, 2)
         _int("width_bits", width_bits, 1)
         _int("channels", channels, 1)
         _int("lead", lead, 1)
         if lead >= period:
             raise ValueError(f"lead must be < period={period}, not {lead!r}")
-        _int("delay", delay, 0)
-        if delay >= period:
-            raise ValueError(f"delay must be < period={period}, not {delay!r}")
-        self._period, self._w, self._n, self._lead, self._delay = period, width_bits, channels, lead, delay
+        self._period, self._w, self._n, self._lead = period, width_bits, channels, lead
         super().__init__({
             "i": In(stream.Signature(data.StructLayout({"width": unsigned(width_bits)}))),
             "pwm": Out(channels), "period_start": Out(1), "phase": Out((period - 1).bit_length()),
@@ -110,21 +105,37 @@ class ServoPWMCounters(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         p, w, n, lead = self._period, self._w, self._n, self._lead
-        count = Signal(range(p), init=(p - self._delay) % p)
-        m.d.sync += count.eq(Mux(count == p - 1, 0, count + 1))
-        m.d.sync += self.period_start.eq(count == 0)
+        # the count resets to 0, like its wrap: a nonzero reset value would give some of its
+        # flip-flops a set and others a reset, control sets an iCE40 logic block cannot mix
+        # along the counter's carry chain (a start offset as the reset value cost the hexapod's
+        # iCEBreaker top its clock: 22.5 MHz against 24)
+        count = Signal(range(p))
+        # high while count is period - 1, from a register: the counter's wrap, the end of the
+        # pulses and the token's return take no comparator of the count in front of them
+        last = Signal()
+        m.d.sync += last.eq(count == (p - 2) % p)
+        with m.If(last):
+            m.d.sync += count.eq(0)
+        with m.Else():
+            m.d.sync += count.eq(count + 1)
+        # the first period after reset is quiet: it runs as pulses of nothing (no loads) and
+        # does not start (no period_start)
+        started = Signal()
+        with m.If(last):
+            m.d.sync += started.eq(1)
+        m.d.sync += self.period_start.eq((count == 0) & started)
         # the pulses' part of the period, from a register: it gates every channel's count
-        run = Signal(init=self._delay > 0)      # a delay runs as pulses of nothing: no loads
+        run = Signal(init=1)
         with m.If(count == lead - 1):
             m.d.sync += run.eq(1)
-        with m.Elif(count == p - 1):
+        with m.Elif(last):
             m.d.sync += run.eq(0)
         m.d.comb += [self.phase.eq(count), self.i.ready.eq(~run)]
         load = self.i.valid & ~run
         bus = self._bus(m, load)
         # channel k loads at the k-th transfer of the window: a token passed along on each
         token = Signal(n, init=1)
-        with m.If(count == p - 1):
+        with m.If(last):
             m.d.sync += token.eq(1)
         with m.Elif(load):
             m.d.sync += token.eq(token << 1)

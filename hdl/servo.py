@@ -139,8 +139,9 @@ class ServoController(wiring.Component):
     pins ``lead`` cycles after that pass's period start (within one period). After reset (the
     ``sync`` domain's own, not a ``ResetInserter``'s: the engine's ROM reads its first word in
     every reset cycle) the engine initialises the memory for ``init_cycles = 16 * channels + 1``
-    cycles, every pin low; the first period starts then (the first pulses, the home pose with
-    ``home_at_reset``, ``lead`` cycles later). A status answer is valid 6 cycles after its
+    cycles; every pin is low for a period, then the first period starts (``period + 1`` cycles
+    after reset; the first pulses, the home pose with ``home_at_reset``, ``lead`` cycles
+    later). A status answer is valid 6 cycles after its
     request.
 
     Throughput
@@ -187,10 +188,9 @@ class ServoController(wiring.Component):
             raise ValueError(f"period must be >= {least} cycles for {channels} channels of "
                              f"{width_bits} bits, not {period!r}")
         # a pass loads every channel once, in order, within pass_cycles of its period start
-        # (the microprogram's LOADNEXT ends each channel's path); the first period starts
-        # once the memory is initialised (period >= init + pass cycles)
-        self._bank = ServoPWMCounters(period, width_bits, channels, lead=self._engine.pass_cycles + 2,
-                                      delay=self._engine.init_cycles)
+        # (the microprogram's LOADNEXT ends each channel's path); the first period starts a
+        # period after reset, the memory initialised (period >= init + pass cycles)
+        self._bank = ServoPWMCounters(period, width_bits, channels, lead=self._engine.pass_cycles + 2)
         sig = {
             "write": In(stream.Signature(self._engine.write_layout)),
             "target": In(stream.Signature(self._engine.target_layout)),

@@ -13,24 +13,25 @@ def measure(dut, windows, load_at, periods, extra=0):
     """Send ``windows[k]`` (one width per channel, plus ``extra`` more) in period k's window,
     the j-th width at phase ``load_at(k, j)``; return per period (from a ``period_start`` to the
     next) each channel's (rise offset from the period start, high cycles), the cycles
-    ``i.ready`` was high before the first window (phase 0, the cycle before the first period
-    start), and the phases any pin was high in."""
-    out = {"pulses": [], "ready_early": 0, "high_phases": set()}
+    ``i.ready`` or a pin was high in the quiet period after reset, and the phases any pin was
+    high in."""
+    out = {"pulses": [], "ready_early": 0, "pins_early": 0, "high_phases": set()}
 
     async def bench(ctx):
-        n, started, k, sent, windowed = dut.channels, False, -1, 0, False
+        n, started, k, sent = dut.channels, False, -1, 0
         rise, high = [None] * n, [0] * n
         offset = 0
-        for _ in range((periods + 1) * dut.period + 2):
+        for cycle in range((periods + 2) * dut.period + 2):
             if ctx.get(dut.period_start):
                 if started:
                     out["pulses"].append(list(zip(rise, high)))
                 started, k, sent, offset = True, k + 1, 0, 0
                 rise, high = [None] * n, [0] * n
             phase = ctx.get(dut.phase)
-            windowed = windowed or phase == 0
-            if not windowed:
+            if cycle < dut.period:
                 out["ready_early"] += ctx.get(dut.i.ready)
+                out["pins_early"] += ctx.get(dut.pwm) != 0
+                assert not ctx.get(dut.period_start), f"period start at cycle {cycle}"
             queue = windows[k] + [0] * extra if 0 <= k < len(windows) else []
             valid = started and sent < len(queue) and load_at(k, sent) <= phase < dut.lead
             ctx.set(dut.i.valid, valid)
@@ -88,22 +89,21 @@ def test_transfers_beyond_the_channels_are_ignored():
     assert got["pulses"][:2] == [expected(dut, w) for w in windows[:2]]
 
 
-def test_delay_holds_pins_and_loads_until_the_first_period_start():
-    dut = ServoPWMCounters(period=50, width_bits=5, channels=3, lead=6, delay=17)
+def test_the_first_period_after_reset_is_quiet():
+    dut = ServoPWMCounters(period=50, width_bits=5, channels=3, lead=6)
     got = measure(dut, [[4, 0, 31], [1, 2, 3]], lambda k, j: j + 1, 2)
-    assert got["ready_early"] == 0
-    assert got["pulses"][0] == expected(dut, [4, 0, 31])
+    assert got["ready_early"] == 0 and got["pins_early"] == 0
+    assert got["pulses"][:2] == [expected(dut, [4, 0, 31]), expected(dut, [1, 2, 3])]
 
     async def first_start(ctx):
-        for cycle in range(60):
+        for cycle in range(120):
             if ctx.get(dut.period_start):
-                assert cycle == 17 + 1
+                assert cycle == dut.period + 1
                 return
-            assert ctx.get(dut.pwm) == 0
             await ctx.tick()
         raise AssertionError("no period start")
 
-    dut = ServoPWMCounters(period=50, width_bits=5, channels=3, lead=6, delay=17)
+    dut = ServoPWMCounters(period=50, width_bits=5, channels=3, lead=6)
     sim = Simulator(dut)
     sim.add_clock(1e-6)
     sim.add_testbench(first_start)
@@ -116,8 +116,6 @@ def test_delay_holds_pins_and_loads_until_the_first_period_start():
     ((10, 8, 0, 1), "channels must be an integer >= 1, not 0"),
     ((10, 8, 2, 0), "lead must be an integer >= 1, not 0"),
     ((10, 8, 2, 10), "lead must be < period=10, not 10"),
-    ((10, 8, 2, 3, -1), "delay must be an integer >= 0, not -1"),
-    ((10, 8, 2, 3, 10), "delay must be < period=10, not 10"),
     ((10, 8, 2, True), "lead must be an integer >= 1, not True"),
 ])
 def test_parameter_errors(args, msg):
