@@ -107,6 +107,9 @@ class BoardBuild:
     bitstream: BitstreamResult
     #: the controller's IK core: {"architecture", "legs", "latency_cycles"}
     core: dict
+    #: the servo pins' timing: {"lead_cycles": pulses rise this long after a period start,
+    #: "max_width_cycles": the widest pulse shown}
+    pulses: dict
 
 
 def board_build(robot, plan, spec: BoardSpec, module: str, manifest_text: str, outdir, progress) -> BoardBuild:
@@ -132,4 +135,5 @@ def board_build(robot, plan, spec: BoardSpec, module: str, manifest_text: str, o
         raise BoardBuildError(str(e)) from None
     progress(f"bitstream {bits.path.name}: Fmax {bits.fmax_mhz:g} MHz against {spec.clock_hz / 1e6:g} MHz"
              f" (nextpnr seed {bits.seed})")
-    return BoardBuild(spec, name, text, bits, core)
+    pulses = {"lead_cycles": ctl.servo.lead, "max_width_cycles": ctl.servo.max_width}
+    return BoardBuild(spec, name, text, bits, core, pulses)

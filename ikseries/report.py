@@ -341,7 +341,7 @@ def _board_record(b, robot) -> dict:
     bits = b.bitstream
     return {**b.spec.record(robot), "controller_verilog": f"{b.module}.v", "controller_module": b.module,
             "bitstream": f"bitstream/{bits.path.name}", "fmax_mhz": bits.fmax_mhz, "meets_clock": bits.meets_clock,
-            "utilisation": bits.utilisation, "controller_core": b.core}
+            "utilisation": bits.utilisation, "controller_core": b.core, "servo_pulses": b.pulses}
 
 
 def _controller_core(b: dict) -> list[str]:
@@ -352,6 +352,16 @@ def _controller_core(b: dict) -> list[str]:
             f"leg{'s' if core['legs'] > 1 else ''} ({core['latency_cycles']} cycles a leg), whatever the "
             "core built above: requests arrive at the line rate, thousands of cycles apart, so a faster "
             "core would only cost area.", ""]
+
+
+def _servo_pulses(b: dict) -> list[str]:
+    p, hz = b.get("servo_pulses"), b["clock"]["achieved_hz"]
+    if not p:
+        return []
+    return [f"Servo pulses: every period the servo controller updates all channels in one pass, then every "
+            f"enabled channel's pulse rises at once, {p['lead_cycles']:,} cycles ({p['lead_cycles'] / hz * 1e6:.1f} µs) "
+            f"after the period start; a pulse is at most {p['max_width_cycles']:,} cycles "
+            f"({p['max_width_cycles'] / hz * 1e6:.1f} µs) wide.", ""]
 
 
 def _board_section(r: dict) -> list[str]:
@@ -365,7 +375,7 @@ def _board_section(r: dict) -> list[str]:
            f"{clock['achieved_hz'] / 1e6:.9g} MHz from the {clock['oscillator_hz'] / 1e6:g} MHz oscillator"
            f"{'' if clock['primitive'] is None else ' through ' + clock['primitive']}; Fmax of the whole top {b['fmax_mhz']:g} MHz "
            f"({'meets' if b['meets_clock'] else 'misses'} the clock). Host link {b['baud']:,} baud "
-           f"(UART divisor {b['uart_divisor']}).", "", *_controller_core(b),
+           f"(UART divisor {b['uart_divisor']}).", "", *_controller_core(b), *_servo_pulses(b),
            _row(["resource", "used", "available"]), _row(["---"] * 3),
            *(_row([k, str(v["used"]), str(v["available"])]) for k, v in b["utilisation"].items()), "",
            "Pin map:", "", _row(["pin", "package pin", "channel", "leg", "servo"]), _row(["---"] * 5),

@@ -31,6 +31,9 @@ def test_manifest_report_and_bitstream(board_build):
     assert (board_build / "hexapod_core_controller.v").read_text().count("module hexapod_core_controller(") == 1
     md = (board_build / "report.md").read_text()
     assert "## Board" in md and "| gpio_0:0+ |" in md and f"Fmax of the whole top {rep['board']['fmax_mhz']:g} MHz" in md
+    p = rep["board"]["servo_pulses"]
+    assert p["lead_cycles"] + p["max_width_cycles"] == man["pwm"][0]["period_cycles"]
+    assert f"rises at once, {p['lead_cycles']:,} cycles" in md
 
 
 def test_program_takes_the_build_directory(board_build, capsys, monkeypatch):
