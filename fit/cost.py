@@ -22,12 +22,13 @@ The structure search bounds its effort by multiplications whatever the model
 from __future__ import annotations
 
 import abc
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 from ..constraints.devices import Part, family, family_primitives, part
 from .ops import OPS
-from .plan import Plan, lut_groups
+from .plan import Plan, lut_groups, stored_field
 
 __all__ = ["CostModel", "MultiplierCount", "DeviceCost", "Usage", "DEFAULT_COST_MODEL", "COSTS"]
 
@@ -39,6 +40,10 @@ class CostModel(abc.ABC):
     name: ClassVar[str]
     #: what the fit chooses per servo, in the plan's method record ("with the fewest multipliers")
     objective: ClassVar[str]
+    #: the price depends on the coefficients' values (the widths of tables and operands), not
+    #: only on the operations: the search then reprices its finalists with their fitted
+    #: coefficients (:func:`ikseries.fit.search.fit_servo`)
+    prices_values: ClassVar[bool] = False
 
     @abc.abstractmethod
     def cost(self, plan, output: str) -> float:
@@ -90,6 +95,12 @@ class Usage:
         the fabric and, on a shared multiplier, its operand multiplexers.
     ff : int
         Flip-flops of each registered node's own register (delay registers not counted).
+    slow_tables : int
+        Tables in the fabric deeper than one logic level reads
+        (:attr:`~ikseries.constraints.facts.Family.rom_level_words`) on a family with a table
+        primitive, shallower than its ``min_depth``: synthesis builds each as a LUT ROM of
+        several levels or on a block RAM read without its output register, whichever it
+        prefers at the table's width.
     """
     products: int = 0
     dsp: int = 0
@@ -97,6 +108,7 @@ class Usage:
     ports: int = 0
     lut: int = 0
     ff: int = 0
+    slow_tables: int = 0
 
 
 @dataclass(frozen=True)
@@ -154,6 +166,7 @@ class DeviceCost(CostModel):
     part: str
     interval: int = 1
     name: ClassVar[str] = "device"
+    prices_values: ClassVar[bool] = True
     objective: ClassVar[str] = "taking the least of the device (DSP blocks, block RAM, LUTs, FFs)"
 
     def __post_init__(self):
@@ -182,6 +195,8 @@ class DeviceCost(CostModel):
 
     def cost(self, plan, output: str) -> float:
         u = self.usage(plan, output)
+        if u.slow_tables and self.interval == 1:
+            return math.inf    # at one target per clock the clock is the rate: see the class docstring
         cap = part(self.part).capacities
         fabric = u.lut / cap["LUT"] + u.ff / cap["FF"] + (u.bram / cap["BRAM"] if u.bram else 0.0)
         return u.dsp / self.interval + fabric * cap["DSP"]
@@ -206,24 +221,26 @@ class DeviceCost(CostModel):
                 lut += n.width          # one LUT per bit (a sum LUT beside a carry cell, or a CCU2C half)
             elif n.op == "clamp":
                 lut += 3 * n.width      # two comparisons and the selection
-        bram, ports, table_lut, table_ff = self._tables(plan, cone)
-        return Usage(products, dsp, bram, ports, lut + table_lut, ff + table_ff)
+        bram, table_lut, table_ff, slow = self._tables(plan, cone)
+        return Usage(products, dsp, bram, bram, lut + table_lut, ff + table_ff, slow)
 
     def _tables(self, plan: Plan, cone: set) -> tuple[int, int, int, int]:
-        """(block RAM blocks, read ports, LUTs, FFs) of the tables read in ``cone``: per index,
-        one ROM of its ``lut`` nodes side by side, ``index.hi + 1`` words."""
-        prim, bram, lut, ff = self._table_primitive, 0, 0, 0
+        """(block RAM blocks, LUTs, FFs, slow tables (:attr:`Usage.slow_tables`)) of the tables
+        read in ``cone``: per index, one ROM of its ``lut`` nodes side by side, ``index.hi + 1``
+        words of the bits the evaluators store (:func:`~ikseries.fit.plan.stored_field`)."""
+        prim, fam, bram, lut, ff, slow = self._table_primitive, self._family, 0, 0, 0, 0
         for index, luts in lut_groups(plan).items():
             luts = [i for i in luts if i in cone]
             if not luts:
                 continue
-            depth, width = plan.nodes[index].hi + 1, sum(plan.nodes[i].width for i in luts)
+            depth, width = plan.nodes[index].hi + 1, sum(stored_field(plan, i)[0] for i in luts)
             if prim is not None and prim.min_depth <= depth <= prim.shapes[-1][1]:
                 bram += prim.blocks(depth, width)      # its output register is in the block
             else:
-                lut += width * -(-depth // (1 << self._family.lut_inputs))
+                lut += width * -(-depth // (1 << fam.lut_inputs))
                 ff += width
-        return bram, bram, lut, ff
+                slow += prim is not None and fam.rom_level_words < depth < prim.min_depth
+        return bram, lut, ff, slow
 
 
 DEFAULT_COST_MODEL = MultiplierCount()

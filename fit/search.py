@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .context import FitError
+from .formats import fitted_cost
 from .lowering import structure_cost, structure_multipliers
 from .minimax import minimax, region_ids
 from .polyfit import Basis
@@ -252,8 +253,10 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     variable sets with a computed variable (:func:`_feature_bases`) are then tried on cells of
     it, alone or on a grid with another variable (:func:`_feature_grid_sets`). The ``FINALISTS`` cheapest structures
     found (those within ``FINALIST_MARGIN`` of the cheapest) are each pruned (a cheaper one may
-    prune less), the fewest multipliers after pruning winning (on a tie the cheaper before). The
-    candidates of one kind share their pool (and its monomial columns).
+    prune less), the cheapest after pruning winning (on a tie the cheaper before); with a cost
+    model that prices coefficient values (:class:`~.cost.DeviceCost`) the finalists are priced
+    again with their fitted coefficients (:func:`_repriced`). The candidates of one kind share
+    their pool (and its monomial columns).
     """
     found: list = []           # (cost, ServoFit, states, Cells) of every new best, costs falling
     pools: dict = {}
@@ -304,7 +307,25 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     pools.clear()
     finalists = [e for e in found[::-1][:FINALISTS] if e[0] <= found[-1][0] + FINALIST_MARGIN]
     pruned = [_settle_and_prune(ctx, entry, budget_ticks, progress) for entry in finalists]
-    return min(pruned, key=lambda p: p[0])[1]
+    return min(_repriced(ctx, pruned, progress), key=lambda p: p[0])[1]
+
+
+def _repriced(ctx, pruned: list, progress) -> list:
+    """The pruned finalists (cost, ServoFit), each at its cost with its fitted coefficients
+    (:func:`~.formats.fitted_cost`) when the cost model prices their values
+    (:attr:`~.cost.CostModel.prices_values`), the search's cost breaking ties: the search priced
+    them on stand-in coefficients, and near-ties there may be ordered the other way with the
+    real ones. Unchanged (no format chosen, no plan built) for a model that counts operations."""
+    if not ctx.cost_model.prices_values or len(pruned) < 2:
+        return pruned
+    out = []
+    for cost, sf in pruned:
+        fitted = fitted_cost(ctx, sf)
+        why = "" if fitted < float("inf") else " (no format meets the quantization budget, or not at the rate)"
+        progress(f"  {sf.name}: {sf.features.label()}, {len(sf.poly)} terms, with its fitted coefficients "
+                 f"{ctx.cost_model.label(fitted)}{why}")
+        out.append(((fitted, cost), sf))
+    return out
 
 
 def _affordable(ctx, fs, terms, name: str, found: list) -> float | None:
