@@ -243,11 +243,11 @@ class _Values(MultiplierCount):
 
 
 @pytest.mark.parametrize("model,chosen", [(MultiplierCount(), "a"), (_Values(), "b")])
-def test_the_search_reprices_its_finalists_with_their_fitted_coefficients(monkeypatch, model, chosen):
-    """A model that prices coefficient values decides between the pruned finalists by their
-    prices with the fitted coefficients (:func:`ikseries.fit.formats.fitted_cost`), the
-    search's price breaking ties; the multiplier count keeps the search's price and builds no
-    fitted plan."""
+def test_the_search_ranks_structures_by_their_fitted_coefficients(monkeypatch, model, chosen):
+    """A model that prices coefficient values ranks the structures found (for the finals) and
+    the pruned finalists by their prices with the fitted coefficients
+    (:func:`ikseries.fit.formats.fitted_cost`), in their order on a tie; the multiplier count
+    keeps the search's cost and builds no fitted plan."""
     import types
     import ikseries.fit.search as search
     calls = []
@@ -259,8 +259,10 @@ def test_the_search_reprices_its_finalists_with_their_fitted_coefficients(monkey
     ctx = types.SimpleNamespace(cost_model=model)
     sfs = {n: types.SimpleNamespace(name=n, features=types.SimpleNamespace(label=lambda: "f"), poly={})
            for n in "abc"}
-    pruned = search._repriced(ctx, [(10.0, sfs["a"]), (10.2, sfs["b"]), (10.4, sfs["c"])], lambda msg: None)
-    assert min(pruned, key=lambda p: p[0])[1].name == chosen
+    entries = [(10.0, sfs["a"]), (10.2, sfs["b"]), (10.4, sfs["c"])]
+    ranked = search._ranked(ctx, entries, lambda msg: None)
+    assert [e[1].name for _, e in ranked] == (["a", "b", "c"] if chosen == "a" else ["b", "c", "a"])
+    assert ranked[0][1] is next(e for e in entries if e[1].name == chosen)     # the entry itself, its cost kept
     assert calls == ([] if chosen == "a" else ["a", "b", "c"])
 
 
