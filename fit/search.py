@@ -321,7 +321,7 @@ def _ranked(ctx, entries: list, progress) -> list:
     model: 2 x 3 cells in r x theta 64.7 against 3 cells in z 70.0 on stand-ins, 88.8 against
     76.0 fitted). No format chosen, no plan built for a model that counts operations."""
     if not ctx.cost_model.prices_values or len(entries) < 2:
-        return [(e[0], e) for e in entries]
+        return sorted(((e[0], e) for e in entries), key=lambda p: p[0])
     out = []
     for entry in entries:
         sf = entry[1]
