@@ -261,6 +261,7 @@ def fit_servo(ctx, name, candidates, sets, raw, budget_ticks, progress) -> Servo
     """
     found: list = []           # (cost, ServoFit, states, Cells) of every new best, costs falling
     pools: dict = {}
+    ctx.format_hints.pop(name, None)   # prices follow this search alone, in any process (jobs)
 
     def search(fs, data):
         for deg in range(1, MAX_DEGREE + 1):

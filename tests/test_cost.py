@@ -268,8 +268,9 @@ def test_the_search_ranks_structures_by_their_fitted_coefficients(monkeypatch, m
 
 def test_fitted_cost_prices_the_fitted_coefficients_in_their_narrowest_formats(small_robot, small_fitted):
     """The fitted price is the model's price of the servo's own plan in the narrowest formats
-    that keep its certified rounding within the quantization budget; with no such format
-    (a budget no rounding meets) it is infinite."""
+    that keep its certified rounding within the quantization budget, whatever feature precision
+    the servo's last price left as the first to try; with no such format (a budget no rounding
+    meets) it is infinite."""
     from ikseries.fit.context import FitContext
     from ikseries.fit.formats import fitted_cost, narrowest_formats
     from ikseries.fit.lowering import trial_plan
@@ -279,5 +280,9 @@ def test_fitted_cost_prices_the_fitted_coefficients_in_their_narrowest_formats(s
     fv, (frac,) = narrowest_formats(ctx, [sf])
     plan = trial_plan(ctx, dataclasses.replace(sf, frac=frac), fv)
     assert fitted_cost(ctx, sf) == model.cost(plan, sf.name) < float("inf")
+    assert ctx.format_hints == {sf.name: fv}
+    for hint in (fv, fv + 5, fv - 3, 8):    # the last one's, a wider one's, a narrower one's: the same formats
+        ctx.format_hints[sf.name] = hint
+        assert fitted_cost(ctx, sf) == model.cost(plan, sf.name) and ctx.format_hints[sf.name] == fv
     tight = dataclasses.replace(ctx, budget=dataclasses.replace(ctx.budget, quantization=1e-12))
     assert narrowest_formats(tight, [sf]) is None and fitted_cost(tight, sf) == float("inf")
