@@ -168,15 +168,16 @@ class DeviceCost(CostModel):
     chose for s2 a 16 x 6 grid in rho2 x z (126-word tables, one 20-bit table on a DP16KD read
     without its output register, the critical path) over 32 x 21 cells: 24 DSP, 10 EBR, 1151
     LUT, 1933 FF, Fmax 147.3 / 149.9 / 149.1 MHz (seeds 1-3), 20 cycles, 134.1 ns. Now it
-    chooses the multiplier count's plan, node for node: 24 DSP, 12 EBR, 691 LUT, 1737 FF, seed
-    1 router past 300 s, 227.1 / 217.3 MHz, 20 cycles, 92.0 ns, the default's figures. On the
-    default cylinder-leg (exact products, ``python bench/fit_benchmark.py cylinder-leg --cost
-    device``: pipelined, the iCE40UP5K's model) its plan took 58 products, 173 SB_MAC16
-    blocks, 6397 LUTs and 3916 FFs by this model against the multiplier count's 57, 173, 6391
-    and 3841 (before: 60, 197, 7327, 4109), in 13.2 s of CPU against 6.0 (before: 14.8);
-    fitted (uncertified) with ``hardware.dsp = "ecp5"``, 60 products and 105 ECP5 blocks
-    against 57 and 103. It ties at best: the per-servo formats and the pruning (on stand-in costs) are not the whole plan's.
-    So it is not the default (``hardware.cost = "multipliers"``).
+    chooses the multiplier count's plan, node for node: 24 DSP, 12 EBR, 691 LUT, 1737 FF, seed 1
+    router past 300 s, 227.1 / 217.3 MHz, 20 cycles, 92.0 ns, the default's figures (the fit,
+    certified: 49.8 s of CPU against 39.8). On the default cylinder-leg (exact products,
+    ``python bench/fit_benchmark.py cylinder-leg --cost device``: pipelined, the iCE40UP5K's
+    model) its plan took 58 products, 173 SB_MAC16 blocks, 6397 LUTs and 3916 FFs by this model
+    against the multiplier count's 57, 173, 6391 and 3841 (before: 60, 197, 7327, 4109), in
+    13.2-14.2 s of CPU against 6.0-6.8 (another engineer's runs beside it; before: 14.8); fitted
+    (uncertified) with ``hardware.dsp = "ecp5"``, 60 products and 105 ECP5 blocks against 57 and
+    103. It ties at best: the per-servo formats and the pruning (on stand-in costs) are not the
+    whole plan's. So it is not the default (``hardware.cost = "multipliers"``).
 
     Parameters
     ----------
