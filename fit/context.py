@@ -79,6 +79,9 @@ class FitContext:
     trial_builders : dict
         Per (feature bits, lowering) a plan builder holding the coordinate stage, on which
         :func:`ikseries.fit.lowering.trial_plan` builds one servo's plan at a time.
+    format_hints : dict
+        Per servo the feature precision of the last fit priced with its coefficients
+        (:func:`ikseries.fit.formats.fitted_cost`), tried first for the next.
     """
     robot: object
     inputs: tuple[PlanInput, ...]
@@ -89,6 +92,7 @@ class FitContext:
     cost_model: CostModel = DEFAULT_COST_MODEL
     structure_costs: dict = field(default_factory=dict, compare=False, repr=False)
     trial_builders: dict = field(default_factory=dict, compare=False, repr=False)
+    format_hints: dict = field(default_factory=dict, compare=False, repr=False)
 
     @classmethod
     def for_robot(cls, robot, quantization_share: float, cost_model: CostModel = DEFAULT_COST_MODEL

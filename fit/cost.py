@@ -5,7 +5,9 @@ cheapest that meets the approximation budget. "Cheapest" is asked of a :class:`C
 an architecture offers (:meth:`ikseries.hdl.architectures.Architecture.cost_model`): it is the
 architecture that knows what a product, an addition or a table read costs it. The model prices
 a trial plan holding the one servo (its coordinate stage included), built from the structure
-alone before any coefficient is fitted.
+alone before any coefficient is fitted; a model whose price depends on the coefficients' values
+(:attr:`CostModel.prices_values`) prices the structures found again with their fitted
+coefficients (:func:`ikseries.fit.formats.fitted_cost`).
 
 A cost model that changes which structure is chosen changes the fitted plan, so it is part of
 the fit. Every architecture offers :class:`MultiplierCount` by default, which the fit's cache
@@ -22,12 +24,13 @@ The structure search bounds its effort by multiplications whatever the model
 from __future__ import annotations
 
 import abc
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
 from ..constraints.devices import Part, family, family_primitives, part
 from .ops import OPS
-from .plan import Plan, lut_groups
+from .plan import Plan, lut_groups, stored_field
 
 __all__ = ["CostModel", "MultiplierCount", "DeviceCost", "Usage", "DEFAULT_COST_MODEL", "COSTS"]
 
@@ -39,6 +42,10 @@ class CostModel(abc.ABC):
     name: ClassVar[str]
     #: what the fit chooses per servo, in the plan's method record ("with the fewest multipliers")
     objective: ClassVar[str]
+    #: the price depends on the coefficients' values (the widths of tables and operands), not
+    #: only on the operations: the search then reprices its finalists with their fitted
+    #: coefficients (:func:`ikseries.fit.search.fit_servo`)
+    prices_values: ClassVar[bool] = False
 
     @abc.abstractmethod
     def cost(self, plan, output: str) -> float:
@@ -90,6 +97,12 @@ class Usage:
         the fabric and, on a shared multiplier, its operand multiplexers.
     ff : int
         Flip-flops of each registered node's own register (delay registers not counted).
+    slow_tables : int
+        Tables in the fabric deeper than one logic level reads
+        (:attr:`~ikseries.constraints.facts.Family.rom_level_words`) on a family with a table
+        primitive, shallower than its ``min_depth``: synthesis builds each as a LUT ROM of
+        several levels or on a block RAM read without its output register, whichever it
+        prefers at the table's width.
     """
     products: int = 0
     dsp: int = 0
@@ -97,6 +110,7 @@ class Usage:
     ports: int = 0
     lut: int = 0
     ff: int = 0
+    slow_tables: int = 0
 
 
 @dataclass(frozen=True)
@@ -129,18 +143,41 @@ class DeviceCost(CostModel):
     ``ice40/cells_sim.v`` model leaves its contents undefined at power-up), so a ROM there
     needs a loader writing it after configuration, which no core has.
 
-    It prices area, not timing: a table moved from block RAM to a LUT ROM, or a longer
-    path, costs it nothing in clock rate. Measured on the ECP5 one-per-clock core
-    (``bench/pareto.py --designs modulo1dt --cost device``), it chose for one servo a grid of
-    16 x 6 cells (96-word tables: LUT ROMs) over one of 32 x 21 (block RAM): 3 EBR fewer (10),
-    472 LUTs more, Fmax 110.9 instead of 198.8 MHz, latency 171 instead of 96 ns. And the fitter
-    prices a structure on its trial plan (:func:`ikseries.fit.lowering.structure_cost`:
-    coefficients at 16 fractional bits, before any is fitted), whose operand widths are not the
-    fitted plan's: with exact products (``fit.products = "exact"``) the fitted coefficients are
-    wider and take more blocks than priced. On the default cylinder-leg the device model's plan
-    (one servo on another structure, priced 0.1 % cheaper on its trial plan) took more of the
-    part than the multiplier count's: 60 products, 112 ECP5 DSP blocks and 4376 LUTs against
-    57, 103 and 4088. So it is not the default (``hardware.cost = "multipliers"``).
+    Timing at the rate asked: at ``interval`` 1 the clock is the rate, and a table read from
+    the fabric is one pipeline stage. One logic level reads a table of up to the family's
+    :attr:`~ikseries.constraints.facts.Family.rom_level_words` (the ECP5's LUT4s through PFUMX
+    and L6MUX21: 64 words); a deeper one shallower than the table primitive's ``min_depth``
+    stays out of the modulo core's registered block RAMs, and Yosys builds it either as LUTs of
+    several levels or on a DP16KD read without its output register (clock-to-out 5.6 ns
+    against 0.97), as it prefers at the table's width (see ``DP16KD_MIN_DEPTH``). Such a
+    structure (:attr:`Usage.slow_tables`) is priced infinite at interval 1 on a family with a
+    table primitive: it is chosen only if nothing else fits. At a longer interval, and on a
+    family without a table primitive, tables are priced as area only, and so are the
+    pipelined core's block RAM reads, which no core registers.
+
+    Widths: the search prices a structure on its trial plan (:func:`ikseries.fit.lowering.structure_cost`:
+    stand-in coefficients at 16 fractional bits, before any is fitted), whose operand and table
+    widths are not the fitted plan's. As the model prices values (:attr:`prices_values`), the
+    search ranks every structure it found, and its pruned finalists, by their prices with their
+    fitted coefficients in the narrowest formats for the servo alone
+    (:func:`ikseries.fit.formats.fitted_cost`); tables are priced at the bits their ROM stores
+    (:func:`~ikseries.fit.plan.stored_field`).
+
+    Measured (fit17). The ECP5 one-per-clock core, ``python bench/pareto.py --designs modulo1dt
+    --devices ecp5 --seeds 1,2,3 --jobs 1 --timeout 300 --cost device``: before these rules it
+    chose for s2 a 16 x 6 grid in rho2 x z (126-word tables, one 20-bit table on a DP16KD read
+    without its output register, the critical path) over 32 x 21 cells: 24 DSP, 10 EBR, 1151
+    LUT, 1933 FF, Fmax 147.3 / 149.9 / 149.1 MHz (seeds 1-3), 20 cycles, 134.1 ns. Now it
+    chooses the multiplier count's plan, node for node: 24 DSP, 12 EBR, 691 LUT, 1737 FF, seed 1
+    router past 300 s, 227.1 / 217.3 MHz, 20 cycles, 92.0 ns, the default's figures (the fit,
+    certified: 49.8 s of CPU against 39.8). On the default cylinder-leg (exact products,
+    ``python bench/fit_benchmark.py cylinder-leg --cost device``: pipelined, the iCE40UP5K's
+    model) its plan took 58 products, 173 SB_MAC16 blocks, 6397 LUTs and 3916 FFs by this model
+    against the multiplier count's 57, 173, 6391 and 3841 (before: 60, 197, 7327, 4109), in
+    13.2-14.2 s of CPU against 6.0-6.8 (another engineer's runs beside it; before: 14.8); fitted
+    (uncertified) with ``hardware.dsp = "ecp5"``, 60 products and 105 ECP5 blocks against 57 and
+    103. It ties at best: the per-servo formats and the pruning (on stand-in costs) are not the
+    whole plan's. So it is not the default (``hardware.cost = "multipliers"``).
 
     Parameters
     ----------
@@ -154,6 +191,7 @@ class DeviceCost(CostModel):
     part: str
     interval: int = 1
     name: ClassVar[str] = "device"
+    prices_values: ClassVar[bool] = True
     objective: ClassVar[str] = "taking the least of the device (DSP blocks, block RAM, LUTs, FFs)"
 
     def __post_init__(self):
@@ -182,6 +220,8 @@ class DeviceCost(CostModel):
 
     def cost(self, plan, output: str) -> float:
         u = self.usage(plan, output)
+        if u.slow_tables and self.interval == 1:
+            return math.inf    # at one target per clock the clock is the rate: see the class docstring
         cap = part(self.part).capacities
         fabric = u.lut / cap["LUT"] + u.ff / cap["FF"] + (u.bram / cap["BRAM"] if u.bram else 0.0)
         return u.dsp / self.interval + fabric * cap["DSP"]
@@ -206,24 +246,26 @@ class DeviceCost(CostModel):
                 lut += n.width          # one LUT per bit (a sum LUT beside a carry cell, or a CCU2C half)
             elif n.op == "clamp":
                 lut += 3 * n.width      # two comparisons and the selection
-        bram, ports, table_lut, table_ff = self._tables(plan, cone)
-        return Usage(products, dsp, bram, ports, lut + table_lut, ff + table_ff)
+        bram, table_lut, table_ff, slow = self._tables(plan, cone)
+        return Usage(products, dsp, bram, bram, lut + table_lut, ff + table_ff, slow)
 
     def _tables(self, plan: Plan, cone: set) -> tuple[int, int, int, int]:
-        """(block RAM blocks, read ports, LUTs, FFs) of the tables read in ``cone``: per index,
-        one ROM of its ``lut`` nodes side by side, ``index.hi + 1`` words."""
-        prim, bram, lut, ff = self._table_primitive, 0, 0, 0
+        """(block RAM blocks, LUTs, FFs, slow tables (:attr:`Usage.slow_tables`)) of the tables
+        read in ``cone``: per index, one ROM of its ``lut`` nodes side by side, ``index.hi + 1``
+        words of the bits the evaluators store (:func:`~ikseries.fit.plan.stored_field`)."""
+        prim, fam, bram, lut, ff, slow = self._table_primitive, self._family, 0, 0, 0, 0
         for index, luts in lut_groups(plan).items():
             luts = [i for i in luts if i in cone]
             if not luts:
                 continue
-            depth, width = plan.nodes[index].hi + 1, sum(plan.nodes[i].width for i in luts)
+            depth, width = plan.nodes[index].hi + 1, sum(stored_field(plan, i)[0] for i in luts)
             if prim is not None and prim.min_depth <= depth <= prim.shapes[-1][1]:
                 bram += prim.blocks(depth, width)      # its output register is in the block
             else:
-                lut += width * -(-depth // (1 << self._family.lut_inputs))
+                lut += width * -(-depth // (1 << fam.lut_inputs))
                 ff += width
-        return bram, bram, lut, ff
+                slow += prim is not None and fam.rom_level_words < depth < prim.min_depth
+        return bram, lut, ff, slow
 
 
 DEFAULT_COST_MODEL = MultiplierCount()

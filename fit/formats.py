@@ -13,7 +13,8 @@ from .lowering import trial_plan
 from .minimax import subset_minimax
 from .structure import ServoFit
 
-__all__ = ["round_and_refit", "requantize", "choose_formats", "narrowest_frac", "MAX_FRAC"]
+__all__ = ["round_and_refit", "requantize", "choose_formats", "narrowest_formats", "narrowest_frac", "fitted_cost",
+           "FEATURE_BITS", "MAX_FRAC"]
 
 #: the most fractional bits an accumulator may have
 MAX_FRAC = 24
@@ -114,11 +115,16 @@ def narrowest_frac(bound, quant: float, top: int = MAX_FRAC) -> int | None:
     return lo
 
 
-def choose_formats(ctx, fits: list[ServoFit], progress) -> tuple[int, list[ServoFit]]:
-    """Narrowest feature precision ``fv`` and per-servo accumulator precision meeting the
-    certified quantization budget: returns ``fv`` and the fits with their ``frac`` set."""
+#: the feature precisions tried, narrowest first
+FEATURE_BITS = range(8, 40)
+
+
+def narrowest_formats(ctx, fits: list[ServoFit], fvs=FEATURE_BITS) -> tuple[int, list[int]] | None:
+    """``(fv, fracs)``: the narrowest feature precision of ``fvs`` at which every servo of
+    ``fits`` has an accumulator precision meeting the certified quantization budget, and those
+    precisions (:func:`narrowest_frac`); None if none has."""
     quant = ctx.budget.quantization
-    for fv in range(8, 40):
+    for fv in fvs:
         fracs = []
         for sf in fits:
             frac = narrowest_frac(lambda f: _rounding_pu(ctx, dataclasses.replace(sf, frac=f), fv), quant)
@@ -126,9 +132,46 @@ def choose_formats(ctx, fits: list[ServoFit], progress) -> tuple[int, list[Servo
                 break
             fracs.append(frac)
         if len(fracs) == len(fits):
-            fits = [dataclasses.replace(sf, frac=fr) for sf, fr in zip(fits, fracs)]
-            progress(f"  formats: features {fv} fractional bits, accumulators "
-                     + ", ".join(f"{sf.name} {sf.frac}" for sf in fits))
-            return fv, fits
-    raise FormatError(f"no fixed-point format keeps the certified rounding error within "
-                      f"{quant:g} pu in 63-bit intermediates")
+            return fv, fracs
+    return None
+
+
+def choose_formats(ctx, fits: list[ServoFit], progress) -> tuple[int, list[ServoFit]]:
+    """Narrowest feature precision ``fv`` and per-servo accumulator precision meeting the
+    certified quantization budget: returns ``fv`` and the fits with their ``frac`` set."""
+    formats = narrowest_formats(ctx, fits)
+    if formats is None:
+        raise FormatError(f"no fixed-point format keeps the certified rounding error within "
+                          f"{ctx.budget.quantization:g} pu in 63-bit intermediates")
+    fv, fracs = formats
+    fits = [dataclasses.replace(sf, frac=fr) for sf, fr in zip(fits, fracs)]
+    progress(f"  formats: features {fv} fractional bits, accumulators "
+             + ", ".join(f"{sf.name} {sf.frac}" for sf in fits))
+    return fv, fits
+
+
+def fitted_cost(ctx, sf: ServoFit) -> float:
+    """Cost (``ctx.cost_model``) of ``sf`` with its own fitted coefficients: its plan alone
+    (:func:`~.lowering.trial_plan`) in the narrowest formats that keep its certified rounding
+    within the quantization budget (:func:`narrowest_formats` of ``sf`` alone; the fit chooses
+    them over every servo, so they may end a bit wider), so the coefficient tables and
+    operands are as wide as the fitted values make them, not the search's stand-ins
+    (:func:`~.lowering.structure_cost`). Infinite if no format fits.
+
+    The search prices many fits of one servo, whose formats are alike: the feature precision
+    found for the servo last (``ctx.format_hints``) is tried first, and taken if one bit fewer
+    fails (the rounding bound falls as the precision grows); else every one, narrowest first.
+    Each servo's hint is its own, dropped when its search starts
+    (:func:`~.search.fit_servo`), so the price does not depend on the other servos' searches
+    nor on an earlier attempt's (nor on ``jobs``)."""
+    hint = ctx.format_hints.get(sf.name)
+    if hint is not None and (hint == FEATURE_BITS.start or narrowest_formats(ctx, [sf], (hint - 1,)) is None):
+        formats = narrowest_formats(ctx, [sf], range(hint, FEATURE_BITS.stop))
+    else:
+        formats = narrowest_formats(ctx, [sf])
+    if formats is None:
+        return float("inf")
+    fv, (frac,) = formats
+    ctx.format_hints[sf.name] = fv
+    plan = trial_plan(ctx, dataclasses.replace(sf, frac=frac), fv)
+    return ctx.cost_model.cost(plan, sf.name)

@@ -129,9 +129,11 @@ def _priced(ctx, fs: FeatureSet, terms: list, servo: str | None) -> tuple[float,
 
 
 def _trial_cost(ctx, fs: FeatureSet, terms: list, limits) -> tuple[float, int]:
-    # distinct coefficients: equal ones would share Horner sub-expressions
+    # distinct coefficients: equal ones would share Horner sub-expressions; in cells, signs
+    # alternating from cell to cell, so that every bit of a table's entries varies and is stored
+    # (ikseries.fit.plan.stored_field), as wide as the same magnitude of either sign takes
     cells = fs.cut.cells if fs.cut else 0
-    sf = ServoFit("cost", fs, 0, {e: (1.0 + k / 4096,) * cells if cells else 1.0 + k / 4096
-                                  for k, e in enumerate(terms)}, 0.0, frac=16)
+    sf = ServoFit("cost", fs, 0, {e: tuple((-1) ** j * (1.0 + k / 4096) for j in range(cells)) if cells
+                                  else 1.0 + k / 4096 for k, e in enumerate(terms)}, 0.0, frac=16)
     plan = trial_plan(ctx, sf, 16, mixed=False, limits={"cost": limits})
     return ctx.cost_model.cost(plan, "cost"), output_multipliers(plan)["cost"]

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from .ops import OPS, operation
 
 __all__ = ["quantize", "extend_stages", "under", "Node", "PlanInput", "PlanOutput", "Plan", "PlanBuilder", "bits_for", "lut_groups",
-           "signed_bits", "PLAN_FORMAT",
+           "signed_bits", "stored_field", "PLAN_FORMAT",
            "PLAN_VERSION", "READABLE_VERSIONS", "REGISTERED_OPS"]
 
 PLAN_FORMAT = "ikseries.plan"
@@ -66,6 +66,22 @@ def lut_groups(plan: "Plan") -> dict[int, list[int]]:
         if OPS[n.op].kind == "table" and idx in live:
             groups.setdefault(n.args[0], []).append(idx)
     return groups
+
+
+def stored_field(plan: "Plan", li: int) -> tuple[int, int]:
+    """``(bits, top)``: the low ``bits`` of lut ``li``'s entries (two's complement at its node
+    width) are stored in its ROM; the rest, ``top``, is the same in every entry its index
+    reaches, and is wiring (FloPoCo's constant sign bits not stored: a table of negative
+    values, or one far from 0, keeps only the bits that vary). At least one bit is stored.
+    Here beside :func:`lut_groups` because the fitter's cost model prices the ROMs the
+    evaluators lay out (:mod:`ikseries.hdl.evaluator`)."""
+    n = plan.nodes[li]
+    ix, w = plan.nodes[n.args[0]], n.width
+    words = {v & ((1 << w) - 1) for v in n.param[ix.lo:ix.hi + 1]}
+    bits = w
+    while bits > 1 and len({v >> (bits - 1) for v in words}) == 1:
+        bits -= 1
+    return bits, next(iter(words)) >> bits
 
 
 def bits_for(lo: int, hi: int) -> tuple[int, bool]:

@@ -7,24 +7,10 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..fit.ops import OPS, node_shape
-from ..fit.plan import Plan, lut_groups
+from ..fit.plan import Plan, lut_groups, stored_field   # both re-exported: the ROM layout's helpers
 
 __all__ = ["PlanEvaluator", "input_layout", "lut_fields", "lut_groups", "lut_rom_init", "node_expression",
            "output_layout", "stored_field"]
-
-
-def stored_field(plan: Plan, li: int) -> tuple[int, int]:
-    """``(bits, top)``: the low ``bits`` of lut ``li``'s entries (two's complement at its node
-    width) are stored in its ROM; the rest, ``top``, is the same in every entry its index
-    reaches, and is wiring (FloPoCo's constant sign bits not stored: a table of negative
-    values, or one far from 0, keeps only the bits that vary). At least one bit is stored."""
-    n = plan.nodes[li]
-    ix, w = plan.nodes[n.args[0]], n.width
-    words = {v & ((1 << w) - 1) for v in n.param[ix.lo:ix.hi + 1]}
-    bits = w
-    while bits > 1 and len({v >> (bits - 1) for v in words}) == 1:
-        bits -= 1
-    return bits, next(iter(words)) >> bits
 
 
 def lut_rom_init(plan: Plan, index: int, luts: list[int]) -> tuple[list[int], int]:

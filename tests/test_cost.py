@@ -9,7 +9,7 @@ from amaranth.back import verilog
 from helpers import tiny_grid_plan, tiny_piecewise_plan, tiny_plan
 from ikseries.constraints.devices import family, part, primitive
 from ikseries.fit.cost import COSTS, DeviceCost, MultiplierCount, Usage
-from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput, lut_groups
+from ikseries.fit.plan import PlanBuilder, PlanInput, PlanOutput, lut_groups, stored_field
 from ikseries.hdl.modulo import ModuloEvaluator
 
 ECP5 = "ecp5-25f"
@@ -24,15 +24,16 @@ def product_plan(bits: int):
     return b.build([PlanOutput("y", b.clamp(p, 0, 1000), p, "ticks", 1.0)])
 
 
-def table_plan(depth: int, tables: int = 2, seed: int = 0):
+def table_plan(depth: int, tables: int = 2, seed: int = 0, offset: float = 0.0, scale: float = 100.0):
     """y = clamp(t0[a] * b + t1[a] + ...) with ``depth`` cells of port a (one per value) and
-    ``tables`` coefficient tables read at one index: one ROM of ``depth`` words."""
+    ``tables`` coefficient tables read at one index: one ROM of ``depth`` words, entries
+    ``offset + scale * N(0, 1)``."""
     rng = np.random.default_rng(seed)
     bits = (depth - 1).bit_length()
     inputs = [PlanInput("a", "mm", 0, 0, depth - 1, bits, False), PlanInput("b", "deg", 4, -100, 100, 8, True)]
     b = PlanBuilder(inputs)
     cell, _ = b.cell(b.input_nodes["a"], 0)
-    luts = [b.lut(cell, tuple(float(v) for v in rng.normal(size=depth) * 100), 4) for _ in range(tables)]
+    luts = [b.lut(cell, tuple(offset + float(v) for v in rng.normal(size=depth) * scale), 4) for _ in range(tables)]
     acc = b.mul(luts[0], b.input_nodes["b"])
     for t in luts[1:]:
         acc = b.add(acc, t)
@@ -195,3 +196,93 @@ def test_the_fitter_chooses_other_structures_by_the_device(small_robot, small_fi
         sum(model.cost(plan, o.name) for o in plan.outputs)
     # the model goes to the servos' worker processes: the same plan, byte for byte
     assert fit_robot(robot, cost_model=model, jobs=2)[0].dumps() == dev_plan.dumps()
+
+
+@pytest.mark.parametrize("depth", [65, 96, 127])
+def test_a_table_synthesis_may_put_on_an_unregistered_block_ram_cannot_run_one_target_per_clock(depth):
+    """On the ECP5 a table deeper than one logic level reads (LUT4s through PFUMX and L6MUX21:
+    ``rom_level_words`` = 64) and shallower than DP16KD's ``min_depth`` stays out of the
+    modulo core's registered block RAMs, and Yosys builds it as LUTs of several levels or on a
+    DP16KD read without its output register (measured: modulo1dt fitted so, 147-150 MHz
+    against 217): at interval 1, where the clock is the rate, it is priced infinite; at
+    interval 4, and where there is no table primitive (iCE40), as LUTs. Either side of the
+    band: priced."""
+    ecp5, dp16kd = family("ecp5"), primitive("DP16KD")
+    assert ecp5.rom_level_words == 1 << ecp5.wide_lut_inputs == 64 < depth < dp16kd.min_depth
+    plan = table_plan(depth)
+    u = DeviceCost(ECP5).usage(plan, "y")
+    assert u.slow_tables == 1 and u.bram == 0 and instances(plan, "DP16KD") == 0
+    assert DeviceCost(ECP5).cost(plan, "y") == float("inf")
+    assert DeviceCost(ECP5, 4).usage(plan, "y").slow_tables == 1
+    assert 0 < DeviceCost(ECP5, 4).cost(plan, "y") < float("inf")
+    assert DeviceCost("ice40-up5k").usage(plan, "y").slow_tables == 0
+    assert DeviceCost("ice40-up5k").cost(plan, "y") < float("inf")
+    for edge in (ecp5.rom_level_words, dp16kd.min_depth):
+        assert DeviceCost(ECP5).usage(table_plan(edge), "y").slow_tables == 0
+        assert DeviceCost(ECP5).cost(table_plan(edge), "y") < float("inf")
+
+
+def test_tables_are_priced_at_the_bits_their_rom_stores():
+    """Entries far from 0 share their top bits, which the evaluators wire instead of storing
+    (``stored_field``): the model prices the stored bits, the ROM the cores lay out (its
+    DP16KD blocks counted as the core instantiates them), not the nodes' widths."""
+    near, far = table_plan(1024, 3, scale=100.0), table_plan(1024, 3, offset=50000.0, scale=4.0)
+    for plan in (near, far):
+        luts = next(iter(lut_groups(plan).values()))
+        stored = sum(stored_field(plan, i)[0] for i in luts)
+        assert DeviceCost(ECP5).usage(plan, "y").bram == instances(plan, "DP16KD") == -(-stored // 18)
+        fabric = DeviceCost("ice40-up5k").usage(plan, "y")
+        assert fabric.lut - DeviceCost("ice40-up5k").usage(product_plan(8), "y").lut >= stored * 1024 // 16
+    wide = sum(far.nodes[i].width for i in next(iter(lut_groups(far).values())))
+    assert -(-wide // 18) > DeviceCost(ECP5).usage(far, "y").bram       # the node widths would take more
+
+
+class _Values(MultiplierCount):
+    """A model that prices coefficient values (only its flag differs from the multiplier count)."""
+    prices_values = True
+
+
+@pytest.mark.parametrize("model,chosen", [(MultiplierCount(), "c"), (_Values(), "b")])
+def test_the_search_ranks_structures_by_their_fitted_coefficients(monkeypatch, model, chosen):
+    """A model that prices coefficient values ranks the structures found (for the finals) and
+    the pruned finalists by their prices with the fitted coefficients
+    (:func:`ikseries.fit.formats.fitted_cost`), in their order on a tie; the multiplier count
+    keeps the search's cost and builds no fitted plan."""
+    import types
+    import ikseries.fit.search as search
+    calls = []
+
+    def fitted(ctx, sf):
+        calls.append(sf.name)
+        return {"a": 12.0, "b": 11.5, "c": 11.5}[sf.name]
+    monkeypatch.setattr(search, "fitted_cost", fitted)
+    ctx = types.SimpleNamespace(cost_model=model)
+    sfs = {n: types.SimpleNamespace(name=n, features=types.SimpleNamespace(label=lambda: "f"), poly={})
+           for n in "abc"}
+    entries = [(10.2, sfs["a"]), (10.4, sfs["b"]), (10.0, sfs["c"])]
+    ranked = search._ranked(ctx, entries, lambda msg: None)
+    assert [e[1].name for _, e in ranked] == (["c", "a", "b"] if chosen == "c" else ["b", "c", "a"])
+    assert ranked[0][1] is next(e for e in entries if e[1].name == chosen)     # the entry itself, its cost kept
+    assert calls == ([] if chosen == "c" else ["a", "b", "c"])
+
+
+def test_fitted_cost_prices_the_fitted_coefficients_in_their_narrowest_formats(small_robot, small_fitted):
+    """The fitted price is the model's price of the servo's own plan in the narrowest formats
+    that keep its certified rounding within the quantization budget, whatever feature precision
+    the servo's last price left as the first to try; with no such format (a budget no rounding
+    meets) it is infinite."""
+    from ikseries.fit.context import FitContext
+    from ikseries.fit.formats import fitted_cost, narrowest_formats
+    from ikseries.fit.lowering import trial_plan
+    model = DeviceCost(ECP5)
+    ctx = FitContext.for_robot(small_robot.fitted, 0.1, model)
+    sf = small_fitted[1][1]
+    fv, (frac,) = narrowest_formats(ctx, [sf])
+    plan = trial_plan(ctx, dataclasses.replace(sf, frac=frac), fv)
+    assert fitted_cost(ctx, sf) == model.cost(plan, sf.name) < float("inf")
+    assert ctx.format_hints == {sf.name: fv}
+    for hint in (fv, fv + 5, fv - 3, 8):    # the last one's, a wider one's, a narrower one's: the same formats
+        ctx.format_hints[sf.name] = hint
+        assert fitted_cost(ctx, sf) == model.cost(plan, sf.name) and ctx.format_hints[sf.name] == fv
+    tight = dataclasses.replace(ctx, budget=dataclasses.replace(ctx.budget, quantization=1e-12))
+    assert narrowest_formats(tight, [sf]) is None and fitted_cost(tight, sf) == float("inf")
