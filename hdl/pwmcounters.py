@@ -142,7 +142,7 @@ class ServoPWMCounters(wiring.Component):
         pins = []
         for c in range(n):
             # while it counts the bus is 0; while it loads it rests at 0: q + bus + 1 either way
-            q = Signal(w + 1, name=f"count{c}")
+            q = Signal(w + 1, name=f"pulse{c}")
             step = (load & token[c]) | (q[w] & run)
             with m.If(step):
                 m.d.sync += q.eq(q + bus + 1)

@@ -2,7 +2,9 @@
 
 The controller's integer rules live here in plain Python (the hardware documents the same
 rules and the tests compare the two period by period). One call of :meth:`ServoModel.period`
-is one engine pass: it runs at a PWM period start and its widths are applied at the next one.
+is one engine pass: it runs at a PWM period start and its widths show in the same period, on
+pulses that rise after the pass (at most ``period - lead`` wide, which this model leaves to the
+caller).
 """
 from __future__ import annotations
 
