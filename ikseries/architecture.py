@@ -132,6 +132,8 @@ def _candidates(hardware, legs: int, table: Callable[[], object]) -> list[Archit
         order = (("pipelined", None),)
     if legs > 1:       # the legs share one folded evaluator
         order = [o for o in order if o[0] == "folded"]
+    if hardware.dsp_primitives:     # the pipelined core instantiates none (HardwareOptions refuses it)
+        order = [o for o in order if o[0] != "pipelined"]
     return [_configuration(arch, k, hardware, legs, table) for arch, k in order]
 
 

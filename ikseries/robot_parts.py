@@ -490,6 +490,11 @@ class HardwareOptions:
                              f"true (the DSP primitives instantiated: "
                              + ", ".join(f"{FAMILIES[f].label} {p.name}" for f, p in prim_families.items())
                              + f"), not {self.dsp!r}")
+        if prim and self.architecture == "pipelined":
+            # its products are Yosys's: asked for primitives, it would silently drop them
+            raise RobotError(f"{lab['architecture']} must be auto, modulo, folded or fastest when "
+                             f"{lab['dsp_primitives']} is true (the pipelined core instantiates no primitives; "
+                             f"modulo at interval 1 takes a target per cycle on registered ones), not 'pipelined'")
 
     def _validate_fit_device(self, lab: dict) -> None:
         dev = self.fit_device

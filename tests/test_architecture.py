@@ -255,6 +255,10 @@ def test_flat_robot_top_ports_match_the_manifest(auto_robot, small_plan):
     (["--products", "narrow"], "--products must be one of exact, dsp, not 'narrow'"),
     (["--dsp-primitives", "--dsp", "xc7"], "--dsp must be ice40 or ecp5 when --dsp-primitives is true (the DSP "
                                            "primitives instantiated: iCE40 SB_MAC16, ECP5 MULT18X18D), not 'xc7'"),
+    (["--dsp-primitives", "--dsp", "ecp5", "--architecture", "pipelined"],
+     "--architecture must be auto, modulo, folded or fastest when --dsp-primitives is true (the pipelined core "
+     "instantiates no primitives; modulo at interval 1 takes a target per cycle on registered ones), "
+     "not 'pipelined'"),
     (["--preset", "hexapod", "--architecture", "pipelined"],
      "--architecture must be auto, folded or fastest for legs = 6 (the legs share one folded evaluator), "
      "not 'pipelined'"),
