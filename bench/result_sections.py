@@ -303,15 +303,17 @@ def board_tops(res: dict) -> list[str]:
                      "yes" if r["meets_clock"] else "**no**", *(f"{u[k]['used']:,} / {u[k]['available']:,}"
                                                                 for k in ("LC", "BRAM", "DSP"))))
     return ["`ikseries build --preset P --board B`: the robot controller's whole top (PLL, reset, UART, link, "
-            "dispatcher, IK core, servo controller) placed and routed, nextpnr's default seed.", "",
+            "dispatcher, IK core, servo controller) placed and routed, nextpnr seeds tried in turn until one "
+            "meets the clock (the best one's Fmax otherwise).", "",
             *table(("preset", "board", "channels", "clock MHz", "Fmax MHz", "meets clock", "LC", "BRAM", "DSP"), rows)]
 
 
 def servo_cells(res: dict) -> list[str]:
     """Lines of the ``bench/servo_cells.py`` section from its JSON ``res``."""
     rows = [(name, *(res[key].get(k, 0) for k in ("LUT", "FF", "carry", "BRAM")))
-            for name, key in (("ServoController (with its PWM bank)", "controller"),
-                              ("ServoPWMBank alone", "pwm_bank"), ("controller without the bank", "controller_without_bank"))]
+            for name, key in (("ServoController (with its pins' pulse counters)", "controller"),
+                              ("ServoPWMCounters alone", "pwm_bank"),
+                              ("controller without its pulse counters", "controller_without_bank"))]
     return [f"{res['channels']} channels, {res['width_bits']}-bit widths, period {res['period']:,} cycles; "
             "Yosys `synth_ice40 -dsp` counts.", "",
             *table(("design", "LUT", "FF", "carry", "BRAM"), rows)]

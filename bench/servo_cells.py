@@ -1,5 +1,6 @@
 """Yosys iCE40 counts of the servo controller for a hexapod (18 channels), with and without
-its PWM bank (the bank replaces the robot core's own, which is then left unconnected).
+its pins' pulse counters (a :class:`~ikseries.hdl.pwmcounters.ServoPWMCounters`; in a robot
+controller they replace the robot core's own PWM bank, which is then left unconnected).
 
     python bench/servo_cells.py [--channels 18] [--width-bits 16] [--period 240000] [--workdir DIR]
                                 [--json docs/results/servo_cells.json]
