@@ -118,14 +118,11 @@ class ServoPWMCounters(wiring.Component):
             m.d.sync += count.eq(0)
         with m.Else():
             m.d.sync += count.eq(count + 1)
-        # the first period after reset is quiet: it runs as pulses of nothing (no loads) and
-        # does not start (no period_start)
-        started = Signal()
-        with m.If(last):
-            m.d.sync += started.eq(1)
-        m.d.sync += self.period_start.eq((count == 0) & started)
-        # the pulses' part of the period, from a register: it gates every channel's count
+        # the pulses' part of the period, from a register: it gates every channel's count. The
+        # first period after reset is quiet: all of it runs as pulses of nothing (no loads), and
+        # it does not start: only there is run high at count 0
         run = Signal(init=1)
+        m.d.sync += self.period_start.eq((count == 0) & ~run)
         with m.If(count == lead - 1):
             m.d.sync += run.eq(1)
         with m.Elif(last):
