@@ -5,10 +5,12 @@ from amaranth.hdl import Cat, Module, Signal, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-__all__ = ["ServoPWMBank"]
+__all__ = ["ServoPWMBank", "check_int"]
 
 
-def _pos_int(name, v, least):
+def check_int(name, v, least):
+    """Refuse ``v`` unless it is an integer (not a bool) of at least ``least``: the parameter
+    check of the PWM and servo components."""
     if not isinstance(v, int) or isinstance(v, bool) or v < least:
         raise ValueError(f"{name} must be an integer >= {least}, not {v!r}")
 
@@ -69,10 +71,10 @@ class ServoPWMBank(wiring.Component):
 
     def __init__(self, period: int, width_bits: int, groups: int, per_group: int,
                  reset_widths: list[int] | None = None, in_order: bool = False, phase: bool = False):
-        _pos_int("period", period, 2)
-        _pos_int("width_bits", width_bits, 1)
-        _pos_int("groups", groups, 1)
-        _pos_int("per_group", per_group, 1)
+        check_int("period", period, 2)
+        check_int("width_bits", width_bits, 1)
+        check_int("groups", groups, 1)
+        check_int("per_group", per_group, 1)
         n = groups * per_group
         reset_widths = [0] * n if reset_widths is None else list(reset_widths)
         if len(reset_widths) != n or not all(isinstance(w, int) and 0 <= w < 2 ** width_bits

@@ -5,12 +5,9 @@ from amaranth.hdl import Cat, Module, Mux, Signal, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from .pwmbank import check_int
+
 __all__ = ["ServoPWMCounters"]
-
-
-def _int(name, v, least):
-    if not isinstance(v, int) or isinstance(v, bool) or v < least:
-        raise ValueError(f"{name} must be an integer >= {least}, not {v!r}")
 
 
 class ServoPWMCounters(wiring.Component):
@@ -73,10 +70,10 @@ class ServoPWMCounters(wiring.Component):
     """
 
     def __init__(self, period: int, width_bits: int, channels: int, lead: int):
-        _int("period", period, 2)
-        _int("width_bits", width_bits, 1)
-        _int("channels", channels, 1)
-        _int("lead", lead, 1)
+        check_int("period", period, 2)
+        check_int("width_bits", width_bits, 1)
+        check_int("channels", channels, 1)
+        check_int("lead", lead, 1)
         if lead >= period:
             raise ValueError(f"lead must be < period={period}, not {lead!r}")
         self._period, self._w, self._n, self._lead = period, width_bits, channels, lead

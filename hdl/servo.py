@@ -6,16 +6,12 @@ from amaranth.hdl import Module, Shape, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from .pwmbank import check_int
 from .pwmcounters import ServoPWMCounters
 from .servo_engine import ServoEngine
 from .servo_fields import ChannelField, FailsafeAction
 
 __all__ = ["ServoController", "ChannelField", "FailsafeAction"]
-
-
-def _int(name, v, least):
-    if not isinstance(v, int) or isinstance(v, bool) or v < least:
-        raise ValueError(f"{name} must be an integer >= {least}, not {v!r}")
 
 
 def _ik_servos(ik_layout, width_bits) -> list[str]:
@@ -157,10 +153,10 @@ class ServoController(wiring.Component):
     def __init__(self, channels: int, width_bits: int, period: int, *, time_bits: int = 16,
                  home_at_reset: list[int] | None = None, ik_layout=None, ik_legs: int | None = None,
                  trusted_writes: bool = False):
-        _int("channels", channels, 1)
-        _int("width_bits", width_bits, 2)
-        _int("period", period, 2)
-        _int("time_bits", time_bits, 1)
+        check_int("channels", channels, 1)
+        check_int("width_bits", width_bits, 2)
+        check_int("period", period, 2)
+        check_int("time_bits", time_bits, 1)
         full = (1 << width_bits) - 1
         if home_at_reset is not None:
             home_at_reset = list(home_at_reset)
@@ -173,7 +169,7 @@ class ServoController(wiring.Component):
             raise ValueError(f"ik_legs needs an ik_layout, not ik_legs={ik_legs!r} alone")
         if ik_layout is not None:
             legs = channels // len(self._servos) if ik_legs is None else ik_legs
-            _int("ik_legs", legs, 1)
+            check_int("ik_legs", legs, 1)
             if legs * len(self._servos) > channels:
                 raise ValueError(f"ik_legs * servos must be <= channels={channels}, not "
                                  f"{legs} * {len(self._servos)}")
